@@ -1,0 +1,505 @@
+//! Camera intrinsics and projection models: pinhole, plumb_bob, rational_polynomial, equidistant.
+//!
+//! The camera frame is the OpenCV optical frame (x right, y down, z forward). Distortion
+//! coefficients are stored in the order of the ROS distortion model of the same name.
+//!
+//! Projection divides by depth, applies the model's distortion to the normalised coordinates
+//! and maps them through `fx, fy, cx, cy`, exactly as OpenCV does (the equidistant model works
+//! on the angle off the optical axis, so it needs `z > 0` and stays accurate up to 90°).
+//! Jacobians are analytic. Undistortion inverts the distortion numerically: Newton's method with
+//! step halving for the radial-tangential models, a bracketed Newton on the angle for the
+//! fisheye. It fails (`None`) rather than return a point past the fold of the distortion.
+
+use glam::{DVec2, DVec3};
+use serde::{Deserialize, Serialize};
+use std::f64::consts::FRAC_PI_2;
+
+/// Distortion model, named as in ROS `CameraInfo.distortion_model`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum CameraModel {
+    /// No distortion.
+    #[default]
+    Pinhole,
+    /// Brown–Conrady: k1, k2, p1, p2, k3.
+    PlumbBob,
+    /// k1, k2, p1, p2, k3, k4, k5, k6.
+    RationalPolynomial,
+    /// Kannala–Brandt fisheye as OpenCV `cv::fisheye`: k1, k2, k3, k4.
+    Equidistant,
+}
+
+impl CameraModel {
+    pub fn as_str(self) -> &'static str {
+        match self {
+            CameraModel::Pinhole => "pinhole",
+            CameraModel::PlumbBob => "plumb_bob",
+            CameraModel::RationalPolynomial => "rational_polynomial",
+            CameraModel::Equidistant => "equidistant",
+        }
+    }
+
+    /// Parse a ROS `distortion_model` string (also accepts a few common aliases).
+    pub fn parse(name: &str) -> Option<Self> {
+        match name.trim().to_ascii_lowercase().as_str() {
+            "" | "pinhole" | "none" => Some(Self::Pinhole),
+            "plumb_bob" | "radtan" | "brown_conrady" => Some(Self::PlumbBob),
+            "rational_polynomial" => Some(Self::RationalPolynomial),
+            "equidistant" | "fisheye" | "kannala_brandt" => Some(Self::Equidistant),
+            _ => None,
+        }
+    }
+}
+
+/// Intrinsics of one camera.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct CameraIntrinsics {
+    pub width: u32,
+    pub height: u32,
+    pub model: CameraModel,
+    pub fx: f64,
+    pub fy: f64,
+    pub cx: f64,
+    pub cy: f64,
+    /// Coefficients in the order of the ROS distortion model; missing trailing ones are zero.
+    #[serde(default)]
+    pub distortion: Vec<f64>,
+}
+
+impl CameraIntrinsics {
+    pub fn pinhole(width: u32, height: u32, fx: f64, fy: f64, cx: f64, cy: f64) -> Self {
+        Self { width, height, model: CameraModel::Pinhole, fx, fy, cx, cy, distortion: Vec::new() }
+    }
+
+    /// Pixel of a point in the camera frame; `None` if it is not in front of the camera
+    /// (`z <= MIN_DEPTH`). Points far outside the field of view still get a pixel (possibly a
+    /// folded-over one for the polynomial models), as in OpenCV; check [`Self::in_image`].
+    pub fn project(&self, point_in_camera: DVec3) -> Option<DVec2> {
+        self.project_with_jacobian(point_in_camera).map(|(pixel, _)| pixel)
+    }
+
+    /// [`Self::project`] and its Jacobian d(pixel)/d(point), 2×3 row-major.
+    pub fn project_with_jacobian(&self, p: DVec3) -> Option<(DVec2, [[f64; 3]; 2])> {
+        if p.z <= MIN_DEPTH || !p.is_finite() {
+            return None;
+        }
+        let (distorted, d_dp) = match self.model {
+            CameraModel::Equidistant => fisheye(self.fisheye_coeffs(), p),
+            _ => {
+                let iz = 1.0 / p.z;
+                let xy = DVec2::new(p.x * iz, p.y * iz);
+                let (d, j) = radial_tangential(&self.radtan_coeffs(), xy);
+                // Chain through d(x, y)/dp = [[1, 0, -x], [0, 1, -y]] / z.
+                let row = |r: [f64; 2]| [r[0] * iz, r[1] * iz, -(r[0] * xy.x + r[1] * xy.y) * iz];
+                (d, [row(j[0]), row(j[1])])
+            }
+        };
+        let pixel = self.pixel_from_normalized(distorted);
+        let scale = |r: [f64; 3], f: f64| [r[0] * f, r[1] * f, r[2] * f];
+        pixel.is_finite().then_some((pixel, [scale(d_dp[0], self.fx), scale(d_dp[1], self.fy)]))
+    }
+
+    /// Apply the lens distortion to normalised coordinates `(x/z, y/z)`.
+    pub fn distort_normalized(&self, xy: DVec2) -> DVec2 {
+        match self.model {
+            CameraModel::Equidistant => fisheye(self.fisheye_coeffs(), xy.extend(1.0)).0,
+            _ => radial_tangential(&self.radtan_coeffs(), xy).0,
+        }
+    }
+
+    /// Inverse of [`Self::distort_normalized`]; `None` if the iteration does not converge or
+    /// lands beyond the point where the distortion folds over.
+    pub fn undistort_normalized(&self, distorted: DVec2) -> Option<DVec2> {
+        match self.model {
+            CameraModel::Pinhole => Some(distorted),
+            CameraModel::Equidistant => {
+                let theta_d = distorted.length();
+                if theta_d < AXIS_EPS {
+                    return Some(distorted);
+                }
+                let theta = fisheye_theta(self.fisheye_coeffs(), theta_d)?;
+                Some(distorted * (theta.tan() / theta_d))
+            }
+            _ => undistort_radial_tangential(&self.radtan_coeffs(), distorted),
+        }
+    }
+
+    /// Unit ray (z > 0) in the camera frame through the centre of `pixel`.
+    pub fn unproject(&self, pixel: DVec2) -> Option<DVec3> {
+        let distorted = DVec2::new((pixel.x - self.cx) / self.fx, (pixel.y - self.cy) / self.fy);
+        let theta_d = distorted.length();
+        let ray = if self.model == CameraModel::Equidistant && theta_d >= AXIS_EPS {
+            // Built from the angle directly so rays near 90° off-axis stay accurate.
+            let theta = fisheye_theta(self.fisheye_coeffs(), theta_d)?;
+            (distorted * (theta.sin() / theta_d)).extend(theta.cos())
+        } else {
+            self.undistort_normalized(distorted)?.extend(1.0).normalize()
+        };
+        (ray.is_finite() && ray.z > 0.0).then_some(ray)
+    }
+
+    /// Whether `pixel` is on the sensor. Pixel centres sit at integer coordinates, so the image
+    /// covers `[-0.5, width - 0.5) × [-0.5, height - 0.5)`.
+    pub fn in_image(&self, pixel: DVec2) -> bool {
+        pixel.x >= -0.5
+            && pixel.y >= -0.5
+            && pixel.x < self.width as f64 - 0.5
+            && pixel.y < self.height as f64 - 0.5
+    }
+
+    /// Intrinsics of the same camera with the image resized by `factor` (OpenCV pixel-centre
+    /// convention: `c' = (c + 0.5) · factor - 0.5`). Distortion is unit-free and unchanged.
+    pub fn scaled(&self, factor: f64) -> Self {
+        let centre = |c: f64| (c + 0.5) * factor - 0.5;
+        Self {
+            width: (self.width as f64 * factor).round() as u32,
+            height: (self.height as f64 * factor).round() as u32,
+            model: self.model,
+            fx: self.fx * factor,
+            fy: self.fy * factor,
+            cx: centre(self.cx),
+            cy: centre(self.cy),
+            distortion: self.distortion.clone(),
+        }
+    }
+
+    fn pixel_from_normalized(&self, d: DVec2) -> DVec2 {
+        DVec2::new(self.fx * d.x + self.cx, self.fy * d.y + self.cy)
+    }
+
+    /// k1, k2, p1, p2, k3, k4, k5, k6, with the ones the model does not use set to zero.
+    fn radtan_coeffs(&self) -> [f64; 8] {
+        let used = match self.model {
+            CameraModel::PlumbBob => 5,
+            CameraModel::RationalPolynomial => 8,
+            CameraModel::Pinhole | CameraModel::Equidistant => 0,
+        };
+        let mut c = [0.0; 8];
+        for (c, &d) in c.iter_mut().zip(self.distortion.iter().take(used)) {
+            *c = d;
+        }
+        c
+    }
+
+    fn fisheye_coeffs(&self) -> [f64; 4] {
+        let mut k = [0.0; 4];
+        for (k, &d) in k.iter_mut().zip(&self.distortion) {
+            *k = d;
+        }
+        k
+    }
+}
+
+/// Points with `z` at or below this (camera frame, metres) are behind the camera.
+const MIN_DEPTH: f64 = 1e-9;
+/// Below this distorted radius (normalised units) a fisheye ray is taken as the optical axis.
+const AXIS_EPS: f64 = 1e-15;
+/// Convergence threshold of the undistortion iterations, in normalised units.
+const UNDISTORT_TOL: f64 = 1e-12;
+const UNDISTORT_MAX_ITERS: usize = 60;
+
+type Mat2 = [[f64; 2]; 2];
+
+// The formulas are OpenCV's: cv::projectPoints (calib3d "Camera Calibration and 3D
+// Reconstruction" model, 8 coefficients, no tilt or thin prism) and cv::fisheye::projectPoints
+// (theta_d = theta·(1 + k1·θ² + k2·θ⁴ + k3·θ⁶ + k4·θ⁸), zero skew).
+
+/// Radial-tangential distortion of normalised `xy` and its 2×2 Jacobian.
+fn radial_tangential(c: &[f64; 8], xy: DVec2) -> (DVec2, Mat2) {
+    let [k1, k2, p1, p2, k3, k4, k5, k6] = *c;
+    let (x, y) = (xy.x, xy.y);
+    let r2 = x * x + y * y;
+    let num = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3));
+    let den = 1.0 + r2 * (k4 + r2 * (k5 + r2 * k6));
+    let radial = num / den;
+    let d_num = k1 + r2 * (2.0 * k2 + 3.0 * k3 * r2);
+    let d_den = k4 + r2 * (2.0 * k5 + 3.0 * k6 * r2);
+    let d_radial = (d_num * den - num * d_den) / (den * den); // d radial / d r²
+    let distorted = DVec2::new(
+        x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x),
+        y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y,
+    );
+    let cross = 2.0 * x * y * d_radial + 2.0 * p1 * x + 2.0 * p2 * y;
+    let jacobian = [
+        [radial + 2.0 * x * x * d_radial + 2.0 * p1 * y + 6.0 * p2 * x, cross],
+        [cross, radial + 2.0 * y * y * d_radial + 6.0 * p1 * y + 2.0 * p2 * x],
+    ];
+    (distorted, jacobian)
+}
+
+/// Newton's method with step halving on [`radial_tangential`], started at the distorted point.
+fn undistort_radial_tangential(c: &[f64; 8], target: DVec2) -> Option<DVec2> {
+    let tol = UNDISTORT_TOL * target.length().max(1.0);
+    let mut xy = target;
+    let (mut f, mut j) = radial_tangential(c, xy);
+    for _ in 0..UNDISTORT_MAX_ITERS {
+        let residual = (f - target).length();
+        if residual < tol {
+            return (det2(&j) > 0.0).then_some(xy);
+        }
+        let step = solve2(&j, f - target)?;
+        let mut t = 1.0;
+        loop {
+            let candidate = xy - step * t;
+            let (fc, jc) = radial_tangential(c, candidate);
+            if (fc - target).length() < residual {
+                (xy, f, j) = (candidate, fc, jc);
+                break;
+            }
+            t *= 0.5;
+            if t < 1e-6 {
+                return None;
+            }
+        }
+    }
+    None
+}
+
+/// `theta_d(theta)` of the equidistant model and its derivative.
+fn fisheye_theta_d(k: [f64; 4], theta: f64) -> (f64, f64) {
+    let [k1, k2, k3, k4] = k;
+    let t2 = theta * theta;
+    let theta_d = theta * (1.0 + t2 * (k1 + t2 * (k2 + t2 * (k3 + t2 * k4))));
+    let d_theta_d = 1.0 + t2 * (3.0 * k1 + t2 * (5.0 * k2 + t2 * (7.0 * k3 + t2 * 9.0 * k4)));
+    (theta_d, d_theta_d)
+}
+
+/// Equidistant projection of `p` (z > 0) to distorted normalised coordinates, and its 2×3
+/// Jacobian. Works on the angle `atan2(ρ, z)` so it stays accurate close to 90° off-axis.
+fn fisheye(k: [f64; 4], p: DVec3) -> (DVec2, [[f64; 3]; 2]) {
+    let rho = p.x.hypot(p.y);
+    if rho < 1e-14 * p.z {
+        let iz = 1.0 / p.z;
+        return (p.truncate() * iz, [[iz, 0.0, -p.x * iz * iz], [0.0, iz, -p.y * iz * iz]]);
+    }
+    let (theta_d, d_theta_d) = fisheye_theta_d(k, rho.atan2(p.z));
+    let n2 = rho * rho + p.z * p.z;
+    let (ux, uy) = (p.x / rho, p.y / rho);
+    // Across the radial direction the image scales by c = θd/ρ, along it by a = dθd/dρ.
+    let c = theta_d / rho;
+    let a = d_theta_d * p.z / n2;
+    let b = -d_theta_d * rho / n2; // dθd/dz
+    let jacobian = [
+        [c * uy * uy + a * ux * ux, ux * uy * (a - c), ux * b],
+        [ux * uy * (a - c), c * ux * ux + a * uy * uy, uy * b],
+    ];
+    (DVec2::new(ux, uy) * theta_d, jacobian)
+}
+
+/// Angle off the optical axis whose distorted angle is `theta_d`: Newton on `[0, π/2)`, falling
+/// back to bisection when a step leaves the bracket. `None` past the fold or at/after 90°.
+fn fisheye_theta(k: [f64; 4], theta_d: f64) -> Option<f64> {
+    let (mut lo, mut hi) = (0.0, FRAC_PI_2);
+    let mut theta = if theta_d < hi { theta_d } else { 0.5 * hi };
+    for _ in 0..UNDISTORT_MAX_ITERS {
+        let (f, df) = fisheye_theta_d(k, theta);
+        let residual = f - theta_d;
+        if residual.abs() < UNDISTORT_TOL {
+            return (df > 0.0 && theta < FRAC_PI_2).then_some(theta);
+        }
+        if residual > 0.0 {
+            hi = theta;
+        } else {
+            lo = theta;
+        }
+        let next = theta - residual / df;
+        theta = if df > 0.0 && next > lo && next < hi { next } else { 0.5 * (lo + hi) };
+    }
+    None
+}
+
+fn det2(m: &Mat2) -> f64 {
+    m[0][0] * m[1][1] - m[0][1] * m[1][0]
+}
+
+/// Solve `m · s = r`; `None` if `m` is singular.
+fn solve2(m: &Mat2, r: DVec2) -> Option<DVec2> {
+    let det = det2(m);
+    if det.abs() < 1e-300 || !det.is_finite() {
+        return None;
+    }
+    let s = DVec2::new(m[1][1] * r.x - m[0][1] * r.y, m[0][0] * r.y - m[1][0] * r.x) / det;
+    s.is_finite().then_some(s)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn plumb_bob_wide() -> CameraIntrinsics {
+        CameraIntrinsics {
+            model: CameraModel::PlumbBob,
+            distortion: vec![-0.27, 0.075, 6e-4, -4e-4, -0.009],
+            ..CameraIntrinsics::pinhole(1920, 1080, 1050.0, 1048.5, 962.3, 538.7)
+        }
+    }
+
+    fn rational() -> CameraIntrinsics {
+        CameraIntrinsics {
+            model: CameraModel::RationalPolynomial,
+            distortion: vec![0.52, -2.6, 2e-4, -3e-4, 1.5, 0.4, -2.4, 1.45],
+            ..CameraIntrinsics::pinhole(2048, 1536, 976.0, 975.2, 1022.1, 771.9)
+        }
+    }
+
+    /// A ~190° lens; OpenCV's model only reaches 90° off-axis, so the image corners are invalid.
+    fn fisheye_wide() -> CameraIntrinsics {
+        CameraIntrinsics {
+            model: CameraModel::Equidistant,
+            distortion: vec![0.03, -0.005, 0.001, -2e-4],
+            ..CameraIntrinsics::pinhole(1600, 1300, 395.0, 394.6, 801.2, 648.9)
+        }
+    }
+
+    fn cameras() -> Vec<CameraIntrinsics> {
+        let pinhole = CameraIntrinsics::pinhole(640, 480, 525.0, 523.5, 319.5, 239.5);
+        vec![pinhole, plumb_bob_wide(), rational(), fisheye_wide()]
+    }
+
+    /// Directions from on-axis out to `max_deg` off-axis, all around, at assorted depths.
+    fn points(max_deg: f64) -> Vec<DVec3> {
+        let mut out = vec![DVec3::new(0.0, 0.0, 2.0), DVec3::new(1e-9, -2e-9, 1.0)];
+        for i in 1..=24 {
+            let theta = (max_deg * i as f64 / 24.0).to_radians();
+            for j in 0..12 {
+                let phi = (30.0 * j as f64 + 7.0 * i as f64).to_radians();
+                let depth = 0.5 + 0.37 * ((i * 12 + j) % 11) as f64;
+                let dir = DVec3::new(theta.sin() * phi.cos(), theta.sin() * phi.sin(), theta.cos());
+                out.push(dir * depth);
+            }
+        }
+        out
+    }
+
+    fn max_off_axis_deg(cam: &CameraIntrinsics) -> f64 {
+        if cam.model == CameraModel::Equidistant { 89.5 } else { 75.0 }
+    }
+
+    #[test]
+    fn unproject_then_project_round_trips_over_the_whole_image() {
+        for cam in cameras() {
+            let (w, h) = (cam.width as f64, cam.height as f64);
+            for i in 0..=32 {
+                for j in 0..=24 {
+                    let px = DVec2::new(-0.5 + w * i as f64 / 32.0, -0.5 + h * j as f64 / 24.0);
+                    let Some(ray) = cam.unproject(px) else {
+                        // Only the fisheye corners, beyond 90° off-axis, have no ray.
+                        let limit = fisheye_theta_d(cam.fisheye_coeffs(), FRAC_PI_2).0;
+                        let d = DVec2::new((px.x - cam.cx) / cam.fx, (px.y - cam.cy) / cam.fy);
+                        assert!(cam.model == CameraModel::Equidistant && d.length() > limit);
+                        continue;
+                    };
+                    assert!((ray.length() - 1.0).abs() < 1e-12 && ray.z > 0.0);
+                    let back = cam.project(ray * 7.3).unwrap_or_else(|| panic!("{px}"));
+                    assert!((back - px).length() < 1e-6, "{:?} {px} -> {back}", cam.model);
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn project_then_unproject_recovers_the_direction_out_to_the_edge_of_the_fov() {
+        for cam in cameras() {
+            let mut checked = 0;
+            for p in points(max_off_axis_deg(&cam)) {
+                let px = cam.project(p).unwrap_or_else(|| panic!("{p}"));
+                let margin = DVec2::splat(50.0);
+                let size = DVec2::new(cam.width as f64, cam.height as f64);
+                if cam.model != CameraModel::Equidistant
+                    && (px.cmplt(-margin).any() || px.cmpgt(size + margin).any())
+                {
+                    continue;
+                }
+                let ray = cam.unproject(px).unwrap_or_else(|| panic!("{:?} {p}", cam.model));
+                assert!((ray - p.normalize()).length() < 1e-9, "{:?} {p}: {ray}", cam.model);
+                checked += 1;
+            }
+            assert!(checked > 100, "{:?}: {checked}", cam.model);
+        }
+    }
+
+    #[test]
+    fn distort_and_undistort_are_inverse() {
+        for cam in cameras() {
+            let tan_max = max_off_axis_deg(&cam).to_radians().tan();
+            for p in points(max_off_axis_deg(&cam)) {
+                let xy = p.truncate() / p.z;
+                if cam.model != CameraModel::Equidistant && xy.length() > 0.6 * tan_max {
+                    continue;
+                }
+                let back = cam.undistort_normalized(cam.distort_normalized(xy));
+                let back = back.unwrap_or_else(|| panic!("{:?} {xy}", cam.model));
+                assert!((back - xy).length() < 1e-9 * xy.length().max(1.0), "{:?} {xy}", cam.model);
+            }
+        }
+    }
+
+    #[test]
+    fn undistort_fails_beyond_the_fold() {
+        // r·(1 - 0.3 r²) peaks at r_d ≈ 0.703, so r_d = 0.8 has no preimage.
+        let cam = CameraIntrinsics {
+            model: CameraModel::PlumbBob,
+            distortion: vec![-0.3],
+            ..CameraIntrinsics::pinhole(100, 100, 50.0, 50.0, 49.5, 49.5)
+        };
+        assert!(cam.undistort_normalized(DVec2::new(0.6, 0.2)).is_some());
+        assert!(cam.undistort_normalized(DVec2::new(0.8, 0.0)).is_none());
+        let fisheye = CameraIntrinsics { model: CameraModel::Equidistant, ..cam };
+        assert!(fisheye.undistort_normalized(DVec2::new(1.6, 0.0)).is_none());
+    }
+
+    #[test]
+    fn jacobian_matches_central_differences() {
+        for cam in cameras() {
+            for p in points(max_off_axis_deg(&cam)) {
+                let (_, jac) = cam.project_with_jacobian(p).unwrap_or_else(|| panic!("{p}"));
+                let h = 1e-6 * p.length();
+                let scale = jac.iter().flatten().fold(1.0_f64, |m, v| m.max(v.abs()));
+                for k in 0..3 {
+                    let mut dp = DVec3::ZERO;
+                    dp[k] = h;
+                    let plus = cam.project(p + dp).unwrap_or_else(|| panic!("{p}"));
+                    let minus = cam.project(p - dp).unwrap_or_else(|| panic!("{p}"));
+                    let fd = (plus - minus) / (2.0 * h);
+                    for (row, numeric) in [fd.x, fd.y].into_iter().enumerate() {
+                        let err = (jac[row][k] - numeric).abs();
+                        let analytic = jac[row][k];
+                        let what = format!("{:?} {p} [{row}][{k}]", cam.model);
+                        assert!(err < 1e-6 * scale, "{what}: {analytic} vs {numeric}");
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn points_behind_the_camera_do_not_project() {
+        for cam in cameras() {
+            let behind = [DVec3::NEG_Z, DVec3::X, DVec3::new(1.0, 2.0, 1e-12)];
+            for p in behind {
+                assert!(cam.project(p).is_none() && cam.project_with_jacobian(p).is_none());
+            }
+            assert!(cam.project(DVec3::new(f64::NAN, 0.0, 1.0)).is_none());
+        }
+    }
+
+    #[test]
+    fn scaling_follows_the_pixel_centre_convention() {
+        for cam in cameras() {
+            let half = cam.scaled(0.5);
+            assert_eq!((half.width, half.height), (cam.width / 2, cam.height / 2));
+            for p in points(30.0) {
+                let (Some(a), Some(b)) = (cam.project(p), half.project(p)) else { panic!("{p}") };
+                assert!(((a + 0.5) * 0.5 - 0.5 - b).length() < 1e-9);
+            }
+        }
+    }
+
+    #[test]
+    fn in_image_covers_pixel_areas() {
+        let cam = CameraIntrinsics::pinhole(640, 480, 500.0, 500.0, 319.5, 239.5);
+        assert!(cam.in_image(DVec2::new(-0.5, -0.5)) && cam.in_image(DVec2::new(639.49, 479.49)));
+        assert!(!cam.in_image(DVec2::new(639.5, 10.0)) && !cam.in_image(DVec2::new(10.0, -0.51)));
+        assert!(!cam.in_image(DVec2::new(f64::NAN, 10.0)));
+    }
+}

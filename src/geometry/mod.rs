@@ -1,0 +1,14 @@
+//! Geometry on the CPU, in f64: rigid transforms, rotations, trajectories, camera models.
+//!
+//! Transforms are `glam::DAffine3` values named by what they map: `world_from_vehicle *
+//! vehicle_from_lidar` is `world_from_lidar`. Rotations are kept orthonormal by construction
+//! (built from unit quaternions) so `inverse()` of a rigid transform is exact up to rounding.
+
+pub mod camera;
+pub mod rigid;
+pub mod rot6d;
+pub mod so3;
+pub mod trajectory;
+
+pub use rigid::{Rigid, rig_errors, RigError};
+pub use trajectory::{Trajectory, TrajectoryError};

@@ -1,0 +1,145 @@
+//! The vehicle trajectory `world_from_vehicle(t)`: timestamped poses, interpolated with SLERP on
+//! rotation and linear on translation.
+//!
+//! Queries outside the covered time range are an error, except within an explicit, bounded
+//! extrapolation margin (PandaSet's rear cameras fire up to 50 ms before the first pose).
+
+use thiserror::Error;
+
+use super::Rigid;
+
+#[derive(Debug, Error, PartialEq)]
+pub enum TrajectoryError {
+    #[error("the trajectory is empty")]
+    Empty,
+    #[error(
+        "time {stamp_nanos} ns is outside the trajectory [{start_nanos}, {end_nanos}] ns by {outside_ms:.1} ms (allowed extrapolation {allowed_ms:.1} ms)"
+    )]
+    OutOfRange { stamp_nanos: i64, start_nanos: i64, end_nanos: i64, outside_ms: f64, allowed_ms: f64 },
+}
+
+/// Poses sorted by time; duplicate stamps keep the last pose given.
+#[derive(Clone, Debug, Default)]
+pub struct Trajectory {
+    stamps_nanos: Vec<i64>,
+    world_from_vehicle: Vec<Rigid>,
+    /// How far past either end a query may extrapolate, in nanoseconds.
+    pub max_extrapolation_nanos: i64,
+}
+
+impl Trajectory {
+    pub fn new(mut poses: Vec<(i64, Rigid)>) -> Self {
+        poses.sort_by_key(|(t, _)| *t);
+        let mut stamps_nanos: Vec<i64> = Vec::with_capacity(poses.len());
+        let mut world_from_vehicle: Vec<Rigid> = Vec::with_capacity(poses.len());
+        for (t, pose) in poses {
+            if stamps_nanos.last() == Some(&t) {
+                if let Some(last) = world_from_vehicle.last_mut() {
+                    *last = pose;
+                }
+                continue;
+            }
+            stamps_nanos.push(t);
+            world_from_vehicle.push(pose);
+        }
+        Self { stamps_nanos, world_from_vehicle, max_extrapolation_nanos: 0 }
+    }
+
+    pub fn with_max_extrapolation_nanos(mut self, nanos: i64) -> Self {
+        self.max_extrapolation_nanos = nanos.max(0);
+        self
+    }
+
+    pub fn len(&self) -> usize {
+        self.stamps_nanos.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.stamps_nanos.is_empty()
+    }
+
+    pub fn stamps_nanos(&self) -> &[i64] {
+        &self.stamps_nanos
+    }
+
+    pub fn poses(&self) -> impl Iterator<Item = (i64, Rigid)> + '_ {
+        self.stamps_nanos.iter().copied().zip(self.world_from_vehicle.iter().copied())
+    }
+
+    /// First and last stamp.
+    pub fn time_range_nanos(&self) -> Option<(i64, i64)> {
+        Some((*self.stamps_nanos.first()?, *self.stamps_nanos.last()?))
+    }
+
+    /// `world_from_vehicle` at `stamp_nanos`.
+    pub fn world_from_vehicle(&self, stamp_nanos: i64) -> Result<Rigid, TrajectoryError> {
+        let (start, end) = self.time_range_nanos().ok_or(TrajectoryError::Empty)?;
+        let outside = if stamp_nanos < start {
+            start - stamp_nanos
+        } else if stamp_nanos > end {
+            stamp_nanos - end
+        } else {
+            0
+        };
+        if outside > self.max_extrapolation_nanos {
+            return Err(TrajectoryError::OutOfRange {
+                stamp_nanos,
+                start_nanos: start,
+                end_nanos: end,
+                outside_ms: outside as f64 * 1e-6,
+                allowed_ms: self.max_extrapolation_nanos as f64 * 1e-6,
+            });
+        }
+        let n = self.stamps_nanos.len();
+        if n == 1 {
+            return Ok(self.world_from_vehicle[0]);
+        }
+        // Index of the segment [i, i+1] containing (or nearest to) the stamp.
+        let i = match self.stamps_nanos.binary_search(&stamp_nanos) {
+            Ok(i) => return Ok(self.world_from_vehicle[i]),
+            Err(i) => i.clamp(1, n - 1) - 1,
+        };
+        let (t0, t1) = (self.stamps_nanos[i], self.stamps_nanos[i + 1]);
+        let s = (stamp_nanos - t0) as f64 / (t1 - t0) as f64;
+        Ok(self.world_from_vehicle[i].interpolate(self.world_from_vehicle[i + 1], s))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::{DQuat, DVec3};
+
+    fn straight() -> Trajectory {
+        Trajectory::new(vec![
+            (2_000, Rigid::new(DQuat::from_rotation_z(0.2), DVec3::new(2.0, 0.0, 0.0))),
+            (0, Rigid::IDENTITY),
+            (1_000, Rigid::new(DQuat::from_rotation_z(0.1), DVec3::new(1.0, 0.0, 0.0))),
+        ])
+    }
+
+    #[test]
+    fn interpolates_between_poses() {
+        let p = straight().world_from_vehicle(1_500).unwrap();
+        assert!((p.translation.x - 1.5).abs() < 1e-12);
+        let (angle, _) = Rigid::IDENTITY.difference(p);
+        assert!((angle - 0.15).abs() < 1e-12);
+    }
+
+    #[test]
+    fn exact_stamps_return_the_pose() {
+        let p = straight().world_from_vehicle(2_000).unwrap();
+        assert!((p.translation.x - 2.0).abs() < 1e-15);
+    }
+
+    #[test]
+    fn outside_range_is_an_error_unless_allowed() {
+        let t = straight();
+        assert!(matches!(t.world_from_vehicle(-1), Err(TrajectoryError::OutOfRange { .. })));
+        let t = t.with_max_extrapolation_nanos(500);
+        let p = t.world_from_vehicle(-500).unwrap();
+        assert!((p.translation.x + 0.5).abs() < 1e-12);
+        assert!(t.world_from_vehicle(2_501).is_err());
+        assert_eq!(Trajectory::default().world_from_vehicle(0), Err(TrajectoryError::Empty));
+    }
+}

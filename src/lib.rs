@@ -1,0 +1,23 @@
+//! # rigcal
+//!
+//! Joint extrinsic calibration of every LiDAR and camera on a vehicle from an ordinary drive,
+//! after UniCal (Yang et al., ECCV 2024).
+//!
+//! The library is GUI-free: the desktop studio lives behind the default `app` feature and only
+//! consumes what the library exposes. Module map (see `ARCHITECTURE.md`):
+//!
+//! - [`geometry`]: rigid transforms named `a_from_b`, SO(3) exp/log, the 6D rotation
+//!   representation, trajectory interpolation, rig-error metrics and camera models.
+//! - [`calib`]: the rig model (sensors with intrinsics and `vehicle_from_sensor`) and the native
+//!   calibration file (`rigcal_calibration: 1`, see `docs/interfaces.md`).
+//! - [`log`]: MCAP ingestion (ROS 2 CDR and Foxglove schemas), TF tree resolution and the
+//!   indexed, lazily decoded drive log.
+//! - [`util`]: atomic file writes and small helpers shared by every module.
+
+pub mod calib;
+pub mod geometry;
+pub mod log;
+pub mod util;
+
+#[cfg(feature = "app")]
+pub mod app;

@@ -1,0 +1,566 @@
+//! The MCAP container: channels, chunk locations and random access to single messages.
+//!
+//! How it works: [`McapContainer::open`] reads only the summary section (channels, schemas, chunk
+//! indexes) when the file has one; otherwise it walks the top-level records once, skipping chunk
+//! bodies except to pick up channel and schema records. [`McapContainer::scan`] then
+//! decompresses chunks in parallel (one at a time per thread, so memory stays bounded) and hands
+//! every message to a visitor, which keeps only what it needs plus a [`MessageRef`] to fetch the
+//! payload again later through a small LRU cache of decompressed chunks.
+//!
+//! A truncated or corrupt region ends the walk with a [`Problem`]; whatever came before it stays
+//! usable. Nothing here panics on bad input.
+
+use std::collections::{BTreeMap, VecDeque};
+use std::fs::File;
+use std::io::{Read, Seek, SeekFrom};
+use std::ops::Deref;
+use std::path::{Path, PathBuf};
+use std::sync::{Arc, Mutex};
+
+use mcap::records::{op, Record};
+use rayon::prelude::*;
+
+use super::error::{LogError, Problem};
+
+const MAGIC: &[u8; 8] = b"\x89MCAP0\r\n";
+/// Refuse single records larger than this (a corrupt length would otherwise allocate wildly).
+const MAX_RECORD_BYTES: u64 = 4 << 30;
+
+#[derive(Clone, Debug, PartialEq)]
+pub struct ChannelInfo {
+    pub id: u16,
+    pub topic: String,
+    pub message_encoding: String,
+    pub schema_name: String,
+    pub schema_encoding: String,
+    pub schema_data: Arc<Vec<u8>>,
+}
+
+/// Where a chunk record lives in the file.
+#[derive(Clone, Copy, Debug)]
+pub struct ChunkLoc {
+    /// Offset of the chunk record's opcode.
+    pub offset: u64,
+    /// Length of the whole record, including its 9-byte opcode + length prefix.
+    pub length: u64,
+}
+
+/// Where one message's payload lives.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Location {
+    /// Inside decompressed chunk `chunk`, payload bytes `[start, end)`.
+    Chunk { chunk: u32, start: u32, end: u32 },
+    /// A message record outside chunks; payload bytes `[start, end)` of the file.
+    File { start: u64, end: u64 },
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct MessageRef {
+    pub channel_id: u16,
+    pub log_time_nanos: u64,
+    pub publish_time_nanos: u64,
+    pub location: Location,
+}
+
+/// A message payload: a slice of a shared decompressed chunk (or an owned buffer).
+#[derive(Clone, Debug)]
+pub struct MessageBytes {
+    buf: Arc<Vec<u8>>,
+    start: usize,
+    end: usize,
+}
+
+impl Deref for MessageBytes {
+    type Target = [u8];
+    fn deref(&self) -> &[u8] {
+        &self.buf[self.start..self.end]
+    }
+}
+
+pub struct McapContainer {
+    path: PathBuf,
+    file: Mutex<File>,
+    pub file_len: u64,
+    pub channels: BTreeMap<u16, ChannelInfo>,
+    pub chunks: Vec<ChunkLoc>,
+    loose: Vec<(u16, u64, u64, Location)>,
+    /// Whether the summary section (chunk indexes) was used to find the chunks.
+    pub used_summary: bool,
+    pub library: Option<String>,
+    pub profile: Option<String>,
+    pub problems: Vec<Problem>,
+    cache: Mutex<ChunkCache>,
+}
+
+impl std::fmt::Debug for McapContainer {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("McapContainer")
+            .field("path", &self.path)
+            .field("channels", &self.channels.len())
+            .field("chunks", &self.chunks.len())
+            .finish_non_exhaustive()
+    }
+}
+
+impl McapContainer {
+    pub fn open(path: &Path) -> Result<Self, LogError> {
+        let io = |source| LogError::Io { path: path.to_path_buf(), source };
+        let mut file = File::open(path).map_err(io)?;
+        let file_len = file.metadata().map_err(io)?.len();
+        let mut magic = [0u8; 8];
+        if file_len < 8 || file.read_exact(&mut magic).is_err() || &magic != MAGIC {
+            return Err(LogError::NotMcap {
+                path: path.to_path_buf(),
+                what: "the file does not start with the MCAP magic bytes".into(),
+            });
+        }
+        let mut c = Self {
+            path: path.to_path_buf(),
+            file: Mutex::new(file),
+            file_len,
+            channels: BTreeMap::new(),
+            chunks: Vec::new(),
+            loose: Vec::new(),
+            used_summary: false,
+            library: None,
+            profile: None,
+            problems: Vec::new(),
+            cache: Mutex::new(ChunkCache::new(256 << 20)),
+        };
+        c.read_header();
+        if !c.try_summary() {
+            c.linear_walk()?;
+        }
+        Ok(c)
+    }
+
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    fn read_at(&self, offset: u64, len: u64) -> std::io::Result<Vec<u8>> {
+        if offset.saturating_add(len) > self.file_len || len > MAX_RECORD_BYTES {
+            return Err(std::io::Error::new(std::io::ErrorKind::UnexpectedEof, "record runs past the end of the file"));
+        }
+        let mut f = self.file.lock().map_err(|_| std::io::Error::other("file lock poisoned"))?;
+        f.seek(SeekFrom::Start(offset))?;
+        let mut buf = vec![0u8; len as usize];
+        f.read_exact(&mut buf)?;
+        Ok(buf)
+    }
+
+    fn read_header(&mut self) {
+        // The header record follows the magic: opcode 0x01, then profile and library strings.
+        let Ok(prefix) = self.read_at(8, 9) else { return };
+        if prefix[0] != op::HEADER {
+            return;
+        }
+        let len = u64::from_le_bytes(prefix[1..9].try_into().unwrap_or([0; 8]));
+        if let Ok(body) = self.read_at(17, len) {
+            if let Ok(Record::Header(h)) = mcap::parse_record(op::HEADER, &body) {
+                self.profile = Some(h.profile);
+                self.library = Some(h.library);
+            }
+        }
+    }
+
+    /// Channels and chunk locations from the summary section; false if it is absent or unusable.
+    fn try_summary(&mut self) -> bool {
+        use mcap::sans_io::{SummaryReadEvent, SummaryReader, SummaryReaderOptions};
+        let Ok(mut guard) = self.file.lock() else { return false };
+        let file: &mut File = &mut guard;
+        let mut reader =
+            SummaryReader::new_with_options(SummaryReaderOptions::default().with_file_size(self.file_len));
+        while let Some(event) = reader.next_event() {
+            match event {
+                Ok(SummaryReadEvent::ReadRequest(n)) => match file.read(reader.insert(n)) {
+                    Ok(read) => reader.notify_read(read),
+                    Err(_) => return false,
+                },
+                Ok(SummaryReadEvent::SeekRequest(to)) => match file.seek(to) {
+                    Ok(pos) => reader.notify_seeked(pos),
+                    Err(_) => return false,
+                },
+                Err(e) => {
+                    drop(guard);
+                    self.problems.push(Problem::file(format!("summary section unusable ({e}); read the file linearly")));
+                    return false;
+                }
+            }
+        }
+        drop(guard);
+        let Some(summary) = reader.finish() else { return false };
+        let message_count = summary.stats.as_ref().map(|s| s.message_count).unwrap_or(0);
+        if summary.chunk_indexes.is_empty() && message_count > 0 {
+            return false; // messages outside chunks: only a linear walk finds them
+        }
+        for (id, ch) in &summary.channels {
+            self.channels.insert(*id, channel_info(ch.id, &ch.topic, &ch.message_encoding, ch.schema.as_deref()));
+        }
+        let mut chunks: Vec<ChunkLoc> = summary
+            .chunk_indexes
+            .iter()
+            .map(|ci| ChunkLoc { offset: ci.chunk_start_offset, length: ci.chunk_length })
+            .collect();
+        chunks.sort_by_key(|c| c.offset);
+        for c in &chunks {
+            if c.offset.saturating_add(c.length) > self.file_len {
+                return false;
+            }
+        }
+        self.chunks = chunks;
+        self.used_summary = true;
+        true
+    }
+
+    /// Walk the top-level records from the start; stop at the footer or at the first damage.
+    fn linear_walk(&mut self) -> Result<(), LogError> {
+        let mut offset = 8u64;
+        let mut schemas: BTreeMap<u16, (String, String, Arc<Vec<u8>>)> = BTreeMap::new();
+        let mut raw_channels: Vec<mcap::records::Channel> = Vec::new();
+        loop {
+            if offset == self.file_len {
+                self.problems.push(Problem::file("the file ends without a footer (truncated?)"));
+                break;
+            }
+            let prefix = match self.read_at(offset, 9) {
+                Ok(p) => p,
+                Err(_) => {
+                    self.problems.push(Problem::file(format!("truncated record header at byte {offset}")));
+                    break;
+                }
+            };
+            let opcode = prefix[0];
+            let len = u64::from_le_bytes(prefix[1..9].try_into().unwrap_or([0; 8]));
+            let body_offset = offset + 9;
+            if body_offset.saturating_add(len) > self.file_len {
+                self.problems.push(Problem::file(format!(
+                    "record (opcode {opcode:#04x}) at byte {offset} claims {len} bytes but the file ends first (truncated)"
+                )));
+                break;
+            }
+            match opcode {
+                op::SCHEMA | op::CHANNEL | op::CHUNK => {
+                    let body = self.read_at(body_offset, len).map_err(|e| self.corrupt(offset, e.to_string()))?;
+                    if opcode == op::CHUNK {
+                        self.chunks.push(ChunkLoc { offset, length: len + 9 });
+                        match decompress_chunk(&body) {
+                            Ok(data) => for_each_record(&data, |op, body, _| {
+                                collect_definition(op, body, &mut schemas, &mut raw_channels)
+                            }),
+                            Err(what) => self.problems.push(Problem::file(format!("chunk at byte {offset}: {what}"))),
+                        }
+                    } else {
+                        collect_definition(opcode, &body, &mut schemas, &mut raw_channels);
+                    }
+                }
+                op::MESSAGE => {
+                    if len >= 22 {
+                        let body = self.read_at(body_offset, 22).map_err(|e| self.corrupt(offset, e.to_string()))?;
+                        let channel_id = u16::from_le_bytes([body[0], body[1]]);
+                        let log_time = u64::from_le_bytes(body[6..14].try_into().unwrap_or([0; 8]));
+                        let publish_time = u64::from_le_bytes(body[14..22].try_into().unwrap_or([0; 8]));
+                        let location = Location::File { start: body_offset + 22, end: body_offset + len };
+                        self.loose.push((channel_id, log_time, publish_time, location));
+                    } else {
+                        self.problems.push(Problem::file(format!("message record at byte {offset} is too short")));
+                    }
+                }
+                op::FOOTER | op::DATA_END => break,
+                0 => {
+                    self.problems.push(Problem::file(format!("invalid opcode 0 at byte {offset}; stopped reading")));
+                    break;
+                }
+                _ => {}
+            }
+            offset = body_offset + len;
+        }
+        for ch in raw_channels {
+            let schema = schemas.get(&ch.schema_id);
+            let info = ChannelInfo {
+                id: ch.id,
+                topic: ch.topic.clone(),
+                message_encoding: ch.message_encoding.clone(),
+                schema_name: schema.map(|s| s.0.clone()).unwrap_or_default(),
+                schema_encoding: schema.map(|s| s.1.clone()).unwrap_or_default(),
+                schema_data: schema.map(|s| s.2.clone()).unwrap_or_default(),
+            };
+            self.channels.insert(ch.id, info);
+        }
+        if self.channels.is_empty() && self.chunks.is_empty() && self.loose.is_empty() {
+            let what = self.problems.first().map(|p| p.what.clone()).unwrap_or_else(|| "no records".into());
+            return Err(LogError::Unusable { path: self.path.clone(), what: format!("no channels or messages found: {what}") });
+        }
+        Ok(())
+    }
+
+    fn corrupt(&self, offset: u64, what: String) -> LogError {
+        LogError::Corrupt { path: self.path.clone(), offset, what }
+    }
+
+    /// Decompressed records of chunk `index`, through the LRU cache.
+    pub fn chunk_data(&self, index: u32) -> Result<Arc<Vec<u8>>, String> {
+        if let Ok(mut cache) = self.cache.lock() {
+            if let Some(hit) = cache.get(index) {
+                return Ok(hit);
+            }
+        }
+        let data = Arc::new(self.load_chunk(index)?);
+        if let Ok(mut cache) = self.cache.lock() {
+            cache.put(index, data.clone());
+        }
+        Ok(data)
+    }
+
+    fn load_chunk(&self, index: u32) -> Result<Vec<u8>, String> {
+        let loc = self.chunks.get(index as usize).ok_or_else(|| format!("no chunk {index}"))?;
+        let record = self.read_at(loc.offset, loc.length).map_err(|e| format!("chunk at byte {}: {e}", loc.offset))?;
+        if record.first() != Some(&op::CHUNK) || record.len() < 9 {
+            return Err(format!("the index points at byte {} but no chunk is there", loc.offset));
+        }
+        decompress_chunk(&record[9..]).map_err(|e| format!("chunk at byte {}: {e}", loc.offset))
+    }
+
+    /// The payload of one message.
+    pub fn message_bytes(&self, r: &MessageRef) -> Result<MessageBytes, String> {
+        match r.location {
+            Location::Chunk { chunk, start, end } => {
+                let buf = self.chunk_data(chunk)?;
+                if end as usize > buf.len() || start > end {
+                    return Err("message location outside its chunk".into());
+                }
+                Ok(MessageBytes { buf, start: start as usize, end: end as usize })
+            }
+            Location::File { start, end } => {
+                let buf = self.read_at(start, end - start).map_err(|e| e.to_string())?;
+                let len = buf.len();
+                Ok(MessageBytes { buf: Arc::new(buf), start: 0, end: len })
+            }
+        }
+    }
+
+    /// Visit every message once, chunks in parallel; `visit` returns what to keep. Results come
+    /// back in file order. Damaged chunks become problems.
+    pub fn scan<T, F>(&self, visit: F) -> (Vec<(MessageRef, T)>, Vec<Problem>)
+    where
+        T: Send,
+        F: Fn(&MessageRef, &ChannelInfo, &[u8]) -> Option<T> + Sync,
+    {
+        let per_chunk: Vec<(Vec<(MessageRef, T)>, Vec<Problem>)> = (0..self.chunks.len() as u32)
+            .into_par_iter()
+            .map(|index| {
+                let mut kept = Vec::new();
+                let mut problems = Vec::new();
+                let data = match self.load_chunk(index) {
+                    Ok(d) => d,
+                    Err(what) => {
+                        problems.push(Problem::file(what));
+                        return (kept, problems);
+                    }
+                };
+                for_each_record(&data, |opcode, body, body_start| {
+                    if opcode != op::MESSAGE || body.len() < 22 {
+                        return;
+                    }
+                    let channel_id = u16::from_le_bytes([body[0], body[1]]);
+                    let log_time = u64::from_le_bytes(body[6..14].try_into().unwrap_or([0; 8]));
+                    let publish_time = u64::from_le_bytes(body[14..22].try_into().unwrap_or([0; 8]));
+                    let Some(channel) = self.channels.get(&channel_id) else {
+                        problems.push(Problem::file(format!("message on unknown channel id {channel_id}")));
+                        return;
+                    };
+                    let r = MessageRef {
+                        channel_id,
+                        log_time_nanos: log_time,
+                        publish_time_nanos: publish_time,
+                        location: Location::Chunk {
+                            chunk: index,
+                            start: (body_start + 22) as u32,
+                            end: (body_start + body.len()) as u32,
+                        },
+                    };
+                    if let Some(t) = visit(&r, channel, &body[22..]) {
+                        kept.push((r, t));
+                    }
+                });
+                (kept, problems)
+            })
+            .collect();
+        let mut kept = Vec::new();
+        let mut problems = Vec::new();
+        for (k, p) in per_chunk {
+            kept.extend(k);
+            problems.extend(p);
+        }
+        for &(channel_id, log_time, publish_time, location) in &self.loose {
+            let r = MessageRef { channel_id, log_time_nanos: log_time, publish_time_nanos: publish_time, location };
+            let Some(channel) = self.channels.get(&channel_id) else {
+                problems.push(Problem::file(format!("message on unknown channel id {channel_id}")));
+                continue;
+            };
+            match self.message_bytes(&r) {
+                Ok(bytes) => {
+                    if let Some(t) = visit(&r, channel, &bytes) {
+                        kept.push((r, t));
+                    }
+                }
+                Err(what) => problems.push(Problem::message(&channel.topic, log_time, what)),
+            }
+        }
+        (kept, problems)
+    }
+}
+
+fn channel_info(id: u16, topic: &str, message_encoding: &str, schema: Option<&mcap::Schema<'_>>) -> ChannelInfo {
+    ChannelInfo {
+        id,
+        topic: topic.to_string(),
+        message_encoding: message_encoding.to_string(),
+        schema_name: schema.map(|s| s.name.clone()).unwrap_or_default(),
+        schema_encoding: schema.map(|s| s.encoding.clone()).unwrap_or_default(),
+        schema_data: Arc::new(schema.map(|s| s.data.to_vec()).unwrap_or_default()),
+    }
+}
+
+fn collect_definition(
+    opcode: u8,
+    body: &[u8],
+    schemas: &mut BTreeMap<u16, (String, String, Arc<Vec<u8>>)>,
+    channels: &mut Vec<mcap::records::Channel>,
+) {
+    match (opcode, mcap::parse_record(opcode, body)) {
+        (op::SCHEMA, Ok(Record::Schema { header, data })) => {
+            schemas.insert(header.id, (header.name, header.encoding, Arc::new(data.into_owned())));
+        }
+        (op::CHANNEL, Ok(Record::Channel(ch))) => {
+            if !channels.iter().any(|c| c.id == ch.id) {
+                channels.push(ch);
+            }
+        }
+        _ => {}
+    }
+}
+
+/// Call `f(opcode, body, body_offset)` for each record in a decompressed chunk; stops quietly at
+/// a record that runs past the end (the caller sees fewer messages, never a panic).
+fn for_each_record(data: &[u8], mut f: impl FnMut(u8, &[u8], usize)) {
+    let mut pos = 0usize;
+    while pos + 9 <= data.len() {
+        let opcode = data[pos];
+        let len = u64::from_le_bytes(data[pos + 1..pos + 9].try_into().unwrap_or([0; 8]));
+        let start = pos + 9;
+        let Some(end) = usize::try_from(len).ok().and_then(|l| start.checked_add(l)) else { return };
+        if end > data.len() {
+            return;
+        }
+        f(opcode, &data[start..end], start);
+        pos = end;
+    }
+}
+
+/// Decompress a chunk record body (without its 9-byte prefix) into its records.
+fn decompress_chunk(body: &[u8]) -> Result<Vec<u8>, String> {
+    let header = match mcap::parse_record(op::CHUNK, body) {
+        Ok(Record::Chunk { header, data }) => (header, data),
+        Ok(_) => return Err("not a chunk".into()),
+        Err(e) => return Err(format!("cannot parse chunk: {e}")),
+    };
+    let (header, data) = header;
+    if header.uncompressed_size > MAX_RECORD_BYTES {
+        return Err(format!("chunk claims {} uncompressed bytes", header.uncompressed_size));
+    }
+    let size = header.uncompressed_size as usize;
+    let out = match header.compression.as_str() {
+        "" => data.into_owned(),
+        "zstd" => zstd::bulk::decompress(&data, size).map_err(|e| format!("zstd: {e}"))?,
+        "lz4" => {
+            let mut out = Vec::with_capacity(size);
+            lz4::Decoder::new(&data[..])
+                .and_then(|mut d| d.read_to_end(&mut out))
+                .map_err(|e| format!("lz4: {e}"))?;
+            out
+        }
+        other => return Err(format!("unsupported chunk compression '{other}'")),
+    };
+    if out.len() != size {
+        return Err(format!("chunk decompressed to {} bytes, header says {size}", out.len()));
+    }
+    if header.uncompressed_crc != 0 {
+        let crc = crc32(&out);
+        if crc != header.uncompressed_crc {
+            return Err(format!("chunk CRC mismatch (stored {:08x}, computed {crc:08x})", header.uncompressed_crc));
+        }
+    }
+    Ok(out)
+}
+
+/// CRC-32 (IEEE), as MCAP uses for chunk contents.
+fn crc32(data: &[u8]) -> u32 {
+    static TABLE: std::sync::OnceLock<[u32; 256]> = std::sync::OnceLock::new();
+    let table = TABLE.get_or_init(|| {
+        let mut t = [0u32; 256];
+        for (i, e) in t.iter_mut().enumerate() {
+            let mut c = i as u32;
+            for _ in 0..8 {
+                c = if c & 1 != 0 { 0xEDB8_8320 ^ (c >> 1) } else { c >> 1 };
+            }
+            *e = c;
+        }
+        t
+    });
+    let mut crc = !0u32;
+    for &b in data {
+        crc = table[((crc ^ b as u32) & 0xff) as usize] ^ (crc >> 8);
+    }
+    !crc
+}
+
+/// Least-recently-used decompressed chunks, bounded by total bytes.
+struct ChunkCache {
+    budget_bytes: usize,
+    used_bytes: usize,
+    entries: VecDeque<(u32, Arc<Vec<u8>>)>,
+}
+
+impl ChunkCache {
+    fn new(budget_bytes: usize) -> Self {
+        Self { budget_bytes, used_bytes: 0, entries: VecDeque::new() }
+    }
+
+    fn get(&mut self, index: u32) -> Option<Arc<Vec<u8>>> {
+        let pos = self.entries.iter().position(|(i, _)| *i == index)?;
+        let entry = self.entries.remove(pos)?;
+        let data = entry.1.clone();
+        self.entries.push_back(entry);
+        Some(data)
+    }
+
+    fn put(&mut self, index: u32, data: Arc<Vec<u8>>) {
+        self.used_bytes += data.len();
+        self.entries.push_back((index, data));
+        while self.used_bytes > self.budget_bytes && self.entries.len() > 1 {
+            if let Some((_, old)) = self.entries.pop_front() {
+                self.used_bytes -= old.len();
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn crc32_known_value() {
+        assert_eq!(crc32(b"123456789"), 0xCBF4_3926);
+    }
+
+    #[test]
+    fn cache_evicts_oldest() {
+        let mut c = ChunkCache::new(10);
+        c.put(0, Arc::new(vec![0; 6]));
+        c.put(1, Arc::new(vec![0; 6]));
+        assert!(c.get(0).is_none());
+        assert!(c.get(1).is_some());
+    }
+}
