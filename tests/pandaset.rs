@@ -1,0 +1,106 @@
+//! Acceptance on the real PandaSet drive in ../shared/data/pandaset-002 (see its README):
+//! sensors, counts, /tf_static against ground_truth.json, and trajectory ∘ extrinsic against the
+//! dataset's own per-camera poses at each image's header stamp.
+
+use std::path::PathBuf;
+
+use rigcal::calib::SensorKind;
+use rigcal::geometry::Rigid;
+use rigcal::log::{Drive, StampSource};
+use serde_json::Value;
+
+fn data_dir() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/data/pandaset-002")
+}
+
+fn rigid_from_json(v: &Value) -> Rigid {
+    let mut rows = [[0.0; 4]; 4];
+    for (i, row) in v.as_array().unwrap().iter().enumerate() {
+        for (j, x) in row.as_array().unwrap().iter().enumerate() {
+            rows[i][j] = x.as_f64().unwrap();
+        }
+    }
+    Rigid::from_rows(rows)
+}
+
+fn open() -> Drive {
+    Drive::open(&data_dir().join("pandaset-002.mcap")).unwrap()
+}
+
+#[test]
+fn sensors_counts_and_trajectory() {
+    let drive = open();
+    assert!(drive.problems.is_empty(), "{:?}", drive.problems);
+    assert_eq!(drive.rig.vehicle_frame, "pandar64");
+    assert_eq!(drive.trajectory.len(), 80);
+    assert_eq!(drive.rig.lidars().count(), 2);
+    assert_eq!(drive.rig.cameras().count(), 6);
+    for s in &drive.streams {
+        assert_eq!(s.frames.len(), 16, "{}", s.sensor);
+        assert_eq!(s.stamp_source, StampSource::Header);
+    }
+    for cam in drive.rig.cameras() {
+        let c = cam.camera.as_ref().unwrap();
+        assert_eq!((c.width, c.height), (1920, 1080));
+    }
+}
+
+#[test]
+fn tf_static_equals_ground_truth() {
+    let drive = open();
+    let gt: Value = serde_json::from_slice(&std::fs::read(data_dir().join("ground_truth.json")).unwrap()).unwrap();
+    for (name, s) in gt["sensors"].as_object().unwrap() {
+        let sensor = drive.rig.sensor(name).unwrap_or_else(|| panic!("missing {name}"));
+        let expected = rigid_from_json(&s["vehicle_from_sensor"]);
+        let (r, t) = expected.difference(sensor.vehicle_from_sensor);
+        assert!(r.to_degrees() < 1e-6 && t < 1e-6, "{name}: {r} rad {t} m");
+        let kind = if s["kind"] == "lidar" { SensorKind::Lidar } else { SensorKind::Camera };
+        assert_eq!(sensor.kind, kind);
+        if kind == SensorKind::Camera {
+            let c = sensor.camera.as_ref().unwrap();
+            assert!((c.fx - s["fx"].as_f64().unwrap()).abs() < 1e-6);
+            assert!((c.cy - s["cy"].as_f64().unwrap()).abs() < 1e-6);
+        }
+    }
+}
+
+#[test]
+fn trajectory_times_extrinsic_reproduces_camera_poses() {
+    let drive = open();
+    let poses: Value = serde_json::from_slice(&std::fs::read(data_dir().join("camera_poses.json")).unwrap()).unwrap();
+    let mut checked = 0;
+    for (camera, entries) in poses["cameras"].as_object().unwrap() {
+        let sensor = drive.rig.sensor(camera).unwrap();
+        let stream = drive.stream(camera).unwrap();
+        for e in entries.as_array().unwrap() {
+            let frame = e["frame"].as_u64().unwrap();
+            if frame % 5 != 0 {
+                continue; // the MCAP holds every 5th frame's images
+            }
+            let image = &stream.frames[(frame / 5) as usize];
+            let stamp_s = e["stamp_s"].as_f64().unwrap();
+            // The image's own header stamp is the camera's trigger time.
+            assert!((image.stamp_nanos as f64 * 1e-9 - stamp_s).abs() < 1e-5, "{camera} frame {frame}");
+            let world_from_vehicle = drive.trajectory.world_from_vehicle(image.stamp_nanos).unwrap();
+            let ours = world_from_vehicle * sensor.vehicle_from_sensor;
+            let (r, t) = rigid_from_json(&e["world_from_camera"]).difference(ours);
+            assert!(t < 0.03 && r.to_degrees() < 0.1, "{camera} frame {frame}: {t} m, {} deg", r.to_degrees());
+            checked += 1;
+        }
+    }
+    assert_eq!(checked, 6 * 16);
+}
+
+#[test]
+fn sweeps_and_images_decode() {
+    let drive = open();
+    let sweep = drive.load_sweep("pandar64", 3).unwrap();
+    assert!(sweep.len() > 100_000, "{}", sweep.len());
+    assert!(sweep.intensity.iter().any(|&i| i > 0.0));
+    let gt = drive.load_sweep("pandar_gt", 0).unwrap();
+    assert!(gt.len() > 50_000);
+    let img = drive.load_image("front_camera", 0).unwrap();
+    assert_eq!(img.dimensions(), (1920, 1080));
+    assert!(drive.load_image("front_camera", 99).is_err());
+    assert!(drive.load_sweep("nope", 0).is_err());
+}
