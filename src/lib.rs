@@ -15,6 +15,7 @@
 //! - [`util`]: atomic file writes and small helpers shared by every module.
 
 pub mod calib;
+pub mod cli;
 pub mod geometry;
 pub mod log;
 pub mod util;

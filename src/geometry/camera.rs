@@ -378,8 +378,9 @@ mod tests {
     /// Whether the radial-tangential distortion is still one-to-one between the centre and `xy`
     /// (the polynomial folds back on itself far enough out; OpenCV projects such points anyway).
     fn before_fold(cam: &CameraIntrinsics, xy: DVec2) -> bool {
-        cam.model == CameraModel::Equidistant
-            || (0..=64).all(|i| det2(&radial_tangential(&cam.radtan_coeffs(), xy * (i as f64 / 64.0)).1) > 0.0)
+        let c = cam.radtan_coeffs();
+        let det_at = |s: f64| det2(&radial_tangential(&c, xy * s).1);
+        cam.model == CameraModel::Equidistant || (0..=64).all(|i| det_at(i as f64 / 64.0) > 0.0)
     }
 
     #[test]

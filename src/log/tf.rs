@@ -34,15 +34,14 @@ impl TfTree {
             .push((t.stamp_nanos, t.parent_from_child));
     }
 
-    /// Dynamic edges whose value never changes are moved to the static set (some recorders
-    /// publish mounts on /tf).
+    /// Dynamic edges whose value never changes (or that were sent once) are moved to the static
+    /// set: some recorders publish mounts on /tf.
     pub fn promote_constant_dynamic_edges(&mut self) {
         let constant: Vec<(String, String)> = self
             .dynamic_edges
             .iter()
             .filter(|(_, series)| {
-                series.len() > 1
-                    && series.windows(2).all(|w| {
+                series.windows(2).all(|w| {
                         let (r, t) = w[0].1.difference(w[1].1);
                         r < 1e-9 && t < 1e-9
                     })

@@ -1,0 +1,54 @@
+//! Progress reporting for long work: a bar on a terminal, plain lines otherwise.
+
+use std::io::{IsTerminal, Write};
+use std::time::Instant;
+
+pub struct Progress {
+    label: String,
+    total: u64,
+    done: u64,
+    tty: bool,
+    started: Instant,
+    last_line_pct: u64,
+}
+
+impl Progress {
+    pub fn new(label: &str, total: u64) -> Self {
+        Self { label: label.into(), total: total.max(1), done: 0, tty: std::io::stderr().is_terminal(), started: Instant::now(), last_line_pct: 0 }
+    }
+
+    pub fn set(&mut self, done: u64) {
+        self.done = done.min(self.total);
+        let pct = self.done * 100 / self.total;
+        let mut err = std::io::stderr();
+        if self.tty {
+            let width = 30;
+            let filled = (self.done * width / self.total) as usize;
+            let _ = write!(
+                err,
+                "\r{} [{}{}] {}/{} {:.1}s",
+                self.label,
+                "#".repeat(filled),
+                " ".repeat(width as usize - filled),
+                self.done,
+                self.total,
+                self.started.elapsed().as_secs_f64()
+            );
+            let _ = err.flush();
+        } else if pct >= self.last_line_pct + 10 || self.done == self.total {
+            self.last_line_pct = pct;
+            let _ = writeln!(err, "{}: {}/{} ({pct}%)", self.label, self.done, self.total);
+        }
+    }
+
+    pub fn inc(&mut self) {
+        self.set(self.done + 1);
+    }
+
+    pub fn finish(&mut self) {
+        self.set(self.total);
+        if self.tty {
+            let _ = writeln!(std::io::stderr());
+        }
+    }
+}
