@@ -7,7 +7,11 @@ use anyhow::{Context, Result};
 use clap::{Parser, Subcommand};
 
 #[derive(Parser)]
-#[command(name = "rigcal", version, about = "Calibrate every LiDAR and camera on a vehicle from an ordinary drive")]
+#[command(
+    name = "rigcal",
+    version,
+    about = "Calibrate every LiDAR and camera on a vehicle from an ordinary drive"
+)]
 struct Cli {
     #[command(subcommand)]
     command: Option<Command>,
@@ -48,9 +52,18 @@ fn run() -> Result<()> {
     match cli.command {
         None => studio(None, None),
         Some(Command::Studio { log, calibration }) => studio(log, calibration),
-        Some(Command::Inspect { log, fixed_frame, vehicle_frame }) => {
-            let options = rigcal::log::DriveOptions { fixed_frame, vehicle_frame, ..Default::default() };
-            let drive = rigcal::log::Drive::open_with(&log, &options).with_context(|| format!("cannot inspect {}", log.display()))?;
+        Some(Command::Inspect {
+            log,
+            fixed_frame,
+            vehicle_frame,
+        }) => {
+            let options = rigcal::log::DriveOptions {
+                fixed_frame,
+                vehicle_frame,
+                ..Default::default()
+            };
+            let drive = rigcal::log::Drive::open_with(&log, &options)
+                .with_context(|| format!("cannot inspect {}", log.display()))?;
             print!("{}", rigcal::cli::inspect::report(&drive));
             Ok(())
         }
@@ -64,5 +77,7 @@ fn studio(log: Option<PathBuf>, calibration: Option<PathBuf>) -> Result<()> {
 
 #[cfg(not(feature = "app"))]
 fn studio(_log: Option<PathBuf>, _calibration: Option<PathBuf>) -> Result<()> {
-    anyhow::bail!("this build has no studio (built without the `app` feature); use the subcommands, e.g. `rigcal inspect LOG.mcap`")
+    anyhow::bail!(
+        "this build has no studio (built without the `app` feature); use the subcommands, e.g. `rigcal inspect LOG.mcap`"
+    )
 }

@@ -1,3 +1,4 @@
+#![allow(clippy::unwrap_used, clippy::expect_used)]
 //! Our camera models against OpenCV's `cv2.projectPoints` / `cv2.fisheye.projectPoints`, using
 //! the reference projections in `tests/fixtures/opencv/camera_projections.json` (regenerate
 //! with `tests/fixtures/opencv/make_camera_fixtures.py`).
@@ -23,8 +24,10 @@ struct Case {
 }
 
 fn fixture() -> Fixture {
-    let path =
-        concat!(env!("CARGO_MANIFEST_DIR"), "/tests/fixtures/opencv/camera_projections.json");
+    let path = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/tests/fixtures/opencv/camera_projections.json"
+    );
     let text = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{path}: {e}"));
     serde_json::from_str(&text).unwrap_or_else(|e| panic!("{path}: {e}"))
 }
@@ -39,13 +42,23 @@ fn projection_matches_opencv() {
         assert!(case.points.len() >= 40, "{}", case.name);
         for (p, expected) in case.points.iter().zip(&case.pixels) {
             let (p, expected) = (DVec3::from_array(*p), DVec2::from_array(*expected));
-            let got = case.intrinsics.project(p).unwrap_or_else(|| panic!("{}: {p}", case.name));
+            let got = case
+                .intrinsics
+                .project(p)
+                .unwrap_or_else(|| panic!("{}: {p}", case.name));
             let err = (got - expected).length();
-            assert!(err < TOLERANCE_PX, "{}: {p} -> {got}, OpenCV {expected}", case.name);
+            assert!(
+                err < TOLERANCE_PX,
+                "{}: {p} -> {got}, OpenCV {expected}",
+                case.name
+            );
             worst = worst.max(err);
         }
     }
-    println!("max |ours - OpenCV {}| = {worst:.3e} px", fixture.opencv_version);
+    println!(
+        "max |ours - OpenCV {}| = {worst:.3e} px",
+        fixture.opencv_version
+    );
 }
 
 #[test]
@@ -56,12 +69,24 @@ fn unproject_then_project_returns_the_pixel() {
         let cam = &case.intrinsics;
         for (p, pixel) in case.points.iter().zip(&case.pixels) {
             let (p, pixel) = (DVec3::from_array(*p), DVec2::from_array(*pixel));
-            let ray = cam.unproject(pixel).unwrap_or_else(|| panic!("{}: {pixel}", case.name));
+            let ray = cam
+                .unproject(pixel)
+                .unwrap_or_else(|| panic!("{}: {pixel}", case.name));
             assert!((ray.length() - 1.0).abs() < 1e-12, "{}: {ray}", case.name);
-            assert!((ray - p.normalize()).length() < 1e-9, "{}: {ray} vs {p}", case.name);
-            let back = cam.project(ray).unwrap_or_else(|| panic!("{}: {ray}", case.name));
+            assert!(
+                (ray - p.normalize_or_zero()).length() < 1e-9,
+                "{}: {ray} vs {p}",
+                case.name
+            );
+            let back = cam
+                .project(ray)
+                .unwrap_or_else(|| panic!("{}: {ray}", case.name));
             let err = (back - pixel).length();
-            assert!(err < TOLERANCE_PX, "{}: {pixel} -> {ray} -> {back}", case.name);
+            assert!(
+                err < TOLERANCE_PX,
+                "{}: {pixel} -> {ray} -> {back}",
+                case.name
+            );
             worst = worst.max(err);
         }
     }

@@ -1,3 +1,4 @@
+#![allow(clippy::unwrap_used, clippy::expect_used)]
 //! Acceptance on the real PandaSet drive in ../shared/data/pandaset-002 (see its README):
 //! sensors, counts, /tf_static against ground_truth.json, and trajectory ∘ extrinsic against the
 //! dataset's own per-camera poses at each image's header stamp.
@@ -48,13 +49,22 @@ fn sensors_counts_and_trajectory() {
 #[test]
 fn tf_static_equals_ground_truth() {
     let drive = open();
-    let gt: Value = serde_json::from_slice(&std::fs::read(data_dir().join("ground_truth.json")).unwrap()).unwrap();
+    let gt: Value =
+        serde_json::from_slice(&std::fs::read(data_dir().join("ground_truth.json")).unwrap())
+            .unwrap();
     for (name, s) in gt["sensors"].as_object().unwrap() {
-        let sensor = drive.rig.sensor(name).unwrap_or_else(|| panic!("missing {name}"));
+        let sensor = drive
+            .rig
+            .sensor(name)
+            .unwrap_or_else(|| panic!("missing {name}"));
         let expected = rigid_from_json(&s["vehicle_from_sensor"]);
         let (r, t) = expected.difference(sensor.vehicle_from_sensor);
         assert!(r.to_degrees() < 1e-6 && t < 1e-6, "{name}: {r} rad {t} m");
-        let kind = if s["kind"] == "lidar" { SensorKind::Lidar } else { SensorKind::Camera };
+        let kind = if s["kind"] == "lidar" {
+            SensorKind::Lidar
+        } else {
+            SensorKind::Camera
+        };
         assert_eq!(sensor.kind, kind);
         if kind == SensorKind::Camera {
             let c = sensor.camera.as_ref().unwrap();
@@ -67,7 +77,9 @@ fn tf_static_equals_ground_truth() {
 #[test]
 fn trajectory_times_extrinsic_reproduces_camera_poses() {
     let drive = open();
-    let poses: Value = serde_json::from_slice(&std::fs::read(data_dir().join("camera_poses.json")).unwrap()).unwrap();
+    let poses: Value =
+        serde_json::from_slice(&std::fs::read(data_dir().join("camera_poses.json")).unwrap())
+            .unwrap();
     let mut checked = 0;
     for (camera, entries) in poses["cameras"].as_object().unwrap() {
         let sensor = drive.rig.sensor(camera).unwrap();
@@ -80,11 +92,21 @@ fn trajectory_times_extrinsic_reproduces_camera_poses() {
             let image = &stream.frames[(frame / 5) as usize];
             let stamp_s = e["stamp_s"].as_f64().unwrap();
             // The image's own header stamp is the camera's trigger time.
-            assert!((image.stamp_nanos as f64 * 1e-9 - stamp_s).abs() < 1e-5, "{camera} frame {frame}");
-            let world_from_vehicle = drive.trajectory.world_from_vehicle(image.stamp_nanos).unwrap();
+            assert!(
+                (image.stamp_nanos as f64 * 1e-9 - stamp_s).abs() < 1e-5,
+                "{camera} frame {frame}"
+            );
+            let world_from_vehicle = drive
+                .trajectory
+                .world_from_vehicle(image.stamp_nanos)
+                .unwrap();
             let ours = world_from_vehicle * sensor.vehicle_from_sensor;
             let (r, t) = rigid_from_json(&e["world_from_camera"]).difference(ours);
-            assert!(t < 0.03 && r.to_degrees() < 0.1, "{camera} frame {frame}: {t} m, {} deg", r.to_degrees());
+            assert!(
+                t < 0.03 && r.to_degrees() < 0.1,
+                "{camera} frame {frame}: {t} m, {} deg",
+                r.to_degrees()
+            );
             checked += 1;
         }
     }

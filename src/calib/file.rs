@@ -11,19 +11,28 @@ use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
 use super::rig::{Rig, Sensor, SensorKind};
-use crate::geometry::camera::CameraIntrinsics;
 use crate::geometry::Rigid;
+use crate::geometry::camera::CameraIntrinsics;
 
 pub const SCHEMA_VERSION: u32 = 1;
 
 #[derive(Debug, Error)]
 pub enum CalibFileError {
     #[error("{path}: cannot read: {source}")]
-    Read { path: PathBuf, source: std::io::Error },
+    Read {
+        path: PathBuf,
+        source: std::io::Error,
+    },
     #[error("{path}: cannot write: {source}")]
-    Write { path: PathBuf, source: std::io::Error },
+    Write {
+        path: PathBuf,
+        source: std::io::Error,
+    },
     #[error("{path}: not a valid rigcal calibration file: {source}")]
-    Parse { path: PathBuf, source: serde_yaml::Error },
+    Parse {
+        path: PathBuf,
+        source: serde_yaml::Error,
+    },
     #[error("{path}: {what}")]
     Invalid { path: PathBuf, what: String },
 }
@@ -84,7 +93,9 @@ impl ExtrinsicYaml {
         }
         let norm = q.length();
         if (norm - 1.0).abs() > 1e-3 {
-            return Err(format!("rotation_xyzw has norm {norm:.6}, expected a unit quaternion"));
+            return Err(format!(
+                "rotation_xyzw has norm {norm:.6}, expected a unit quaternion"
+            ));
         }
         Ok(Rigid::new(q / norm, t))
     }
@@ -114,7 +125,10 @@ impl CalibrationFile {
 
     /// The rig, validated; `path` only names the file in errors.
     pub fn to_rig(&self, path: &Path) -> Result<Rig, CalibFileError> {
-        let invalid = |what: String| CalibFileError::Invalid { path: path.to_path_buf(), what };
+        let invalid = |what: String| CalibFileError::Invalid {
+            path: path.to_path_buf(),
+            what,
+        };
         if self.rigcal_calibration != SCHEMA_VERSION {
             return Err(invalid(format!(
                 "rigcal_calibration is {}, this version reads {SCHEMA_VERSION}",
@@ -135,7 +149,9 @@ impl CalibrationFile {
                 .map_err(|e| invalid(format!("sensor '{}': {e}", s.name)))?;
             if s.kind == SensorKind::Camera {
                 match &s.camera {
-                    None => return Err(invalid(format!("camera '{}' has no camera: block", s.name))),
+                    None => {
+                        return Err(invalid(format!("camera '{}' has no camera: block", s.name)));
+                    }
                     Some(c) if !(c.fx > 0.0 && c.fy > 0.0) || c.width == 0 || c.height == 0 => {
                         return Err(invalid(format!(
                             "camera '{}': fx, fy, width and height must be positive",
@@ -148,23 +164,34 @@ impl CalibrationFile {
             sensors.push(Sensor {
                 name: s.name.clone(),
                 kind: s.kind,
-                frame_id: if s.frame_id.is_empty() { s.name.clone() } else { s.frame_id.clone() },
+                frame_id: if s.frame_id.is_empty() {
+                    s.name.clone()
+                } else {
+                    s.frame_id.clone()
+                },
                 topics: s.topics.clone(),
                 vehicle_from_sensor,
                 camera: s.camera.clone(),
             });
         }
-        Ok(Rig { vehicle_frame: self.vehicle_frame.clone(), sensors })
+        Ok(Rig {
+            vehicle_frame: self.vehicle_frame.clone(),
+            sensors,
+        })
     }
 
     pub fn parse(text: &str, path: &Path) -> Result<Self, CalibFileError> {
-        serde_yaml::from_str(text)
-            .map_err(|source| CalibFileError::Parse { path: path.to_path_buf(), source })
+        serde_yaml::from_str(text).map_err(|source| CalibFileError::Parse {
+            path: path.to_path_buf(),
+            source,
+        })
     }
 
     pub fn load(path: &Path) -> Result<Self, CalibFileError> {
-        let text = std::fs::read_to_string(path)
-            .map_err(|source| CalibFileError::Read { path: path.to_path_buf(), source })?;
+        let text = std::fs::read_to_string(path).map_err(|source| CalibFileError::Read {
+            path: path.to_path_buf(),
+            source,
+        })?;
         let file = Self::parse(&text, path)?;
         file.to_rig(path)?; // validate once, on load
         Ok(file)
@@ -181,8 +208,12 @@ impl CalibrationFile {
     }
 
     pub fn save(&self, path: &Path) -> Result<(), CalibFileError> {
-        crate::util::write_atomic(path, self.to_yaml().as_bytes())
-            .map_err(|source| CalibFileError::Write { path: path.to_path_buf(), source })
+        crate::util::write_atomic(path, self.to_yaml().as_bytes()).map_err(|source| {
+            CalibFileError::Write {
+                path: path.to_path_buf(),
+                source,
+            }
+        })
     }
 }
 
@@ -215,7 +246,9 @@ mod tests {
                         DQuat::from_xyzw(-0.5, 0.5, -0.5, 0.5),
                         DVec3::new(1.5, 0.0, 1.5),
                     ),
-                    camera: Some(CameraIntrinsics::pinhole(1920, 1080, 1970.0, 1970.5, 970.2, 483.1)),
+                    camera: Some(CameraIntrinsics::pinhole(
+                        1920, 1080, 1970.0, 1970.5, 970.2, 483.1,
+                    )),
                 },
             ],
         }
@@ -242,7 +275,9 @@ mod tests {
         let dir = std::env::temp_dir().join(format!("rigcal-calib-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         let path = dir.join("calib.yaml");
-        CalibrationFile::from_rig(&sample_rig()).save(&path).unwrap();
+        CalibrationFile::from_rig(&sample_rig())
+            .save(&path)
+            .unwrap();
         let rig = CalibrationFile::load_rig(&path).unwrap();
         assert_eq!(rig.sensors.len(), 2);
         std::fs::remove_dir_all(&dir).unwrap();
@@ -251,19 +286,26 @@ mod tests {
     #[test]
     fn bad_files_name_the_file_and_the_problem() {
         let p = Path::new("bad.yaml");
-        let err = CalibrationFile::parse("rigcal_calibration: [", p).unwrap_err().to_string();
+        let err = CalibrationFile::parse("rigcal_calibration: [", p)
+            .unwrap_err()
+            .to_string();
         assert!(err.contains("bad.yaml"), "{err}");
         let mut file = CalibrationFile::from_rig(&sample_rig());
         file.sensors[0].vehicle_from_sensor.rotation_xyzw = [0.0, 0.0, 0.0, 2.0];
         let err = file.to_rig(p).unwrap_err().to_string();
-        assert!(err.contains("bad.yaml") && err.contains("lidar_top") && err.contains("norm"), "{err}");
+        assert!(
+            err.contains("bad.yaml") && err.contains("lidar_top") && err.contains("norm"),
+            "{err}"
+        );
         let mut file = CalibrationFile::from_rig(&sample_rig());
         file.sensors[1].name = "lidar_top".into();
         assert!(file.to_rig(p).unwrap_err().to_string().contains("twice"));
         let mut file = CalibrationFile::from_rig(&sample_rig());
         file.rigcal_calibration = 2;
         assert!(file.to_rig(p).is_err());
-        let err = CalibrationFile::load(Path::new("/nonexistent/c.yaml")).unwrap_err().to_string();
+        let err = CalibrationFile::load(Path::new("/nonexistent/c.yaml"))
+            .unwrap_err()
+            .to_string();
         assert!(err.contains("/nonexistent/c.yaml"));
     }
 
@@ -296,9 +338,18 @@ provenance:
 metrics:
   loss: 0.5
 "#;
-        let rig = CalibrationFile::parse(text, Path::new("doc.yaml")).unwrap().to_rig(Path::new("doc.yaml")).unwrap();
+        let rig = CalibrationFile::parse(text, Path::new("doc.yaml"))
+            .unwrap()
+            .to_rig(Path::new("doc.yaml"))
+            .unwrap();
         let cam = rig.sensor("front_camera").unwrap();
-        assert_eq!(cam.vehicle_from_sensor.translation, DVec3::new(1.0, 2.0, 3.0));
-        assert_eq!(cam.camera.as_ref().unwrap().model, crate::geometry::camera::CameraModel::PlumbBob);
+        assert_eq!(
+            cam.vehicle_from_sensor.translation,
+            DVec3::new(1.0, 2.0, 3.0)
+        );
+        assert_eq!(
+            cam.camera.as_ref().unwrap().model,
+            crate::geometry::camera::CameraModel::PlumbBob
+        );
     }
 }

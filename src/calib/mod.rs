@@ -7,5 +7,5 @@
 pub mod file;
 pub mod rig;
 
-pub use file::{CalibrationFile, CalibFileError};
+pub use file::{CalibFileError, CalibrationFile};
 pub use rig::{Rig, Sensor, SensorKind};

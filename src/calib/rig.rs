@@ -2,8 +2,8 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::geometry::camera::CameraIntrinsics;
 use crate::geometry::Rigid;
+use crate::geometry::camera::CameraIntrinsics;
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -61,6 +61,9 @@ impl Rig {
 
     /// `(name, vehicle_from_sensor)` pairs, the input of [`crate::geometry::rig_errors`].
     pub fn extrinsics(&self) -> Vec<(String, Rigid)> {
-        self.sensors.iter().map(|s| (s.name.clone(), s.vehicle_from_sensor)).collect()
+        self.sensors
+            .iter()
+            .map(|s| (s.name.clone(), s.vehicle_from_sensor))
+            .collect()
     }
 }

@@ -21,16 +21,30 @@ pub fn report(drive: &Drive) -> String {
         c.file_len,
         c.chunks.len(),
         c.channels.len(),
-        if c.used_summary { "summary + chunk indexes" } else { "none (read linearly)" },
+        if c.used_summary {
+            "summary + chunk indexes"
+        } else {
+            "none (read linearly)"
+        },
         c.profile.as_deref().unwrap_or("?"),
         c.library.as_deref().unwrap_or("?"),
     );
     if let Some((lo, hi)) = drive.time_range_nanos() {
-        let _ = writeln!(o, "sensor time range: {:.3} .. {:.3} s ({:.2} s)", secs(lo), secs(hi), secs(hi - lo));
+        let _ = writeln!(
+            o,
+            "sensor time range: {:.3} .. {:.3} s ({:.2} s)",
+            secs(lo),
+            secs(hi),
+            secs(hi - lo)
+        );
     }
 
     let _ = writeln!(o, "\ntopics:");
-    let _ = writeln!(o, "  {:<40} {:<36} {:<9} {:>7} {:>8}  status", "topic", "schema", "encoding", "count", "rate Hz");
+    let _ = writeln!(
+        o,
+        "  {:<40} {:<36} {:<9} {:>7} {:>8}  status",
+        "topic", "schema", "encoding", "count", "rate Hz"
+    );
     for t in &drive.topics {
         let status = match (t.understood, t.failed) {
             (false, _) => "not used".to_string(),
@@ -40,16 +54,30 @@ pub fn report(drive: &Drive) -> String {
         let _ = writeln!(
             o,
             "  {:<40} {:<36} {:<9} {:>7} {:>8.2}  {status}",
-            t.topic, t.schema_name, t.message_encoding, t.count, t.rate_hz()
+            t.topic,
+            t.schema_name,
+            t.message_encoding,
+            t.count,
+            t.rate_hz()
         );
     }
 
     let _ = writeln!(o, "\ntrajectory: {}", drive.trajectory_source);
     if let Some((lo, hi)) = drive.trajectory.time_range_nanos() {
-        let _ = writeln!(o, "  covers {:.3} .. {:.3} s; extrapolates up to {:.0} ms", secs(lo), secs(hi), drive.trajectory.max_extrapolation_nanos as f64 * 1e-6);
+        let _ = writeln!(
+            o,
+            "  covers {:.3} .. {:.3} s; extrapolates up to {:.0} ms",
+            secs(lo),
+            secs(hi),
+            drive.trajectory.max_extrapolation_nanos as f64 * 1e-6
+        );
     }
 
-    let _ = writeln!(o, "\nsensors (vehicle frame '{}'):", drive.rig.vehicle_frame);
+    let _ = writeln!(
+        o,
+        "\nsensors (vehicle frame '{}'):",
+        drive.rig.vehicle_frame
+    );
     for s in &drive.rig.sensors {
         let stream = drive.stream(&s.name);
         let frames = stream.map_or(0, |st| st.frames.len());
@@ -65,7 +93,9 @@ pub fn report(drive: &Drive) -> String {
             for f in &st.frames {
                 match (drive.trajectory.world_from_vehicle(f.stamp_nanos), range) {
                     (Err(_), _) => outside += 1,
-                    (Ok(_), Some((lo, hi))) if f.stamp_nanos < lo || f.stamp_nanos > hi => extra += 1,
+                    (Ok(_), Some((lo, hi))) if f.stamp_nanos < lo || f.stamp_nanos > hi => {
+                        extra += 1
+                    }
                     _ => {}
                 }
             }
@@ -84,16 +114,37 @@ pub fn report(drive: &Drive) -> String {
         let _ = writeln!(
             o,
             "      vehicle_from_sensor t = [{:.3}, {:.3}, {:.3}] m, rpy = [{:.2}, {:.2}, {:.2}] deg",
-            t.x, t.y, t.z, rpy[0].to_degrees(), rpy[1].to_degrees(), rpy[2].to_degrees()
+            t.x,
+            t.y,
+            t.z,
+            rpy[0].to_degrees(),
+            rpy[1].to_degrees(),
+            rpy[2].to_degrees()
         );
         if let Some(c) = &s.camera {
-            let _ = writeln!(o, "      {}×{} {} fx {:.1} fy {:.1} cx {:.1} cy {:.1}", c.width, c.height, c.model.as_str(), c.fx, c.fy, c.cx, c.cy);
+            let _ = writeln!(
+                o,
+                "      {}×{} {} fx {:.1} fy {:.1} cx {:.1} cy {:.1}",
+                c.width,
+                c.height,
+                c.model.as_str(),
+                c.fx,
+                c.fy,
+                c.cx,
+                c.cy
+            );
         }
         if extrapolated > 0 {
-            let _ = writeln!(o, "      {extrapolated} frames lie just outside the trajectory (extrapolated)");
+            let _ = writeln!(
+                o,
+                "      {extrapolated} frames lie just outside the trajectory (extrapolated)"
+            );
         }
         if outside > 0 {
-            let _ = writeln!(o, "      {outside} frames lie outside the trajectory and cannot be used");
+            let _ = writeln!(
+                o,
+                "      {outside} frames lie outside the trajectory and cannot be used"
+            );
         }
     }
 
@@ -102,7 +153,11 @@ pub fn report(drive: &Drive) -> String {
         let _ = writeln!(o, "  {parent} → {child} (static)");
     }
     for ((parent, child), series) in &drive.tf.dynamic_edges {
-        let _ = writeln!(o, "  {parent} → {child} (dynamic, {} samples)", series.len());
+        let _ = writeln!(
+            o,
+            "  {parent} → {child} (dynamic, {} samples)",
+            series.len()
+        );
     }
 
     let mut missing = Vec::new();
@@ -115,10 +170,23 @@ pub fn report(drive: &Drive) -> String {
     if drive.rig.cameras().count() == 0 {
         missing.push("any camera image topic".to_string());
     }
-    for s in drive.rig.sensors.iter().filter(|s| s.kind == SensorKind::Camera && s.camera.is_none()) {
+    for s in drive
+        .rig
+        .sensors
+        .iter()
+        .filter(|s| s.kind == SensorKind::Camera && s.camera.is_none())
+    {
         missing.push(format!("camera info for {}", s.name));
     }
-    let _ = writeln!(o, "\nready for calibration: {}", if missing.is_empty() { "yes".to_string() } else { format!("no — missing {}", missing.join("; ")) });
+    let _ = writeln!(
+        o,
+        "\nready for calibration: {}",
+        if missing.is_empty() {
+            "yes".to_string()
+        } else {
+            format!("no — missing {}", missing.join("; "))
+        }
+    );
     if !drive.problems.is_empty() {
         let _ = writeln!(o, "\nproblems ({}):", drive.problems.len());
         for p in drive.problems.iter().take(50) {

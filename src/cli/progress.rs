@@ -14,7 +14,14 @@ pub struct Progress {
 
 impl Progress {
     pub fn new(label: &str, total: u64) -> Self {
-        Self { label: label.into(), total: total.max(1), done: 0, tty: std::io::stderr().is_terminal(), started: Instant::now(), last_line_pct: 0 }
+        Self {
+            label: label.into(),
+            total: total.max(1),
+            done: 0,
+            tty: std::io::stderr().is_terminal(),
+            started: Instant::now(),
+            last_line_pct: 0,
+        }
     }
 
     pub fn set(&mut self, done: u64) {

@@ -68,14 +68,24 @@ pub struct CameraIntrinsics {
 
 impl CameraIntrinsics {
     pub fn pinhole(width: u32, height: u32, fx: f64, fy: f64, cx: f64, cy: f64) -> Self {
-        Self { width, height, model: CameraModel::Pinhole, fx, fy, cx, cy, distortion: Vec::new() }
+        Self {
+            width,
+            height,
+            model: CameraModel::Pinhole,
+            fx,
+            fy,
+            cx,
+            cy,
+            distortion: Vec::new(),
+        }
     }
 
     /// Pixel of a point in the camera frame; `None` if it is not in front of the camera
     /// (`z <= MIN_DEPTH`). Points far outside the field of view still get a pixel (possibly a
     /// folded-over one for the polynomial models), as in OpenCV; check [`Self::in_image`].
     pub fn project(&self, point_in_camera: DVec3) -> Option<DVec2> {
-        self.project_with_jacobian(point_in_camera).map(|(pixel, _)| pixel)
+        self.project_with_jacobian(point_in_camera)
+            .map(|(pixel, _)| pixel)
     }
 
     /// [`Self::project`] and its Jacobian d(pixel)/d(point), 2×3 row-major.
@@ -96,7 +106,9 @@ impl CameraIntrinsics {
         };
         let pixel = self.pixel_from_normalized(distorted);
         let scale = |r: [f64; 3], f: f64| [r[0] * f, r[1] * f, r[2] * f];
-        pixel.is_finite().then_some((pixel, [scale(d_dp[0], self.fx), scale(d_dp[1], self.fy)]))
+        pixel
+            .is_finite()
+            .then_some((pixel, [scale(d_dp[0], self.fx), scale(d_dp[1], self.fy)]))
     }
 
     /// Apply the lens distortion to normalised coordinates `(x/z, y/z)`.
@@ -133,7 +145,9 @@ impl CameraIntrinsics {
             let theta = fisheye_theta(self.fisheye_coeffs(), theta_d)?;
             (distorted * (theta.sin() / theta_d)).extend(theta.cos())
         } else {
-            self.undistort_normalized(distorted)?.extend(1.0).normalize()
+            self.undistort_normalized(distorted)?
+                .extend(1.0)
+                .try_normalize()?
         };
         (ray.is_finite() && ray.z > 0.0).then_some(ray)
     }
@@ -221,8 +235,14 @@ fn radial_tangential(c: &[f64; 8], xy: DVec2) -> (DVec2, Mat2) {
     );
     let cross = 2.0 * x * y * d_radial + 2.0 * p1 * x + 2.0 * p2 * y;
     let jacobian = [
-        [radial + 2.0 * x * x * d_radial + 2.0 * p1 * y + 6.0 * p2 * x, cross],
-        [cross, radial + 2.0 * y * y * d_radial + 6.0 * p1 * y + 2.0 * p2 * x],
+        [
+            radial + 2.0 * x * x * d_radial + 2.0 * p1 * y + 6.0 * p2 * x,
+            cross,
+        ],
+        [
+            cross,
+            radial + 2.0 * y * y * d_radial + 6.0 * p1 * y + 2.0 * p2 * x,
+        ],
     ];
     (distorted, jacobian)
 }
@@ -270,7 +290,10 @@ fn fisheye(k: [f64; 4], p: DVec3) -> (DVec2, [[f64; 3]; 2]) {
     let rho = p.x.hypot(p.y);
     if rho < 1e-14 * p.z {
         let iz = 1.0 / p.z;
-        return (p.truncate() * iz, [[iz, 0.0, -p.x * iz * iz], [0.0, iz, -p.y * iz * iz]]);
+        return (
+            p.truncate() * iz,
+            [[iz, 0.0, -p.x * iz * iz], [0.0, iz, -p.y * iz * iz]],
+        );
     }
     let (theta_d, d_theta_d) = fisheye_theta_d(k, rho.atan2(p.z));
     let n2 = rho * rho + p.z * p.z;
@@ -303,7 +326,11 @@ fn fisheye_theta(k: [f64; 4], theta_d: f64) -> Option<f64> {
             lo = theta;
         }
         let next = theta - residual / df;
-        theta = if df > 0.0 && next > lo && next < hi { next } else { 0.5 * (lo + hi) };
+        theta = if df > 0.0 && next > lo && next < hi {
+            next
+        } else {
+            0.5 * (lo + hi)
+        };
     }
     None
 }
@@ -364,7 +391,11 @@ mod tests {
             for j in 0..12 {
                 let phi = (30.0 * j as f64 + 7.0 * i as f64).to_radians();
                 let depth = 0.5 + 0.37 * ((i * 12 + j) % 11) as f64;
-                let dir = DVec3::new(theta.sin() * phi.cos(), theta.sin() * phi.sin(), theta.cos());
+                let dir = DVec3::new(
+                    theta.sin() * phi.cos(),
+                    theta.sin() * phi.sin(),
+                    theta.cos(),
+                );
                 out.push(dir * depth);
             }
         }
@@ -372,7 +403,11 @@ mod tests {
     }
 
     fn max_off_axis_deg(cam: &CameraIntrinsics) -> f64 {
-        if cam.model == CameraModel::Equidistant { 89.5 } else { 75.0 }
+        if cam.model == CameraModel::Equidistant {
+            89.5
+        } else {
+            75.0
+        }
     }
 
     /// Whether the radial-tangential distortion is still one-to-one between the centre and `xy`
@@ -399,7 +434,11 @@ mod tests {
                     };
                     assert!((ray.length() - 1.0).abs() < 1e-12 && ray.z > 0.0);
                     let back = cam.project(ray * 7.3).unwrap_or_else(|| panic!("{px}"));
-                    assert!((back - px).length() < 1e-6, "{:?} {px} -> {back}", cam.model);
+                    assert!(
+                        (back - px).length() < 1e-6,
+                        "{:?} {px} -> {back}",
+                        cam.model
+                    );
                 }
             }
         }
@@ -414,8 +453,14 @@ mod tests {
                 if !before_fold(&cam, p.truncate() / p.z) {
                     continue;
                 }
-                let ray = cam.unproject(px).unwrap_or_else(|| panic!("{:?} {p}", cam.model));
-                assert!((ray - p.normalize()).length() < 1e-9, "{:?} {p}: {ray}", cam.model);
+                let ray = cam
+                    .unproject(px)
+                    .unwrap_or_else(|| panic!("{:?} {p}", cam.model));
+                assert!(
+                    (ray - p.normalize_or_zero()).length() < 1e-9,
+                    "{:?} {p}: {ray}",
+                    cam.model
+                );
                 checked += 1;
             }
             assert!(checked > 100, "{:?}: {checked}", cam.model);
@@ -432,7 +477,11 @@ mod tests {
                 }
                 let back = cam.undistort_normalized(cam.distort_normalized(xy));
                 let back = back.unwrap_or_else(|| panic!("{:?} {xy}", cam.model));
-                assert!((back - xy).length() < 1e-9 * xy.length().max(1.0), "{:?} {xy}", cam.model);
+                assert!(
+                    (back - xy).length() < 1e-9 * xy.length().max(1.0),
+                    "{:?} {xy}",
+                    cam.model
+                );
             }
         }
     }
@@ -447,7 +496,10 @@ mod tests {
         };
         assert!(cam.undistort_normalized(DVec2::new(0.6, 0.2)).is_some());
         assert!(cam.undistort_normalized(DVec2::new(0.8, 0.0)).is_none());
-        let fisheye = CameraIntrinsics { model: CameraModel::Equidistant, ..cam };
+        let fisheye = CameraIntrinsics {
+            model: CameraModel::Equidistant,
+            ..cam
+        };
         assert!(fisheye.undistort_normalized(DVec2::new(1.6, 0.0)).is_none());
     }
 
@@ -455,7 +507,9 @@ mod tests {
     fn jacobian_matches_central_differences() {
         for cam in cameras() {
             for p in points(max_off_axis_deg(&cam)) {
-                let (_, jac) = cam.project_with_jacobian(p).unwrap_or_else(|| panic!("{p}"));
+                let (_, jac) = cam
+                    .project_with_jacobian(p)
+                    .unwrap_or_else(|| panic!("{p}"));
                 let h = 1e-6 * p.length();
                 let scale = jac.iter().flatten().fold(1.0_f64, |m, v| m.max(v.abs()));
                 for k in 0..3 {
@@ -492,7 +546,9 @@ mod tests {
             let half = cam.scaled(0.5);
             assert_eq!((half.width, half.height), (cam.width / 2, cam.height / 2));
             for p in points(30.0) {
-                let (Some(a), Some(b)) = (cam.project(p), half.project(p)) else { panic!("{p}") };
+                let (Some(a), Some(b)) = (cam.project(p), half.project(p)) else {
+                    panic!("{p}")
+                };
                 assert!(((a + 0.5) * 0.5 - 0.5 - b).length() < 1e-9);
             }
         }

@@ -10,5 +10,5 @@ pub mod rot6d;
 pub mod so3;
 pub mod trajectory;
 
-pub use rigid::{Rigid, rig_errors, RigError};
+pub use rigid::{RigError, Rigid, rig_errors};
 pub use trajectory::{Trajectory, TrajectoryError};

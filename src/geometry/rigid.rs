@@ -23,20 +23,32 @@ impl Default for Rigid {
 }
 
 impl Rigid {
-    pub const IDENTITY: Self = Self { rotation: DQuat::IDENTITY, translation: DVec3::ZERO };
+    pub const IDENTITY: Self = Self {
+        rotation: DQuat::IDENTITY,
+        translation: DVec3::ZERO,
+    };
 
     pub fn new(rotation: DQuat, translation: DVec3) -> Self {
-        Self { rotation: rotation.normalize(), translation }
+        Self {
+            rotation: rotation.normalize(),
+            translation,
+        }
     }
 
     pub fn from_translation(translation: DVec3) -> Self {
-        Self { rotation: DQuat::IDENTITY, translation }
+        Self {
+            rotation: DQuat::IDENTITY,
+            translation,
+        }
     }
 
     /// From a (near-)rigid 4×4 matrix; the rotation block is projected onto SO(3).
     pub fn from_mat4(m: DMat4) -> Self {
         let r = DMat3::from_mat4(m);
-        Self { rotation: so3::quat_from_matrix_orthonormalized(r), translation: m.w_axis.truncate() }
+        Self {
+            rotation: so3::quat_from_matrix_orthonormalized(r),
+            translation: m.w_axis.truncate(),
+        }
     }
 
     /// From row-major rows, as in most calibration files.
@@ -62,7 +74,10 @@ impl Rigid {
 
     pub fn inverse(self) -> Self {
         let inv = self.rotation.conjugate();
-        Self { rotation: inv, translation: -(inv * self.translation) }
+        Self {
+            rotation: inv,
+            translation: -(inv * self.translation),
+        }
     }
 
     pub fn transform_point(self, p: DVec3) -> DVec3 {
@@ -76,7 +91,10 @@ impl Rigid {
     /// `self ∘ exp(δ)` with δ = (ω, v) applied on the right (in the `b` frame): a small
     /// perturbation of the source side. ω in radians, v in metres.
     pub fn perturbed_right(self, omega_rad: DVec3, v_m: DVec3) -> Self {
-        self * Self { rotation: so3::exp(omega_rad), translation: v_m }
+        self * Self {
+            rotation: so3::exp(omega_rad),
+            translation: v_m,
+        }
     }
 
     /// Rotation angle (rad) and translation length (m) of `self⁻¹ ∘ other`... expressed as
@@ -134,9 +152,8 @@ pub fn rig_errors(
     estimate: &[(String, Rigid)],
     root: &str,
 ) -> Option<Vec<RigError>> {
-    let find = |set: &[(String, Rigid)], name: &str| {
-        set.iter().find(|(n, _)| n == name).map(|(_, t)| *t)
-    };
+    let find =
+        |set: &[(String, Rigid)], name: &str| set.iter().find(|(n, _)| n == name).map(|(_, t)| *t);
     let alignment = find(reference, root)? * find(estimate, root)?.inverse();
     Some(
         reference
@@ -159,7 +176,10 @@ mod tests {
     use super::*;
 
     fn sample() -> Rigid {
-        Rigid::new(so3::exp(DVec3::new(0.2, -0.5, 1.0)), DVec3::new(1.0, -2.0, 0.5))
+        Rigid::new(
+            so3::exp(DVec3::new(0.2, -0.5, 1.0)),
+            DVec3::new(1.0, -2.0, 0.5),
+        )
     }
 
     #[test]
@@ -183,9 +203,15 @@ mod tests {
     #[test]
     fn rpy_is_fixed_axis_xyz() {
         let (roll, pitch, yaw) = (0.1, -0.2, 0.3);
-        let q = DQuat::from_rotation_z(yaw) * DQuat::from_rotation_y(pitch) * DQuat::from_rotation_x(roll);
+        let q = DQuat::from_rotation_z(yaw)
+            * DQuat::from_rotation_y(pitch)
+            * DQuat::from_rotation_x(roll);
         let rpy = Rigid::new(q, DVec3::ZERO).roll_pitch_yaw_rad();
-        assert!((rpy[0] - roll).abs() < 1e-12 && (rpy[1] - pitch).abs() < 1e-12 && (rpy[2] - yaw).abs() < 1e-12);
+        assert!(
+            (rpy[0] - roll).abs() < 1e-12
+                && (rpy[1] - pitch).abs() < 1e-12
+                && (rpy[2] - yaw).abs() < 1e-12
+        );
     }
 
     #[test]
@@ -201,10 +227,19 @@ mod tests {
 
     #[test]
     fn rig_errors_are_invariant_to_a_common_offset() {
-        let reference = vec![("root".to_string(), Rigid::IDENTITY), ("cam".to_string(), sample())];
+        let reference = vec![
+            ("root".to_string(), Rigid::IDENTITY),
+            ("cam".to_string(), sample()),
+        ];
         // The estimate differs by a global transform G plus a known error on `cam`.
-        let g = Rigid::new(so3::exp(DVec3::new(0.0, 0.3, 0.0)), DVec3::new(5.0, 0.0, 0.0));
-        let err = Rigid::new(so3::exp(DVec3::new(1f64.to_radians(), 0.0, 0.0)), DVec3::new(0.0, 0.1, 0.0));
+        let g = Rigid::new(
+            so3::exp(DVec3::new(0.0, 0.3, 0.0)),
+            DVec3::new(5.0, 0.0, 0.0),
+        );
+        let err = Rigid::new(
+            so3::exp(DVec3::new(1f64.to_radians(), 0.0, 0.0)),
+            DVec3::new(0.0, 0.1, 0.0),
+        );
         let estimate = vec![
             ("root".to_string(), g * Rigid::IDENTITY),
             ("cam".to_string(), g * sample() * err),

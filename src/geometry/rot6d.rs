@@ -39,7 +39,12 @@ mod tests {
     fn any_generic_vector_gives_a_rotation() {
         let r = to_matrix([1.0, 0.2, -0.3, 0.5, 2.0, 0.1]).unwrap();
         assert!((r.determinant() - 1.0).abs() < 1e-12);
-        assert!((r.transpose() * r - DMat3::IDENTITY).to_cols_array().iter().all(|d| d.abs() < 1e-12));
+        assert!(
+            (r.transpose() * r - DMat3::IDENTITY)
+                .to_cols_array()
+                .iter()
+                .all(|d| d.abs() < 1e-12)
+        );
     }
 
     #[test]

@@ -19,7 +19,11 @@ pub fn exp(omega_rad: DVec3) -> DQuat {
 /// Axis-angle vector of a rotation, with angle in [0, π].
 pub fn log(rotation: DQuat) -> DVec3 {
     // Take the hemisphere with w ≥ 0 so the angle is in [0, π].
-    let q = if rotation.w < 0.0 { -rotation } else { rotation };
+    let q = if rotation.w < 0.0 {
+        -rotation
+    } else {
+        rotation
+    };
     let v = DVec3::new(q.x, q.y, q.z);
     let sin_half = v.length();
     if sin_half < 1e-12 {

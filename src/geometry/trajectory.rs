@@ -15,7 +15,13 @@ pub enum TrajectoryError {
     #[error(
         "time {stamp_nanos} ns is outside the trajectory [{start_nanos}, {end_nanos}] ns by {outside_ms:.1} ms (allowed extrapolation {allowed_ms:.1} ms)"
     )]
-    OutOfRange { stamp_nanos: i64, start_nanos: i64, end_nanos: i64, outside_ms: f64, allowed_ms: f64 },
+    OutOfRange {
+        stamp_nanos: i64,
+        start_nanos: i64,
+        end_nanos: i64,
+        outside_ms: f64,
+        allowed_ms: f64,
+    },
 }
 
 /// Poses sorted by time; duplicate stamps keep the last pose given.
@@ -42,7 +48,11 @@ impl Trajectory {
             stamps_nanos.push(t);
             world_from_vehicle.push(pose);
         }
-        Self { stamps_nanos, world_from_vehicle, max_extrapolation_nanos: 0 }
+        Self {
+            stamps_nanos,
+            world_from_vehicle,
+            max_extrapolation_nanos: 0,
+        }
     }
 
     pub fn with_max_extrapolation_nanos(mut self, nanos: i64) -> Self {
@@ -63,7 +73,10 @@ impl Trajectory {
     }
 
     pub fn poses(&self) -> impl Iterator<Item = (i64, Rigid)> + '_ {
-        self.stamps_nanos.iter().copied().zip(self.world_from_vehicle.iter().copied())
+        self.stamps_nanos
+            .iter()
+            .copied()
+            .zip(self.world_from_vehicle.iter().copied())
     }
 
     /// First and last stamp.
@@ -112,9 +125,15 @@ mod tests {
 
     fn straight() -> Trajectory {
         Trajectory::new(vec![
-            (2_000, Rigid::new(DQuat::from_rotation_z(0.2), DVec3::new(2.0, 0.0, 0.0))),
+            (
+                2_000,
+                Rigid::new(DQuat::from_rotation_z(0.2), DVec3::new(2.0, 0.0, 0.0)),
+            ),
             (0, Rigid::IDENTITY),
-            (1_000, Rigid::new(DQuat::from_rotation_z(0.1), DVec3::new(1.0, 0.0, 0.0))),
+            (
+                1_000,
+                Rigid::new(DQuat::from_rotation_z(0.1), DVec3::new(1.0, 0.0, 0.0)),
+            ),
         ])
     }
 
@@ -135,11 +154,17 @@ mod tests {
     #[test]
     fn outside_range_is_an_error_unless_allowed() {
         let t = straight();
-        assert!(matches!(t.world_from_vehicle(-1), Err(TrajectoryError::OutOfRange { .. })));
+        assert!(matches!(
+            t.world_from_vehicle(-1),
+            Err(TrajectoryError::OutOfRange { .. })
+        ));
         let t = t.with_max_extrapolation_nanos(500);
         let p = t.world_from_vehicle(-500).unwrap();
         assert!((p.translation.x + 0.5).abs() < 1e-12);
         assert!(t.world_from_vehicle(2_501).is_err());
-        assert_eq!(Trajectory::default().world_from_vehicle(0), Err(TrajectoryError::Empty));
+        assert_eq!(
+            Trajectory::default().world_from_vehicle(0),
+            Err(TrajectoryError::Empty)
+        );
     }
 }

@@ -16,7 +16,9 @@ pub struct CdrReader<'a> {
 impl<'a> CdrReader<'a> {
     pub fn new(payload: &'a [u8]) -> DecodeResult<Self> {
         if payload.len() < 4 {
-            return Err(DecodeError::new("CDR payload shorter than its 4-byte header"));
+            return Err(DecodeError::new(
+                "CDR payload shorter than its 4-byte header",
+            ));
         }
         let little_endian = match (payload[0], payload[1]) {
             (0, 1) => true,
@@ -27,7 +29,11 @@ impl<'a> CdrReader<'a> {
                 )));
             }
         };
-        Ok(Self { data: &payload[4..], pos: 0, little_endian })
+        Ok(Self {
+            data: &payload[4..],
+            pos: 0,
+            little_endian,
+        })
     }
 
     fn align(&mut self, n: usize) {
@@ -38,13 +44,17 @@ impl<'a> CdrReader<'a> {
     }
 
     fn take(&mut self, n: usize, what: &str) -> DecodeResult<&'a [u8]> {
-        let end = self.pos.checked_add(n).filter(|&e| e <= self.data.len()).ok_or_else(|| {
-            DecodeError::new(format!(
-                "truncated CDR: {what} needs {n} bytes at offset {} of {}",
-                self.pos,
-                self.data.len()
-            ))
-        })?;
+        let end = self
+            .pos
+            .checked_add(n)
+            .filter(|&e| e <= self.data.len())
+            .ok_or_else(|| {
+                DecodeError::new(format!(
+                    "truncated CDR: {what} needs {n} bytes at offset {} of {}",
+                    self.pos,
+                    self.data.len()
+                ))
+            })?;
         let s = &self.data[self.pos..end];
         self.pos = end;
         Ok(s)
@@ -81,7 +91,8 @@ impl<'a> CdrReader<'a> {
         let len = self.u32(what)? as usize;
         let bytes = self.take(len, what)?;
         let bytes = bytes.strip_suffix(&[0]).unwrap_or(bytes);
-        String::from_utf8(bytes.to_vec()).map_err(|_| DecodeError::new(format!("{what} is not UTF-8")))
+        String::from_utf8(bytes.to_vec())
+            .map_err(|_| DecodeError::new(format!("{what} is not UTF-8")))
     }
 
     /// A `sequence<uint8>` / `uint8[]`, borrowed.
@@ -101,7 +112,9 @@ impl<'a> CdrReader<'a> {
     pub fn f64_seq(&mut self, what: &str) -> DecodeResult<Vec<f64>> {
         let n = self.u32(what)? as usize;
         if n > self.data.len() {
-            return Err(DecodeError::new(format!("{what}: sequence length {n} exceeds the payload")));
+            return Err(DecodeError::new(format!(
+                "{what}: sequence length {n} exceeds the payload"
+            )));
         }
         (0..n).map(|_| self.f64(what)).collect()
     }
@@ -109,7 +122,9 @@ impl<'a> CdrReader<'a> {
     pub fn seq_len(&mut self, what: &str) -> DecodeResult<usize> {
         let n = self.u32(what)? as usize;
         if n > self.data.len() {
-            return Err(DecodeError::new(format!("{what}: sequence length {n} exceeds the payload")));
+            return Err(DecodeError::new(format!(
+                "{what}: sequence length {n} exceeds the payload"
+            )));
         }
         Ok(n)
     }

@@ -17,7 +17,7 @@ use std::ops::Deref;
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
 
-use mcap::records::{op, Record};
+use mcap::records::{Record, op};
 use rayon::prelude::*;
 
 use super::error::{LogError, Problem};
@@ -104,7 +104,10 @@ impl std::fmt::Debug for McapContainer {
 
 impl McapContainer {
     pub fn open(path: &Path) -> Result<Self, LogError> {
-        let io = |source| LogError::Io { path: path.to_path_buf(), source };
+        let io = |source| LogError::Io {
+            path: path.to_path_buf(),
+            source,
+        };
         let mut file = File::open(path).map_err(io)?;
         let file_len = file.metadata().map_err(io)?.len();
         let mut magic = [0u8; 8];
@@ -140,9 +143,15 @@ impl McapContainer {
 
     fn read_at(&self, offset: u64, len: u64) -> std::io::Result<Vec<u8>> {
         if offset.saturating_add(len) > self.file_len || len > MAX_RECORD_BYTES {
-            return Err(std::io::Error::new(std::io::ErrorKind::UnexpectedEof, "record runs past the end of the file"));
+            return Err(std::io::Error::new(
+                std::io::ErrorKind::UnexpectedEof,
+                "record runs past the end of the file",
+            ));
         }
-        let mut f = self.file.lock().map_err(|_| std::io::Error::other("file lock poisoned"))?;
+        let mut f = self
+            .file
+            .lock()
+            .map_err(|_| std::io::Error::other("file lock poisoned"))?;
         f.seek(SeekFrom::Start(offset))?;
         let mut buf = vec![0u8; len as usize];
         f.read_exact(&mut buf)?;
@@ -151,26 +160,31 @@ impl McapContainer {
 
     fn read_header(&mut self) {
         // The header record follows the magic: opcode 0x01, then profile and library strings.
-        let Ok(prefix) = self.read_at(8, 9) else { return };
+        let Ok(prefix) = self.read_at(8, 9) else {
+            return;
+        };
         if prefix[0] != op::HEADER {
             return;
         }
         let len = u64::from_le_bytes(prefix[1..9].try_into().unwrap_or([0; 8]));
-        if let Ok(body) = self.read_at(17, len) {
-            if let Ok(Record::Header(h)) = mcap::parse_record(op::HEADER, &body) {
-                self.profile = Some(h.profile);
-                self.library = Some(h.library);
-            }
+        if let Ok(body) = self.read_at(17, len)
+            && let Ok(Record::Header(h)) = mcap::parse_record(op::HEADER, &body)
+        {
+            self.profile = Some(h.profile);
+            self.library = Some(h.library);
         }
     }
 
     /// Channels and chunk locations from the summary section; false if it is absent or unusable.
     fn try_summary(&mut self) -> bool {
         use mcap::sans_io::{SummaryReadEvent, SummaryReader, SummaryReaderOptions};
-        let Ok(mut guard) = self.file.lock() else { return false };
+        let Ok(mut guard) = self.file.lock() else {
+            return false;
+        };
         let file: &mut File = &mut guard;
-        let mut reader =
-            SummaryReader::new_with_options(SummaryReaderOptions::default().with_file_size(self.file_len));
+        let mut reader = SummaryReader::new_with_options(
+            SummaryReaderOptions::default().with_file_size(self.file_len),
+        );
         while let Some(event) = reader.next_event() {
             match event {
                 Ok(SummaryReadEvent::ReadRequest(n)) => match file.read(reader.insert(n)) {
@@ -183,24 +197,34 @@ impl McapContainer {
                 },
                 Err(e) => {
                     drop(guard);
-                    self.problems.push(Problem::file(format!("summary section unusable ({e}); read the file linearly")));
+                    self.problems.push(Problem::file(format!(
+                        "summary section unusable ({e}); read the file linearly"
+                    )));
                     return false;
                 }
             }
         }
         drop(guard);
-        let Some(summary) = reader.finish() else { return false };
+        let Some(summary) = reader.finish() else {
+            return false;
+        };
         let message_count = summary.stats.as_ref().map(|s| s.message_count).unwrap_or(0);
         if summary.chunk_indexes.is_empty() && message_count > 0 {
             return false; // messages outside chunks: only a linear walk finds them
         }
         for (id, ch) in &summary.channels {
-            self.channels.insert(*id, channel_info(ch.id, &ch.topic, &ch.message_encoding, ch.schema.as_deref()));
+            self.channels.insert(
+                *id,
+                channel_info(ch.id, &ch.topic, &ch.message_encoding, ch.schema.as_deref()),
+            );
         }
         let mut chunks: Vec<ChunkLoc> = summary
             .chunk_indexes
             .iter()
-            .map(|ci| ChunkLoc { offset: ci.chunk_start_offset, length: ci.chunk_length })
+            .map(|ci| ChunkLoc {
+                offset: ci.chunk_start_offset,
+                length: ci.chunk_length,
+            })
             .collect();
         chunks.sort_by_key(|c| c.offset);
         for c in &chunks {
@@ -220,13 +244,16 @@ impl McapContainer {
         let mut raw_channels: Vec<mcap::records::Channel> = Vec::new();
         loop {
             if offset == self.file_len {
-                self.problems.push(Problem::file("the file ends without a footer (truncated?)"));
+                self.problems
+                    .push(Problem::file("the file ends without a footer (truncated?)"));
                 break;
             }
             let prefix = match self.read_at(offset, 9) {
                 Ok(p) => p,
                 Err(_) => {
-                    self.problems.push(Problem::file(format!("truncated record header at byte {offset}")));
+                    self.problems.push(Problem::file(format!(
+                        "truncated record header at byte {offset}"
+                    )));
                     break;
                 }
             };
@@ -241,14 +268,21 @@ impl McapContainer {
             }
             match opcode {
                 op::SCHEMA | op::CHANNEL | op::CHUNK => {
-                    let body = self.read_at(body_offset, len).map_err(|e| self.corrupt(offset, e.to_string()))?;
+                    let body = self
+                        .read_at(body_offset, len)
+                        .map_err(|e| self.corrupt(offset, e.to_string()))?;
                     if opcode == op::CHUNK {
-                        self.chunks.push(ChunkLoc { offset, length: len + 9 });
+                        self.chunks.push(ChunkLoc {
+                            offset,
+                            length: len + 9,
+                        });
                         match decompress_chunk(&body) {
                             Ok(data) => for_each_record(&data, |op, body, _| {
                                 collect_definition(op, body, &mut schemas, &mut raw_channels)
                             }),
-                            Err(what) => self.problems.push(Problem::file(format!("chunk at byte {offset}: {what}"))),
+                            Err(what) => self
+                                .problems
+                                .push(Problem::file(format!("chunk at byte {offset}: {what}"))),
                         }
                     } else {
                         collect_definition(opcode, &body, &mut schemas, &mut raw_channels);
@@ -256,19 +290,30 @@ impl McapContainer {
                 }
                 op::MESSAGE => {
                     if len >= 22 {
-                        let body = self.read_at(body_offset, 22).map_err(|e| self.corrupt(offset, e.to_string()))?;
+                        let body = self
+                            .read_at(body_offset, 22)
+                            .map_err(|e| self.corrupt(offset, e.to_string()))?;
                         let channel_id = u16::from_le_bytes([body[0], body[1]]);
                         let log_time = u64::from_le_bytes(body[6..14].try_into().unwrap_or([0; 8]));
-                        let publish_time = u64::from_le_bytes(body[14..22].try_into().unwrap_or([0; 8]));
-                        let location = Location::File { start: body_offset + 22, end: body_offset + len };
-                        self.loose.push((channel_id, log_time, publish_time, location));
+                        let publish_time =
+                            u64::from_le_bytes(body[14..22].try_into().unwrap_or([0; 8]));
+                        let location = Location::File {
+                            start: body_offset + 22,
+                            end: body_offset + len,
+                        };
+                        self.loose
+                            .push((channel_id, log_time, publish_time, location));
                     } else {
-                        self.problems.push(Problem::file(format!("message record at byte {offset} is too short")));
+                        self.problems.push(Problem::file(format!(
+                            "message record at byte {offset} is too short"
+                        )));
                     }
                 }
                 op::FOOTER | op::DATA_END => break,
                 0 => {
-                    self.problems.push(Problem::file(format!("invalid opcode 0 at byte {offset}; stopped reading")));
+                    self.problems.push(Problem::file(format!(
+                        "invalid opcode 0 at byte {offset}; stopped reading"
+                    )));
                     break;
                 }
                 _ => {}
@@ -288,22 +333,33 @@ impl McapContainer {
             self.channels.insert(ch.id, info);
         }
         if self.channels.is_empty() && self.chunks.is_empty() && self.loose.is_empty() {
-            let what = self.problems.first().map(|p| p.what.clone()).unwrap_or_else(|| "no records".into());
-            return Err(LogError::Unusable { path: self.path.clone(), what: format!("no channels or messages found: {what}") });
+            let what = self
+                .problems
+                .first()
+                .map(|p| p.what.clone())
+                .unwrap_or_else(|| "no records".into());
+            return Err(LogError::Unusable {
+                path: self.path.clone(),
+                what: format!("no channels or messages found: {what}"),
+            });
         }
         Ok(())
     }
 
     fn corrupt(&self, offset: u64, what: String) -> LogError {
-        LogError::Corrupt { path: self.path.clone(), offset, what }
+        LogError::Corrupt {
+            path: self.path.clone(),
+            offset,
+            what,
+        }
     }
 
     /// Decompressed records of chunk `index`, through the LRU cache.
     pub fn chunk_data(&self, index: u32) -> Result<Arc<Vec<u8>>, String> {
-        if let Ok(mut cache) = self.cache.lock() {
-            if let Some(hit) = cache.get(index) {
-                return Ok(hit);
-            }
+        if let Ok(mut cache) = self.cache.lock()
+            && let Some(hit) = cache.get(index)
+        {
+            return Ok(hit);
         }
         let data = Arc::new(self.load_chunk(index)?);
         if let Ok(mut cache) = self.cache.lock() {
@@ -313,10 +369,18 @@ impl McapContainer {
     }
 
     fn load_chunk(&self, index: u32) -> Result<Vec<u8>, String> {
-        let loc = self.chunks.get(index as usize).ok_or_else(|| format!("no chunk {index}"))?;
-        let record = self.read_at(loc.offset, loc.length).map_err(|e| format!("chunk at byte {}: {e}", loc.offset))?;
+        let loc = self
+            .chunks
+            .get(index as usize)
+            .ok_or_else(|| format!("no chunk {index}"))?;
+        let record = self
+            .read_at(loc.offset, loc.length)
+            .map_err(|e| format!("chunk at byte {}: {e}", loc.offset))?;
         if record.first() != Some(&op::CHUNK) || record.len() < 9 {
-            return Err(format!("the index points at byte {} but no chunk is there", loc.offset));
+            return Err(format!(
+                "the index points at byte {} but no chunk is there",
+                loc.offset
+            ));
         }
         decompress_chunk(&record[9..]).map_err(|e| format!("chunk at byte {}: {e}", loc.offset))
     }
@@ -329,12 +393,22 @@ impl McapContainer {
                 if end as usize > buf.len() || start > end {
                     return Err("message location outside its chunk".into());
                 }
-                Ok(MessageBytes { buf, start: start as usize, end: end as usize })
+                Ok(MessageBytes {
+                    buf,
+                    start: start as usize,
+                    end: end as usize,
+                })
             }
             Location::File { start, end } => {
-                let buf = self.read_at(start, end - start).map_err(|e| e.to_string())?;
+                let buf = self
+                    .read_at(start, end - start)
+                    .map_err(|e| e.to_string())?;
                 let len = buf.len();
-                Ok(MessageBytes { buf: Arc::new(buf), start: 0, end: len })
+                Ok(MessageBytes {
+                    buf: Arc::new(buf),
+                    start: 0,
+                    end: len,
+                })
             }
         }
     }
@@ -364,9 +438,12 @@ impl McapContainer {
                     }
                     let channel_id = u16::from_le_bytes([body[0], body[1]]);
                     let log_time = u64::from_le_bytes(body[6..14].try_into().unwrap_or([0; 8]));
-                    let publish_time = u64::from_le_bytes(body[14..22].try_into().unwrap_or([0; 8]));
+                    let publish_time =
+                        u64::from_le_bytes(body[14..22].try_into().unwrap_or([0; 8]));
                     let Some(channel) = self.channels.get(&channel_id) else {
-                        problems.push(Problem::file(format!("message on unknown channel id {channel_id}")));
+                        problems.push(Problem::file(format!(
+                            "message on unknown channel id {channel_id}"
+                        )));
                         return;
                     };
                     let r = MessageRef {
@@ -393,9 +470,16 @@ impl McapContainer {
             problems.extend(p);
         }
         for &(channel_id, log_time, publish_time, location) in &self.loose {
-            let r = MessageRef { channel_id, log_time_nanos: log_time, publish_time_nanos: publish_time, location };
+            let r = MessageRef {
+                channel_id,
+                log_time_nanos: log_time,
+                publish_time_nanos: publish_time,
+                location,
+            };
             let Some(channel) = self.channels.get(&channel_id) else {
-                problems.push(Problem::file(format!("message on unknown channel id {channel_id}")));
+                problems.push(Problem::file(format!(
+                    "message on unknown channel id {channel_id}"
+                )));
                 continue;
             };
             match self.message_bytes(&r) {
@@ -411,7 +495,12 @@ impl McapContainer {
     }
 }
 
-fn channel_info(id: u16, topic: &str, message_encoding: &str, schema: Option<&mcap::Schema<'_>>) -> ChannelInfo {
+fn channel_info(
+    id: u16,
+    topic: &str,
+    message_encoding: &str,
+    schema: Option<&mcap::Schema<'_>>,
+) -> ChannelInfo {
     ChannelInfo {
         id,
         topic: topic.to_string(),
@@ -430,12 +519,13 @@ fn collect_definition(
 ) {
     match (opcode, mcap::parse_record(opcode, body)) {
         (op::SCHEMA, Ok(Record::Schema { header, data })) => {
-            schemas.insert(header.id, (header.name, header.encoding, Arc::new(data.into_owned())));
+            schemas.insert(
+                header.id,
+                (header.name, header.encoding, Arc::new(data.into_owned())),
+            );
         }
-        (op::CHANNEL, Ok(Record::Channel(ch))) => {
-            if !channels.iter().any(|c| c.id == ch.id) {
-                channels.push(ch);
-            }
+        (op::CHANNEL, Ok(Record::Channel(ch))) if !channels.iter().any(|c| c.id == ch.id) => {
+            channels.push(ch);
         }
         _ => {}
     }
@@ -449,7 +539,9 @@ fn for_each_record(data: &[u8], mut f: impl FnMut(u8, &[u8], usize)) {
         let opcode = data[pos];
         let len = u64::from_le_bytes(data[pos + 1..pos + 9].try_into().unwrap_or([0; 8]));
         let start = pos + 9;
-        let Some(end) = usize::try_from(len).ok().and_then(|l| start.checked_add(l)) else { return };
+        let Some(end) = usize::try_from(len).ok().and_then(|l| start.checked_add(l)) else {
+            return;
+        };
         if end > data.len() {
             return;
         }
@@ -467,28 +559,45 @@ fn decompress_chunk(body: &[u8]) -> Result<Vec<u8>, String> {
     };
     let (header, data) = header;
     if header.uncompressed_size > MAX_RECORD_BYTES {
-        return Err(format!("chunk claims {} uncompressed bytes", header.uncompressed_size));
+        return Err(format!(
+            "chunk claims {} uncompressed bytes",
+            header.uncompressed_size
+        ));
     }
     let size = header.uncompressed_size as usize;
     let out = match header.compression.as_str() {
         "" => data.into_owned(),
-        "zstd" => zstd::bulk::decompress(&data, size).map_err(|e| format!("zstd: {e}"))?,
+        // Streaming decoders bounded by the declared size: a corrupt header cannot make us
+        // allocate more than the data actually expands to.
+        "zstd" => {
+            let mut out = Vec::new();
+            zstd::stream::Decoder::new(&data[..])
+                .and_then(|d| d.take(size as u64 + 1).read_to_end(&mut out))
+                .map_err(|e| format!("zstd: {e}"))?;
+            out
+        }
         "lz4" => {
-            let mut out = Vec::with_capacity(size);
+            let mut out = Vec::new();
             lz4::Decoder::new(&data[..])
-                .and_then(|mut d| d.read_to_end(&mut out))
+                .and_then(|d| d.take(size as u64 + 1).read_to_end(&mut out))
                 .map_err(|e| format!("lz4: {e}"))?;
             out
         }
         other => return Err(format!("unsupported chunk compression '{other}'")),
     };
     if out.len() != size {
-        return Err(format!("chunk decompressed to {} bytes, header says {size}", out.len()));
+        return Err(format!(
+            "chunk decompressed to {} bytes, header says {size}",
+            out.len()
+        ));
     }
     if header.uncompressed_crc != 0 {
         let crc = crc32(&out);
         if crc != header.uncompressed_crc {
-            return Err(format!("chunk CRC mismatch (stored {:08x}, computed {crc:08x})", header.uncompressed_crc));
+            return Err(format!(
+                "chunk CRC mismatch (stored {:08x}, computed {crc:08x})",
+                header.uncompressed_crc
+            ));
         }
     }
     Ok(out)
@@ -502,7 +611,11 @@ fn crc32(data: &[u8]) -> u32 {
         for (i, e) in t.iter_mut().enumerate() {
             let mut c = i as u32;
             for _ in 0..8 {
-                c = if c & 1 != 0 { 0xEDB8_8320 ^ (c >> 1) } else { c >> 1 };
+                c = if c & 1 != 0 {
+                    0xEDB8_8320 ^ (c >> 1)
+                } else {
+                    c >> 1
+                };
             }
             *e = c;
         }
@@ -524,7 +637,11 @@ struct ChunkCache {
 
 impl ChunkCache {
     fn new(budget_bytes: usize) -> Self {
-        Self { budget_bytes, used_bytes: 0, entries: VecDeque::new() }
+        Self {
+            budget_bytes,
+            used_bytes: 0,
+            entries: VecDeque::new(),
+        }
     }
 
     fn get(&mut self, index: u32) -> Option<Arc<Vec<u8>>> {

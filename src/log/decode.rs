@@ -34,7 +34,12 @@ impl Codec {
     }
 
     pub fn is_lidar(self) -> bool {
-        matches!(self, Codec::Ros2(Ros2Type::PointCloud2) | Codec::FoxgloveProtobuf(FoxgloveType::PointCloud) | Codec::FoxgloveJson(FoxgloveType::PointCloud))
+        matches!(
+            self,
+            Codec::Ros2(Ros2Type::PointCloud2)
+                | Codec::FoxgloveProtobuf(FoxgloveType::PointCloud)
+                | Codec::FoxgloveJson(FoxgloveType::PointCloud)
+        )
     }
 
     pub fn is_image(self) -> bool {

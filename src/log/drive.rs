@@ -16,7 +16,7 @@ use super::container::{McapContainer, MessageRef};
 use super::decode::Codec;
 use super::error::{LogError, Problem};
 use super::pointcloud::{self, LidarSweep};
-use super::tf::{normalize_frame, TfTree};
+use super::tf::{TfTree, normalize_frame};
 use super::types::{CameraInfoMsg, Decoded, PoseMsg, TransformMsg};
 use crate::calib::{Rig, Sensor, SensorKind};
 use crate::geometry::{Rigid, Trajectory};
@@ -36,7 +36,12 @@ pub struct DriveOptions {
 
 impl Default for DriveOptions {
     fn default() -> Self {
-        Self { fixed_frame: None, vehicle_frame: None, max_extrapolation_secs: 0.1, image_cache_len: 24 }
+        Self {
+            fixed_frame: None,
+            vehicle_frame: None,
+            max_extrapolation_secs: 0.1,
+            image_cache_len: 24,
+        }
     }
 }
 
@@ -81,17 +86,30 @@ pub struct TopicStats {
 
 impl TopicStats {
     pub fn rate_hz(&self) -> f64 {
-        let span = (self.last_log_time_nanos.saturating_sub(self.first_log_time_nanos)) as f64 * 1e-9;
-        if self.count > 1 && span > 0.0 { (self.count - 1) as f64 / span } else { 0.0 }
+        let span = (self
+            .last_log_time_nanos
+            .saturating_sub(self.first_log_time_nanos)) as f64
+            * 1e-9;
+        if self.count > 1 && span > 0.0 {
+            (self.count - 1) as f64 / span
+        } else {
+            0.0
+        }
     }
 }
 
 /// What the scan keeps of one message.
 enum Kept {
-    Transforms { msgs: Vec<TransformMsg>, is_static: bool },
+    Transforms {
+        msgs: Vec<TransformMsg>,
+        is_static: bool,
+    },
     Poses(Vec<PoseMsg>),
     CameraInfo(CameraInfoMsg),
-    Sensor { stamp_nanos: i64, frame_id: String },
+    Sensor {
+        stamp_nanos: i64,
+        frame_id: String,
+    },
     Ignored,
     Failed(String),
 }
@@ -114,7 +132,10 @@ pub struct Drive {
 
 impl std::fmt::Debug for Drive {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("Drive").field("path", &self.container.path()).field("streams", &self.streams.len()).finish_non_exhaustive()
+        f.debug_struct("Drive")
+            .field("path", &self.container.path())
+            .field("streams", &self.streams.len())
+            .finish_non_exhaustive()
     }
 }
 
@@ -125,18 +146,29 @@ impl Drive {
 
     pub fn open_with(path: &Path, options: &DriveOptions) -> Result<Self, LogError> {
         let container = McapContainer::open(path)?;
-        let codecs: BTreeMap<u16, Option<Codec>> =
-            container.channels.iter().map(|(id, ch)| (*id, Codec::for_channel(ch))).collect();
+        let codecs: BTreeMap<u16, Option<Codec>> = container
+            .channels
+            .iter()
+            .map(|(id, ch)| (*id, Codec::for_channel(ch)))
+            .collect();
         let (kept, scan_problems) = container.scan(|r, ch, payload| {
-            let Some(codec) = codecs.get(&r.channel_id).copied().flatten() else { return Some(Kept::Ignored) };
+            let Some(codec) = codecs.get(&r.channel_id).copied().flatten() else {
+                return Some(Kept::Ignored);
+            };
             Some(match codec.decode(payload) {
                 Err(e) => Kept::Failed(e.0),
-                Ok(Decoded::Transforms(msgs)) => Kept::Transforms { msgs, is_static: ch.topic.ends_with("tf_static") },
+                Ok(Decoded::Transforms(msgs)) => Kept::Transforms {
+                    msgs,
+                    is_static: ch.topic.ends_with("tf_static"),
+                },
                 Ok(Decoded::Pose(p)) => Kept::Poses(vec![p]),
                 Ok(Decoded::Poses(p)) => Kept::Poses(p),
                 Ok(Decoded::CameraInfo(c)) => Kept::CameraInfo(c),
                 Ok(d) => match d.stamp_and_frame() {
-                    Some((stamp_nanos, frame)) => Kept::Sensor { stamp_nanos, frame_id: normalize_frame(frame) },
+                    Some((stamp_nanos, frame)) => Kept::Sensor {
+                        stamp_nanos,
+                        frame_id: normalize_frame(frame),
+                    },
                     None => Kept::Ignored,
                 },
             })
@@ -149,16 +181,19 @@ impl Drive {
             .channels
             .iter()
             .map(|(id, ch)| {
-                (*id, TopicStats {
-                    topic: ch.topic.clone(),
-                    schema_name: ch.schema_name.clone(),
-                    message_encoding: ch.message_encoding.clone(),
-                    count: 0,
-                    first_log_time_nanos: u64::MAX,
-                    last_log_time_nanos: 0,
-                    understood: codecs.get(id).copied().flatten().is_some(),
-                    failed: 0,
-                })
+                (
+                    *id,
+                    TopicStats {
+                        topic: ch.topic.clone(),
+                        schema_name: ch.schema_name.clone(),
+                        message_encoding: ch.message_encoding.clone(),
+                        count: 0,
+                        first_log_time_nanos: u64::MAX,
+                        last_log_time_nanos: 0,
+                        understood: codecs.get(id).copied().flatten().is_some(),
+                        failed: 0,
+                    },
+                )
             })
             .collect();
 
@@ -168,23 +203,42 @@ impl Drive {
         // topic → (frame_id, frames)
         let mut sensor_frames: BTreeMap<u16, (String, Vec<FrameRef>, Vec<u64>)> = BTreeMap::new();
         for (r, k) in kept {
-            let Some(stats) = topics.get_mut(&r.channel_id) else { continue };
+            let Some(stats) = topics.get_mut(&r.channel_id) else {
+                continue;
+            };
             stats.count += 1;
             stats.first_log_time_nanos = stats.first_log_time_nanos.min(r.log_time_nanos);
             stats.last_log_time_nanos = stats.last_log_time_nanos.max(r.log_time_nanos);
             match k {
                 Kept::Transforms { msgs, is_static } => {
                     for m in &msgs {
-                        if is_static { tf.add_static(m) } else { tf.add_dynamic(m) }
+                        if is_static {
+                            tf.add_static(m)
+                        } else {
+                            tf.add_dynamic(m)
+                        }
                     }
                 }
-                Kept::Poses(p) => poses_by_topic.entry(stats.topic.clone()).or_default().extend(p),
+                Kept::Poses(p) => poses_by_topic
+                    .entry(stats.topic.clone())
+                    .or_default()
+                    .extend(p),
                 Kept::CameraInfo(c) => {
-                    camera_infos.entry(normalize_frame(&c.frame_id)).or_insert((stats.topic.clone(), c));
+                    camera_infos
+                        .entry(normalize_frame(&c.frame_id))
+                        .or_insert((stats.topic.clone(), c));
                 }
-                Kept::Sensor { stamp_nanos, frame_id } => {
-                    let e = sensor_frames.entry(r.channel_id).or_insert_with(|| (frame_id, Vec::new(), Vec::new()));
-                    e.1.push(FrameRef { stamp_nanos, msg: r });
+                Kept::Sensor {
+                    stamp_nanos,
+                    frame_id,
+                } => {
+                    let e = sensor_frames
+                        .entry(r.channel_id)
+                        .or_insert_with(|| (frame_id, Vec::new(), Vec::new()));
+                    e.1.push(FrameRef {
+                        stamp_nanos,
+                        msg: r,
+                    });
                     e.2.push(r.log_time_nanos);
                 }
                 Kept::Ignored => {}
@@ -220,41 +274,70 @@ impl Drive {
                 fixed_frame = Some(f);
                 vehicle_frame = Some(v);
             } else {
-                problems.push(Problem::file(format!("no TF chain from '{f}' to '{v}' for the trajectory")));
+                problems.push(Problem::file(format!(
+                    "no TF chain from '{f}' to '{v}' for the trajectory"
+                )));
             }
         }
-        if trajectory.is_empty() {
-            if let Some((topic, poses)) = poses_by_topic.iter().max_by_key(|(_, p)| p.len()) {
-                if let Some(first) = poses.first() {
-                    let v = first.child_frame_id.clone().map(|c| normalize_frame(&c));
-                    let v = vehicle_frame.clone().or(v).unwrap_or_else(|| "base_link".into());
-                    trajectory_source = format!("{topic}: {} → {v} ({} poses)", first.frame_id, poses.len());
-                    fixed_frame = Some(normalize_frame(&first.frame_id));
-                    vehicle_frame = Some(v);
-                    trajectory = Trajectory::new(poses.iter().map(|p| (p.stamp_nanos, p.frame_from_body)).collect());
-                }
-            }
+        if trajectory.is_empty()
+            && let Some((topic, poses)) = poses_by_topic.iter().max_by_key(|(_, p)| p.len())
+            && let Some(first) = poses.first()
+        {
+            let v = first.child_frame_id.clone().map(|c| normalize_frame(&c));
+            let v = vehicle_frame
+                .clone()
+                .or(v)
+                .unwrap_or_else(|| "base_link".into());
+            trajectory_source =
+                format!("{topic}: {} → {v} ({} poses)", first.frame_id, poses.len());
+            fixed_frame = Some(normalize_frame(&first.frame_id));
+            vehicle_frame = Some(v);
+            trajectory = Trajectory::new(
+                poses
+                    .iter()
+                    .map(|p| (p.stamp_nanos, p.frame_from_body))
+                    .collect(),
+            );
         }
         let trajectory = trajectory.with_max_extrapolation_nanos(max_extrapolation_nanos);
 
         // Sensors: every topic carrying sweeps or images.
-        let vehicle_frame = vehicle_frame.unwrap_or_else(|| static_root_of_sensors(&tf, &sensor_frames));
-        let mut rig = Rig { vehicle_frame: vehicle_frame.clone(), sensors: Vec::new() };
+        let vehicle_frame =
+            vehicle_frame.unwrap_or_else(|| static_root_of_sensors(&tf, &sensor_frames));
+        let mut rig = Rig {
+            vehicle_frame: vehicle_frame.clone(),
+            sensors: Vec::new(),
+        };
         let mut streams = Vec::new();
         for (channel_id, (frame_id, mut frames, log_times)) in sensor_frames {
-            let (Some(ch), Some(Some(codec))) = (container.channels.get(&channel_id), codecs.get(&channel_id)) else { continue };
-            let kind = if codec.is_lidar() { SensorKind::Lidar } else { SensorKind::Camera };
+            let (Some(ch), Some(Some(codec))) =
+                (container.channels.get(&channel_id), codecs.get(&channel_id))
+            else {
+                continue;
+            };
+            let kind = if codec.is_lidar() {
+                SensorKind::Lidar
+            } else {
+                SensorKind::Camera
+            };
             let stamp_source = if frames.iter().all(|f| f.stamp_nanos == 0) {
                 for (f, lt) in frames.iter_mut().zip(&log_times) {
                     f.stamp_nanos = *lt as i64;
                 }
-                problems.push(Problem::file(format!("{}: header stamps are zero; using log time", ch.topic)));
+                problems.push(Problem::file(format!(
+                    "{}: header stamps are zero; using log time",
+                    ch.topic
+                )));
                 StampSource::LogTime
             } else {
                 StampSource::Header
             };
             frames.sort_by_key(|f| f.stamp_nanos);
-            let mut name = if frame_id.is_empty() { ch.topic.trim_matches('/').replace('/', "_") } else { frame_id.clone() };
+            let mut name = if frame_id.is_empty() {
+                ch.topic.trim_matches('/').replace('/', "_")
+            } else {
+                frame_id.clone()
+            };
             if rig.sensor(&name).is_some() {
                 name = format!("{name}{}", ch.topic.replace('/', "_"));
             }
@@ -275,18 +358,37 @@ impl Drive {
                         Some(info.intrinsics.clone())
                     }
                     None => {
-                        problems.push(Problem::file(format!("camera {name} ({}) has no camera info for frame '{frame_id}'", ch.topic)));
+                        problems.push(Problem::file(format!(
+                            "camera {name} ({}) has no camera info for frame '{frame_id}'",
+                            ch.topic
+                        )));
                         None
                     }
                 }
             } else {
                 None
             };
-            rig.sensors.push(Sensor { name: name.clone(), kind, frame_id, topics: topics_of_sensor, vehicle_from_sensor, camera });
-            streams.push(SensorStream { sensor: name, kind, topic: ch.topic.clone(), codec: *codec, stamp_source, frames });
+            rig.sensors.push(Sensor {
+                name: name.clone(),
+                kind,
+                frame_id,
+                topics: topics_of_sensor,
+                vehicle_from_sensor,
+                camera,
+            });
+            streams.push(SensorStream {
+                sensor: name,
+                kind,
+                topic: ch.topic.clone(),
+                codec: *codec,
+                stamp_source,
+                frames,
+            });
         }
         if trajectory.is_empty() {
-            problems.push(Problem::file("no trajectory: no dynamic /tf, odometry or pose topic"));
+            problems.push(Problem::file(
+                "no trajectory: no dynamic /tf, odometry or pose topic",
+            ));
         }
         Ok(Self {
             container,
@@ -316,26 +418,41 @@ impl Drive {
     }
 
     fn stream_index(&self, sensor: &str) -> Result<usize, LogError> {
-        self.streams.iter().position(|s| s.sensor == sensor).ok_or_else(|| LogError::Unusable {
-            path: self.path().to_path_buf(),
-            what: format!("no sensor named '{sensor}'"),
-        })
+        self.streams
+            .iter()
+            .position(|s| s.sensor == sensor)
+            .ok_or_else(|| LogError::Unusable {
+                path: self.path().to_path_buf(),
+                what: format!("no sensor named '{sensor}'"),
+            })
     }
 
     fn payload_error(&self, stream: &SensorStream, r: &MessageRef, what: String) -> LogError {
-        LogError::Message { path: self.path().to_path_buf(), topic: stream.topic.clone(), log_time_nanos: r.log_time_nanos, what }
+        LogError::Message {
+            path: self.path().to_path_buf(),
+            topic: stream.topic.clone(),
+            log_time_nanos: r.log_time_nanos,
+            what,
+        }
     }
 
     /// Decode sweep `index` of a LiDAR.
     pub fn load_sweep(&self, sensor: &str, index: usize) -> Result<LidarSweep, LogError> {
         let stream = &self.streams[self.stream_index(sensor)?];
         let frame = self.frame(stream, index)?;
-        let bytes = self.container.message_bytes(&frame.msg).map_err(|e| self.payload_error(stream, &frame.msg, e))?;
-        let decoded = stream.codec.decode(&bytes).map_err(|e| self.payload_error(stream, &frame.msg, e.0))?;
+        let bytes = self
+            .container
+            .message_bytes(&frame.msg)
+            .map_err(|e| self.payload_error(stream, &frame.msg, e))?;
+        let decoded = stream
+            .codec
+            .decode(&bytes)
+            .map_err(|e| self.payload_error(stream, &frame.msg, e.0))?;
         let Decoded::PointCloud(cloud) = decoded else {
             return Err(self.payload_error(stream, &frame.msg, "not a point cloud".into()));
         };
-        let mut sweep = pointcloud::to_sweep(&cloud).map_err(|e| self.payload_error(stream, &frame.msg, e.0))?;
+        let mut sweep = pointcloud::to_sweep(&cloud)
+            .map_err(|e| self.payload_error(stream, &frame.msg, e.0))?;
         sweep.stamp_nanos = frame.stamp_nanos;
         Ok(sweep)
     }
@@ -343,15 +460,21 @@ impl Drive {
     /// Decode image `index` of a camera (cached).
     pub fn load_image(&self, sensor: &str, index: usize) -> Result<Arc<RgbImage>, LogError> {
         let s = self.stream_index(sensor)?;
-        if let Ok(cache) = self.image_cache.lock() {
-            if let Some((_, img)) = cache.iter().find(|(k, _)| *k == (s, index)) {
-                return Ok(img.clone());
-            }
+        if let Ok(cache) = self.image_cache.lock()
+            && let Some((_, img)) = cache.iter().find(|(k, _)| *k == (s, index))
+        {
+            return Ok(img.clone());
         }
         let stream = &self.streams[s];
         let frame = self.frame(stream, index)?;
-        let bytes = self.container.message_bytes(&frame.msg).map_err(|e| self.payload_error(stream, &frame.msg, e))?;
-        let decoded = stream.codec.decode(&bytes).map_err(|e| self.payload_error(stream, &frame.msg, e.0))?;
+        let bytes = self
+            .container
+            .message_bytes(&frame.msg)
+            .map_err(|e| self.payload_error(stream, &frame.msg, e))?;
+        let decoded = stream
+            .codec
+            .decode(&bytes)
+            .map_err(|e| self.payload_error(stream, &frame.msg, e.0))?;
         let image = match decoded {
             Decoded::Image(raw) => super::image::decode_raw(&raw),
             Decoded::CompressedImage(c) => super::image::decode_compressed(&c),
@@ -369,22 +492,36 @@ impl Drive {
     }
 
     fn frame(&self, stream: &SensorStream, index: usize) -> Result<FrameRef, LogError> {
-        stream.frames.get(index).copied().ok_or_else(|| LogError::Unusable {
-            path: self.path().to_path_buf(),
-            what: format!("{} has {} frames, asked for index {index}", stream.sensor, stream.frames.len()),
-        })
+        stream
+            .frames
+            .get(index)
+            .copied()
+            .ok_or_else(|| LogError::Unusable {
+                path: self.path().to_path_buf(),
+                what: format!(
+                    "{} has {} frames, asked for index {index}",
+                    stream.sensor,
+                    stream.frames.len()
+                ),
+            })
     }
 
     /// Time range covered by sensor data (header stamps), in nanoseconds.
     pub fn time_range_nanos(&self) -> Option<(i64, i64)> {
-        let stamps = self.streams.iter().flat_map(|s| s.frames.iter().map(|f| f.stamp_nanos));
+        let stamps = self
+            .streams
+            .iter()
+            .flat_map(|s| s.frames.iter().map(|f| f.stamp_nanos));
         let (lo, hi) = stamps.fold((i64::MAX, i64::MIN), |(lo, hi), t| (lo.min(t), hi.max(t)));
         (lo <= hi).then_some((lo, hi))
     }
 }
 
 /// When there is no trajectory: the static-tree root that most sensor frames hang from.
-fn static_root_of_sensors(tf: &TfTree, sensors: &BTreeMap<u16, (String, Vec<FrameRef>, Vec<u64>)>) -> String {
+fn static_root_of_sensors(
+    tf: &TfTree,
+    sensors: &BTreeMap<u16, (String, Vec<FrameRef>, Vec<u64>)>,
+) -> String {
     let mut votes: BTreeMap<String, usize> = BTreeMap::new();
     for (frame, _, _) in sensors.values() {
         let mut current = frame.clone();
@@ -396,5 +533,9 @@ fn static_root_of_sensors(tf: &TfTree, sensors: &BTreeMap<u16, (String, Vec<Fram
         }
         *votes.entry(current).or_default() += 1;
     }
-    votes.into_iter().max_by_key(|(_, n)| *n).map(|(f, _)| f).unwrap_or_else(|| "base_link".into())
+    votes
+        .into_iter()
+        .max_by_key(|(_, n)| *n)
+        .map(|(f, _)| f)
+        .unwrap_or_else(|| "base_link".into())
 }

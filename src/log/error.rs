@@ -11,13 +11,25 @@ use thiserror::Error;
 #[derive(Debug, Error)]
 pub enum LogError {
     #[error("{path}: cannot read: {source}")]
-    Io { path: PathBuf, source: std::io::Error },
+    Io {
+        path: PathBuf,
+        source: std::io::Error,
+    },
     #[error("{path}: not an MCAP file: {what}")]
     NotMcap { path: PathBuf, what: String },
     #[error("{path}: corrupt at byte {offset}: {what}")]
-    Corrupt { path: PathBuf, offset: u64, what: String },
+    Corrupt {
+        path: PathBuf,
+        offset: u64,
+        what: String,
+    },
     #[error("{path}: topic {topic}, message at log time {log_time_nanos} ns: {what}")]
-    Message { path: PathBuf, topic: String, log_time_nanos: u64, what: String },
+    Message {
+        path: PathBuf,
+        topic: String,
+        log_time_nanos: u64,
+        what: String,
+    },
     #[error("{path}: {what}")]
     Unusable { path: PathBuf, what: String },
 }
@@ -32,18 +44,30 @@ pub struct Problem {
 
 impl Problem {
     pub fn file(what: impl Into<String>) -> Self {
-        Self { topic: None, log_time_nanos: None, what: what.into() }
+        Self {
+            topic: None,
+            log_time_nanos: None,
+            what: what.into(),
+        }
     }
 
     pub fn message(topic: &str, log_time_nanos: u64, what: impl Into<String>) -> Self {
-        Self { topic: Some(topic.to_string()), log_time_nanos: Some(log_time_nanos), what: what.into() }
+        Self {
+            topic: Some(topic.to_string()),
+            log_time_nanos: Some(log_time_nanos),
+            what: what.into(),
+        }
     }
 }
 
 impl fmt::Display for Problem {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match (&self.topic, self.log_time_nanos) {
-            (Some(topic), Some(t)) => write!(f, "topic {topic}, message at log time {t} ns: {}", self.what),
+            (Some(topic), Some(t)) => write!(
+                f,
+                "topic {topic}, message at log time {t} ns: {}",
+                self.what
+            ),
             (Some(topic), None) => write!(f, "topic {topic}: {}", self.what),
             _ => write!(f, "{}", self.what),
         }

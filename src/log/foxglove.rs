@@ -10,8 +10,8 @@ use serde_json::Value as Json;
 use super::error::{DecodeError, DecodeResult};
 use super::protobuf::{self as pb, Value};
 use super::types::*;
-use crate::geometry::camera::{CameraIntrinsics, CameraModel};
 use crate::geometry::Rigid;
+use crate::geometry::camera::{CameraIntrinsics, CameraModel};
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum FoxgloveType {
@@ -27,17 +27,22 @@ pub enum FoxgloveType {
 
 impl FoxgloveType {
     pub fn from_schema(name: &str) -> Option<Self> {
-        Some(match name.trim_start_matches("foxglove.").trim_start_matches("foxglove_msgs/msg/") {
-            "PointCloud" => Self::PointCloud,
-            "CompressedImage" => Self::CompressedImage,
-            "RawImage" => Self::RawImage,
-            "CameraCalibration" => Self::CameraCalibration,
-            "FrameTransform" => Self::FrameTransform,
-            "FrameTransforms" => Self::FrameTransforms,
-            "PoseInFrame" => Self::PoseInFrame,
-            "PosesInFrame" => Self::PosesInFrame,
-            _ => return None,
-        })
+        Some(
+            match name
+                .trim_start_matches("foxglove.")
+                .trim_start_matches("foxglove_msgs/msg/")
+            {
+                "PointCloud" => Self::PointCloud,
+                "CompressedImage" => Self::CompressedImage,
+                "RawImage" => Self::RawImage,
+                "CameraCalibration" => Self::CameraCalibration,
+                "FrameTransform" => Self::FrameTransform,
+                "FrameTransforms" => Self::FrameTransforms,
+                "PoseInFrame" => Self::PoseInFrame,
+                "PosesInFrame" => Self::PosesInFrame,
+                _ => return None,
+            },
+        )
     }
 }
 
@@ -108,15 +113,36 @@ fn calibration(
     k: &[f64],
 ) -> DecodeResult<Decoded<'static>> {
     if k.len() < 9 {
-        return Err(DecodeError::new(format!("camera calibration K has {} values, expected 9", k.len())));
+        return Err(DecodeError::new(format!(
+            "camera calibration K has {} values, expected 9",
+            k.len()
+        )));
     }
-    let model = CameraModel::parse(model).ok_or_else(|| DecodeError::new(format!("unknown distortion_model '{model}'")))?;
-    let model = if d.iter().all(|v| *v == 0.0) { CameraModel::Pinhole } else { model };
-    let distortion = if model == CameraModel::Pinhole { Vec::new() } else { d };
+    let model = CameraModel::parse(model)
+        .ok_or_else(|| DecodeError::new(format!("unknown distortion_model '{model}'")))?;
+    let model = if d.iter().all(|v| *v == 0.0) {
+        CameraModel::Pinhole
+    } else {
+        model
+    };
+    let distortion = if model == CameraModel::Pinhole {
+        Vec::new()
+    } else {
+        d
+    };
     Ok(Decoded::CameraInfo(CameraInfoMsg {
         stamp_nanos: stamp,
         frame_id,
-        intrinsics: CameraIntrinsics { width, height, model, fx: k[0], fy: k[4], cx: k[2], cy: k[5], distortion },
+        intrinsics: CameraIntrinsics {
+            width,
+            height,
+            model,
+            fx: k[0],
+            fy: k[4],
+            cx: k[2],
+            cy: k[5],
+            distortion,
+        },
     }))
 }
 
@@ -128,12 +154,20 @@ pub fn decode_protobuf(kind: FoxgloveType, payload: &[u8]) -> DecodeResult<Decod
             for v in pb::all(&f, 5) {
                 let e = pb::fields(v.as_bytes())?;
                 if let Some(numeric) = Numeric::from_foxglove(pb_u32(&e, 3)) {
-                    fields.push(PointField { name: pb_str(&e, 1), offset: pb_u32(&e, 2), numeric });
+                    fields.push(PointField {
+                        name: pb_str(&e, 1),
+                        offset: pb_u32(&e, 2),
+                        numeric,
+                    });
                 }
             }
             let data = pb::get(&f, 6).map(|v| v.as_bytes()).unwrap_or_default();
             let stride = pb_u32(&f, 4);
-            let width = if stride == 0 { 0 } else { (data.len() / stride as usize) as u32 };
+            let width = if stride == 0 {
+                0
+            } else {
+                (data.len() / stride as usize) as u32
+            };
             Decoded::PointCloud(RawPointCloud {
                 stamp_nanos: pb_stamp(&f, 1)?,
                 frame_id: pb_str(&f, 2),
@@ -151,7 +185,10 @@ pub fn decode_protobuf(kind: FoxgloveType, payload: &[u8]) -> DecodeResult<Decod
             stamp_nanos: pb_stamp(&f, 1)?,
             frame_id: pb_str(&f, 4),
             format: pb_str(&f, 3),
-            data: pb::get(&f, 2).map(|v| v.as_bytes()).unwrap_or_default().into(),
+            data: pb::get(&f, 2)
+                .map(|v| v.as_bytes())
+                .unwrap_or_default()
+                .into(),
         }),
         FoxgloveType::RawImage => Decoded::Image(RawImage {
             stamp_nanos: pb_stamp(&f, 1)?,
@@ -161,12 +198,23 @@ pub fn decode_protobuf(kind: FoxgloveType, payload: &[u8]) -> DecodeResult<Decod
             encoding: pb_str(&f, 4),
             big_endian: false,
             step: pb_u32(&f, 5),
-            data: pb::get(&f, 6).map(|v| v.as_bytes()).unwrap_or_default().into(),
+            data: pb::get(&f, 6)
+                .map(|v| v.as_bytes())
+                .unwrap_or_default()
+                .into(),
         }),
         FoxgloveType::CameraCalibration => {
             let d: Vec<f64> = pb::all(&f, 5).flat_map(|v| v.as_f64s()).collect();
             let k: Vec<f64> = pb::all(&f, 6).flat_map(|v| v.as_f64s()).collect();
-            calibration(pb_stamp(&f, 1)?, pb_str(&f, 9), pb_u32(&f, 2), pb_u32(&f, 3), &pb_str(&f, 4), d, &k)?
+            calibration(
+                pb_stamp(&f, 1)?,
+                pb_str(&f, 9),
+                pb_u32(&f, 2),
+                pb_u32(&f, 3),
+                &pb_str(&f, 4),
+                d,
+                &k,
+            )?
         }
         FoxgloveType::FrameTransform => Decoded::Transforms(vec![pb_transform(&f)?]),
         FoxgloveType::FrameTransforms => {
@@ -189,7 +237,12 @@ pub fn decode_protobuf(kind: FoxgloveType, payload: &[u8]) -> DecodeResult<Decod
             for v in pb::all(&f, 3) {
                 let p = pb::fields(v.as_bytes())?;
                 let pose = super::ros2::rigid_from(pb_vec3(&p, 1)?, pb_quat(&p, 2)?, "poses")?;
-                out.push(PoseMsg { stamp_nanos: stamp, frame_id: frame_id.clone(), child_frame_id: None, frame_from_body: pose });
+                out.push(PoseMsg {
+                    stamp_nanos: stamp,
+                    frame_id: frame_id.clone(),
+                    child_frame_id: None,
+                    frame_from_body: pose,
+                });
             }
             Decoded::Poses(out)
         }
@@ -200,7 +253,10 @@ pub fn decode_protobuf(kind: FoxgloveType, payload: &[u8]) -> DecodeResult<Decod
 
 fn j_stamp(v: &Json) -> i64 {
     let t = &v["timestamp"];
-    stamp_nanos(t["sec"].as_i64().unwrap_or(0), t["nsec"].as_u64().unwrap_or(0) as u32)
+    stamp_nanos(
+        t["sec"].as_i64().unwrap_or(0),
+        t["nsec"].as_u64().unwrap_or(0) as u32,
+    )
 }
 
 fn j_f64(v: &Json) -> f64 {
@@ -213,8 +269,21 @@ fn j_pose(v: &Json) -> DecodeResult<Rigid> {
     }
     let p = &v["position"];
     let q = &v["orientation"];
-    let quat = if q.is_null() { [0.0, 0.0, 0.0, 1.0] } else { [j_f64(&q["x"]), j_f64(&q["y"]), j_f64(&q["z"]), j_f64(&q["w"])] };
-    super::ros2::rigid_from([j_f64(&p["x"]), j_f64(&p["y"]), j_f64(&p["z"])], quat, "pose")
+    let quat = if q.is_null() {
+        [0.0, 0.0, 0.0, 1.0]
+    } else {
+        [
+            j_f64(&q["x"]),
+            j_f64(&q["y"]),
+            j_f64(&q["z"]),
+            j_f64(&q["w"]),
+        ]
+    };
+    super::ros2::rigid_from(
+        [j_f64(&p["x"]), j_f64(&p["y"]), j_f64(&p["z"])],
+        quat,
+        "pose",
+    )
 }
 
 fn j_str(v: &Json) -> String {
@@ -226,7 +295,9 @@ fn j_u32(v: &Json) -> u32 {
 }
 
 fn j_f64s(v: &Json) -> Vec<f64> {
-    v.as_array().map(|a| a.iter().map(j_f64).collect()).unwrap_or_default()
+    v.as_array()
+        .map(|a| a.iter().map(j_f64).collect())
+        .unwrap_or_default()
 }
 
 fn j_data(v: &Json) -> DecodeResult<Vec<u8>> {
@@ -247,25 +318,39 @@ fn j_transform(v: &Json) -> DecodeResult<TransformMsg> {
         child: j_str(&v["child_frame_id"]),
         parent_from_child: super::ros2::rigid_from(
             [j_f64(&t["x"]), j_f64(&t["y"]), j_f64(&t["z"])],
-            [j_f64(&q["x"]), j_f64(&q["y"]), j_f64(&q["z"]), j_f64(&q["w"])],
+            [
+                j_f64(&q["x"]),
+                j_f64(&q["y"]),
+                j_f64(&q["z"]),
+                j_f64(&q["w"]),
+            ],
             "transform",
         )?,
     })
 }
 
 pub fn decode_json(kind: FoxgloveType, payload: &[u8]) -> DecodeResult<Decoded<'static>> {
-    let v: Json = serde_json::from_slice(payload).map_err(|e| DecodeError::new(format!("invalid JSON: {e}")))?;
+    let v: Json = serde_json::from_slice(payload)
+        .map_err(|e| DecodeError::new(format!("invalid JSON: {e}")))?;
     Ok(match kind {
         FoxgloveType::PointCloud => {
             let mut fields = Vec::new();
             for e in v["fields"].as_array().into_iter().flatten() {
                 if let Some(numeric) = Numeric::from_foxglove(j_u32(&e["type"])) {
-                    fields.push(PointField { name: j_str(&e["name"]), offset: j_u32(&e["offset"]), numeric });
+                    fields.push(PointField {
+                        name: j_str(&e["name"]),
+                        offset: j_u32(&e["offset"]),
+                        numeric,
+                    });
                 }
             }
             let data = j_data(&v["data"])?;
             let stride = j_u32(&v["point_stride"]);
-            let width = if stride == 0 { 0 } else { (data.len() / stride as usize) as u32 };
+            let width = if stride == 0 {
+                0
+            } else {
+                (data.len() / stride as usize) as u32
+            };
             Decoded::PointCloud(RawPointCloud {
                 stamp_nanos: j_stamp(&v),
                 frame_id: j_str(&v["frame_id"]),
@@ -306,7 +391,12 @@ pub fn decode_json(kind: FoxgloveType, payload: &[u8]) -> DecodeResult<Decoded<'
         )?,
         FoxgloveType::FrameTransform => Decoded::Transforms(vec![j_transform(&v)?]),
         FoxgloveType::FrameTransforms => Decoded::Transforms(
-            v["transforms"].as_array().into_iter().flatten().map(j_transform).collect::<DecodeResult<_>>()?,
+            v["transforms"]
+                .as_array()
+                .into_iter()
+                .flatten()
+                .map(j_transform)
+                .collect::<DecodeResult<_>>()?,
         ),
         FoxgloveType::PoseInFrame => Decoded::Pose(PoseMsg {
             stamp_nanos: j_stamp(&v),
@@ -323,7 +413,12 @@ pub fn decode_json(kind: FoxgloveType, payload: &[u8]) -> DecodeResult<Decoded<'
                     .into_iter()
                     .flatten()
                     .map(|p| {
-                        Ok(PoseMsg { stamp_nanos: stamp, frame_id: frame_id.clone(), child_frame_id: None, frame_from_body: j_pose(p)? })
+                        Ok(PoseMsg {
+                            stamp_nanos: stamp,
+                            frame_id: frame_id.clone(),
+                            child_frame_id: None,
+                            frame_from_body: j_pose(p)?,
+                        })
                     })
                     .collect::<DecodeResult<_>>()?,
             )
@@ -344,7 +439,12 @@ pub fn base64_decode(s: &str) -> DecodeResult<Vec<u8>> {
             b'+' | b'-' => 62,
             b'/' | b'_' => 63,
             b'=' | b'\n' | b'\r' | b' ' => continue,
-            _ => return Err(DecodeError::new(format!("invalid base64 character '{}'", c as char))),
+            _ => {
+                return Err(DecodeError::new(format!(
+                    "invalid base64 character '{}'",
+                    c as char
+                )));
+            }
         } as u32;
         acc = (acc << 6) | v;
         bits += 6;
@@ -356,7 +456,6 @@ pub fn base64_decode(s: &str) -> DecodeResult<Vec<u8>> {
     }
     Ok(out)
 }
-
 
 #[cfg(test)]
 mod tests {

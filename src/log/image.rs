@@ -14,16 +14,29 @@ pub fn decode_raw(img: &RawImage<'_>) -> DecodeResult<RgbImage> {
         "rgba8" | "bgra8" => 4,
         "mono8" | "8uc1" => 1,
         "mono16" | "16uc1" => 2,
-        other => return Err(DecodeError::new(format!("unsupported image encoding '{other}'"))),
+        other => {
+            return Err(DecodeError::new(format!(
+                "unsupported image encoding '{other}'"
+            )));
+        }
     };
     let (w, h) = (img.width as usize, img.height as usize);
-    let step = if img.step == 0 { w * bpp } else { img.step as usize };
+    let step = if img.step == 0 {
+        w * bpp
+    } else {
+        img.step as usize
+    };
     if step < w * bpp {
-        return Err(DecodeError::new(format!("step {step} is smaller than width {w} × {bpp} bytes")));
+        return Err(DecodeError::new(format!(
+            "step {step} is smaller than width {w} × {bpp} bytes"
+        )));
     }
     let needed = if h == 0 { 0 } else { (h - 1) * step + w * bpp };
     if img.data.len() < needed {
-        return Err(DecodeError::new(format!("image data has {} bytes, {w}×{h} {enc} needs {needed}", img.data.len())));
+        return Err(DecodeError::new(format!(
+            "image data has {} bytes, {w}×{h} {enc} needs {needed}",
+            img.data.len()
+        )));
     }
     let mut out = RgbImage::new(img.width, img.height);
     for y in 0..h {
@@ -35,7 +48,11 @@ pub fn decode_raw(img: &RawImage<'_>) -> DecodeResult<RgbImage> {
                 "bgr8" | "bgra8" => [p[2], p[1], p[0]],
                 "mono8" | "8uc1" => [p[0]; 3],
                 _ => {
-                    let v = if img.big_endian { u16::from_be_bytes([p[0], p[1]]) } else { u16::from_le_bytes([p[0], p[1]]) };
+                    let v = if img.big_endian {
+                        u16::from_be_bytes([p[0], p[1]])
+                    } else {
+                        u16::from_le_bytes([p[0], p[1]])
+                    };
                     [(v >> 8) as u8; 3]
                 }
             };
@@ -47,8 +64,12 @@ pub fn decode_raw(img: &RawImage<'_>) -> DecodeResult<RgbImage> {
 
 /// Decode a JPEG or PNG (the format string is a hint; the bytes decide).
 pub fn decode_compressed(img: &CompressedImage<'_>) -> DecodeResult<RgbImage> {
-    let format = image::guess_format(&img.data)
-        .map_err(|_| DecodeError::new(format!("compressed image ('{}') is neither JPEG nor PNG", img.format)))?;
+    let format = image::guess_format(&img.data).map_err(|_| {
+        DecodeError::new(format!(
+            "compressed image ('{}') is neither JPEG nor PNG",
+            img.format
+        ))
+    })?;
     image::load_from_memory_with_format(&img.data, format)
         .map(|d| d.into_rgb8())
         .map_err(|e| DecodeError::new(format!("cannot decode {:?} image: {e}", format)))

@@ -36,7 +36,9 @@ const INTENSITY_NAMES: [&str; 3] = ["intensity", "reflectivity", "i"];
 const TIME_NAMES: [&str; 5] = ["t", "time", "timestamp", "offset_time", "time_offset"];
 
 fn find<'f>(fields: &'f [PointField], names: &[&str]) -> Option<&'f PointField> {
-    names.iter().find_map(|n| fields.iter().find(|f| f.name.eq_ignore_ascii_case(n)))
+    names
+        .iter()
+        .find_map(|n| fields.iter().find(|f| f.name.eq_ignore_ascii_case(n)))
 }
 
 fn read(bytes: &[u8], at: usize, numeric: Numeric, big_endian: bool) -> f64 {
@@ -44,7 +46,11 @@ fn read(bytes: &[u8], at: usize, numeric: Numeric, big_endian: bool) -> f64 {
         ($t:ty, $n:expr) => {{
             let mut b = [0u8; $n];
             b.copy_from_slice(&bytes[at..at + $n]);
-            if big_endian { <$t>::from_be_bytes(b) as f64 } else { <$t>::from_le_bytes(b) as f64 }
+            if big_endian {
+                <$t>::from_be_bytes(b) as f64
+            } else {
+                <$t>::from_le_bytes(b) as f64
+            }
         }};
     }
     match numeric {
@@ -74,8 +80,15 @@ pub fn to_sweep(cloud: &RawPointCloud<'_>) -> DecodeResult<LidarSweep> {
     let step = cloud.point_step as usize;
     let width = cloud.width as usize;
     let height = cloud.height.max(1) as usize;
-    let row_step = if cloud.row_step == 0 { width * step } else { cloud.row_step as usize };
-    for f in [Some(fx), Some(fy), Some(fz), intensity, time].into_iter().flatten() {
+    let row_step = if cloud.row_step == 0 {
+        width * step
+    } else {
+        cloud.row_step as usize
+    };
+    for f in [Some(fx), Some(fy), Some(fz), intensity, time]
+        .into_iter()
+        .flatten()
+    {
         if f.offset as usize + f.numeric.size() > step {
             return Err(DecodeError::new(format!(
                 "field '{}' (offset {}, {} bytes) does not fit in point_step {step}",
@@ -86,7 +99,9 @@ pub fn to_sweep(cloud: &RawPointCloud<'_>) -> DecodeResult<LidarSweep> {
         }
     }
     if row_step < width * step {
-        return Err(DecodeError::new(format!("row_step {row_step} is smaller than width {width} × point_step {step}")));
+        return Err(DecodeError::new(format!(
+            "row_step {row_step} is smaller than width {width} × point_step {step}"
+        )));
     }
     let needed = (height - 1) * row_step + width * step;
     if width > 0 && cloud.data.len() < needed {
@@ -118,9 +133,20 @@ pub fn to_sweep(cloud: &RawPointCloud<'_>) -> DecodeResult<LidarSweep> {
             if !p.iter().all(|v| v.is_finite()) {
                 continue;
             }
-            let p = if identity_origin { p } else { cloud.frame_from_cloud.transform_point(glam::DVec3::from_array(p)).to_array() };
-            sweep.points_in_sensor.push([p[0] as f32, p[1] as f32, p[2] as f32]);
-            sweep.intensity.push(intensity.map_or(0.0, |f| read(data, base + f.offset as usize, f.numeric, be) as f32));
+            let p = if identity_origin {
+                p
+            } else {
+                cloud
+                    .frame_from_cloud
+                    .transform_point(glam::DVec3::from_array(p))
+                    .to_array()
+            };
+            sweep
+                .points_in_sensor
+                .push([p[0] as f32, p[1] as f32, p[2] as f32]);
+            sweep.intensity.push(intensity.map_or(0.0, |f| {
+                read(data, base + f.offset as usize, f.numeric, be) as f32
+            }));
             if let (Some(f), Some(times)) = (time, sweep.time_offset_secs.as_mut()) {
                 let raw = read(data, base + f.offset as usize, f.numeric, be);
                 let secs = if f.numeric.is_integer() {
@@ -142,7 +168,11 @@ mod tests {
     use super::*;
 
     fn field(name: &str, offset: u32, numeric: Numeric) -> PointField {
-        PointField { name: name.into(), offset, numeric }
+        PointField {
+            name: name.into(),
+            offset,
+            numeric,
+        }
     }
 
     #[test]
@@ -194,7 +224,11 @@ mod tests {
         let cloud = RawPointCloud {
             stamp_nanos: 0,
             frame_id: String::new(),
-            fields: vec![field("x", 0, Numeric::F32), field("y", 4, Numeric::F32), field("z", 8, Numeric::F32)],
+            fields: vec![
+                field("x", 0, Numeric::F32),
+                field("y", 4, Numeric::F32),
+                field("z", 8, Numeric::F32),
+            ],
             width: 10,
             height: 1,
             point_step: 12,
@@ -204,7 +238,10 @@ mod tests {
             frame_from_cloud: crate::geometry::Rigid::IDENTITY,
         };
         assert!(to_sweep(&cloud).unwrap_err().0.contains("needs 120"));
-        let bad = RawPointCloud { point_step: 4, ..cloud.clone() };
+        let bad = RawPointCloud {
+            point_step: 4,
+            ..cloud.clone()
+        };
         assert!(to_sweep(&bad).is_err());
     }
 }

@@ -42,7 +42,10 @@ impl<'a> Value<'a> {
     /// A repeated double, packed or a single unpacked element.
     pub fn as_f64s(self) -> Vec<f64> {
         match self {
-            Value::Bytes(b) => b.chunks_exact(8).map(|c| f64::from_le_bytes(c.try_into().unwrap_or([0; 8]))).collect(),
+            Value::Bytes(b) => b
+                .chunks_exact(8)
+                .map(|c| f64::from_le_bytes(c.try_into().unwrap_or([0; 8])))
+                .collect(),
             other => vec![other.as_f64()],
         }
     }
@@ -51,7 +54,9 @@ impl<'a> Value<'a> {
 fn varint(buf: &[u8], pos: &mut usize) -> DecodeResult<u64> {
     let mut v = 0u64;
     for shift in (0..64).step_by(7) {
-        let b = *buf.get(*pos).ok_or_else(|| DecodeError::new("truncated protobuf varint"))?;
+        let b = *buf
+            .get(*pos)
+            .ok_or_else(|| DecodeError::new("truncated protobuf varint"))?;
         *pos += 1;
         v |= ((b & 0x7f) as u64) << shift;
         if b & 0x80 == 0 {
@@ -69,22 +74,31 @@ pub fn fields(buf: &[u8]) -> DecodeResult<Vec<(u32, Value<'_>)>> {
         let key = varint(buf, &mut pos)?;
         let number = (key >> 3) as u32;
         let take = |pos: &mut usize, n: usize| -> DecodeResult<&[u8]> {
-            let end = pos.checked_add(n).filter(|&e| e <= buf.len()).ok_or_else(|| {
-                DecodeError::new(format!("truncated protobuf field {number}"))
-            })?;
+            let end = pos
+                .checked_add(n)
+                .filter(|&e| e <= buf.len())
+                .ok_or_else(|| DecodeError::new(format!("truncated protobuf field {number}")))?;
             let s = &buf[*pos..end];
             *pos = end;
             Ok(s)
         };
         let value = match key & 7 {
             0 => Value::Varint(varint(buf, &mut pos)?),
-            1 => Value::Fixed64(u64::from_le_bytes(take(&mut pos, 8)?.try_into().unwrap_or([0; 8]))),
+            1 => Value::Fixed64(u64::from_le_bytes(
+                take(&mut pos, 8)?.try_into().unwrap_or([0; 8]),
+            )),
             2 => {
                 let len = varint(buf, &mut pos)? as usize;
                 Value::Bytes(take(&mut pos, len)?)
             }
-            5 => Value::Fixed32(u32::from_le_bytes(take(&mut pos, 4)?.try_into().unwrap_or([0; 4]))),
-            w => return Err(DecodeError::new(format!("unsupported protobuf wire type {w} in field {number}"))),
+            5 => Value::Fixed32(u32::from_le_bytes(
+                take(&mut pos, 4)?.try_into().unwrap_or([0; 4]),
+            )),
+            w => {
+                return Err(DecodeError::new(format!(
+                    "unsupported protobuf wire type {w} in field {number}"
+                )));
+            }
         };
         out.push((number, value));
     }

@@ -9,8 +9,8 @@ use glam::{DQuat, DVec3};
 use super::cdr::CdrReader;
 use super::error::{DecodeError, DecodeResult};
 use super::types::*;
-use crate::geometry::camera::{CameraIntrinsics, CameraModel};
 use crate::geometry::Rigid;
+use crate::geometry::camera::{CameraIntrinsics, CameraModel};
 
 /// The message types this module decodes.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -48,7 +48,10 @@ fn header(r: &mut CdrReader<'_>) -> DecodeResult<Header> {
     let sec = r.i32("header.stamp.sec")?;
     let nsec = r.u32("header.stamp.nanosec")?;
     let frame_id = r.string("header.frame_id")?;
-    Ok(Header { stamp_nanos: stamp_nanos(sec as i64, nsec), frame_id })
+    Ok(Header {
+        stamp_nanos: stamp_nanos(sec as i64, nsec),
+        frame_id,
+    })
 }
 
 fn pose(r: &mut CdrReader<'_>, what: &str) -> DecodeResult<Rigid> {
@@ -62,7 +65,9 @@ pub fn rigid_from(p: [f64; 3], q: [f64; 4], what: &str) -> DecodeResult<Rigid> {
     let quat = DQuat::from_xyzw(q[0], q[1], q[2], q[3]);
     let norm = quat.length();
     if !norm.is_finite() || !(0.5..2.0).contains(&norm) || !p.iter().all(|v| v.is_finite()) {
-        return Err(DecodeError::new(format!("{what}: invalid pose (quaternion norm {norm})")));
+        return Err(DecodeError::new(format!(
+            "{what}: invalid pose (quaternion norm {norm})"
+        )));
     }
     Ok(Rigid::new(quat / norm, DVec3::from_array(p)))
 }
@@ -78,7 +83,12 @@ pub fn decode(kind: Ros2Type, payload: &[u8]) -> DecodeResult<Decoded<'_>> {
                 let h = header(&mut r)?;
                 let child = r.string("child_frame_id")?;
                 let t = pose(&mut r, "transform")?;
-                out.push(TransformMsg { stamp_nanos: h.stamp_nanos, parent: h.frame_id, child, parent_from_child: t });
+                out.push(TransformMsg {
+                    stamp_nanos: h.stamp_nanos,
+                    parent: h.frame_id,
+                    child,
+                    parent_from_child: t,
+                });
             }
             Decoded::Transforms(out)
         }
@@ -96,7 +106,12 @@ pub fn decode(kind: Ros2Type, payload: &[u8]) -> DecodeResult<Decoded<'_>> {
         Ros2Type::PoseStamped => {
             let h = header(&mut r)?;
             let p = pose(&mut r, "pose")?;
-            Decoded::Pose(PoseMsg { stamp_nanos: h.stamp_nanos, frame_id: h.frame_id, child_frame_id: None, frame_from_body: p })
+            Decoded::Pose(PoseMsg {
+                stamp_nanos: h.stamp_nanos,
+                frame_id: h.frame_id,
+                child_frame_id: None,
+                frame_from_body: p,
+            })
         }
         Ros2Type::CameraInfo => {
             let h = header(&mut r)?;
@@ -105,15 +120,33 @@ pub fn decode(kind: Ros2Type, payload: &[u8]) -> DecodeResult<Decoded<'_>> {
             let model_name = r.string("distortion_model")?;
             let d = r.f64_seq("d")?;
             let k = r.f64_array::<9>("k")?;
-            let model = CameraModel::parse(&model_name)
-                .ok_or_else(|| DecodeError::new(format!("unknown distortion_model '{model_name}'")))?;
+            let model = CameraModel::parse(&model_name).ok_or_else(|| {
+                DecodeError::new(format!("unknown distortion_model '{model_name}'"))
+            })?;
             // An all-zero distortion is a pinhole whatever the model says.
-            let model = if d.iter().all(|v| *v == 0.0) { CameraModel::Pinhole } else { model };
-            let distortion = if model == CameraModel::Pinhole { Vec::new() } else { d };
+            let model = if d.iter().all(|v| *v == 0.0) {
+                CameraModel::Pinhole
+            } else {
+                model
+            };
+            let distortion = if model == CameraModel::Pinhole {
+                Vec::new()
+            } else {
+                d
+            };
             Decoded::CameraInfo(CameraInfoMsg {
                 stamp_nanos: h.stamp_nanos,
                 frame_id: h.frame_id,
-                intrinsics: CameraIntrinsics { width, height, model, fx: k[0], fy: k[4], cx: k[2], cy: k[5], distortion },
+                intrinsics: CameraIntrinsics {
+                    width,
+                    height,
+                    model,
+                    fx: k[0],
+                    fy: k[4],
+                    cx: k[2],
+                    cy: k[5],
+                    distortion,
+                },
             })
         }
         Ros2Type::PointCloud2 => {
@@ -128,7 +161,11 @@ pub fn decode(kind: Ros2Type, payload: &[u8]) -> DecodeResult<Decoded<'_>> {
                 let datatype = r.u8("fields.datatype")?;
                 let _count = r.u32("fields.count")?;
                 if let Some(numeric) = Numeric::from_ros(datatype) {
-                    fields.push(PointField { name, offset, numeric });
+                    fields.push(PointField {
+                        name,
+                        offset,
+                        numeric,
+                    });
                 }
             }
             let big_endian = r.bool("is_bigendian")?;
@@ -156,13 +193,27 @@ pub fn decode(kind: Ros2Type, payload: &[u8]) -> DecodeResult<Decoded<'_>> {
             let big_endian = r.u8("is_bigendian")? != 0;
             let step = r.u32("step")?;
             let data = r.bytes("data")?;
-            Decoded::Image(RawImage { stamp_nanos: h.stamp_nanos, frame_id: h.frame_id, width, height, encoding, big_endian, step, data: data.into() })
+            Decoded::Image(RawImage {
+                stamp_nanos: h.stamp_nanos,
+                frame_id: h.frame_id,
+                width,
+                height,
+                encoding,
+                big_endian,
+                step,
+                data: data.into(),
+            })
         }
         Ros2Type::CompressedImage => {
             let h = header(&mut r)?;
             let format = r.string("format")?;
             let data = r.bytes("data")?;
-            Decoded::CompressedImage(CompressedImage { stamp_nanos: h.stamp_nanos, frame_id: h.frame_id, format, data: data.into() })
+            Decoded::CompressedImage(CompressedImage {
+                stamp_nanos: h.stamp_nanos,
+                frame_id: h.frame_id,
+                format,
+                data: data.into(),
+            })
         }
     })
 }

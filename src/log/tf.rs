@@ -24,7 +24,10 @@ pub struct TfTree {
 
 impl TfTree {
     pub fn add_static(&mut self, t: &TransformMsg) {
-        self.static_edges.insert(normalize_frame(&t.child), (normalize_frame(&t.parent), t.parent_from_child));
+        self.static_edges.insert(
+            normalize_frame(&t.child),
+            (normalize_frame(&t.parent), t.parent_from_child),
+        );
     }
 
     pub fn add_dynamic(&mut self, t: &TransformMsg) {
@@ -42,17 +45,17 @@ impl TfTree {
             .iter()
             .filter(|(_, series)| {
                 series.windows(2).all(|w| {
-                        let (r, t) = w[0].1.difference(w[1].1);
-                        r < 1e-9 && t < 1e-9
-                    })
+                    let (r, t) = w[0].1.difference(w[1].1);
+                    r < 1e-9 && t < 1e-9
+                })
             })
             .map(|(k, _)| k.clone())
             .collect();
         for key in constant {
-            if let Some(series) = self.dynamic_edges.remove(&key) {
-                if let Some((_, t)) = series.first() {
-                    self.static_edges.insert(key.1.clone(), (key.0.clone(), *t));
-                }
+            if let Some(series) = self.dynamic_edges.remove(&key)
+                && let Some((_, t)) = series.first()
+            {
+                self.static_edges.insert(key.1.clone(), (key.0.clone(), *t));
             }
         }
     }
@@ -86,7 +89,11 @@ impl TfTree {
             .static_edges
             .iter()
             .flat_map(|(c, (p, _))| [c.clone(), p.clone()])
-            .chain(self.dynamic_edges.keys().flat_map(|(p, c)| [p.clone(), c.clone()]))
+            .chain(
+                self.dynamic_edges
+                    .keys()
+                    .flat_map(|(p, c)| [p.clone(), c.clone()]),
+            )
             .collect();
         f.sort();
         f.dedup();
@@ -95,7 +102,10 @@ impl TfTree {
 
     /// The dynamic edge with the most samples: (fixed frame, vehicle frame).
     pub fn default_trajectory_frames(&self) -> Option<(String, String)> {
-        self.dynamic_edges.iter().max_by_key(|(_, s)| s.len()).map(|(k, _)| k.clone())
+        self.dynamic_edges
+            .iter()
+            .max_by_key(|(_, s)| s.len())
+            .map(|(k, _)| k.clone())
     }
 
     /// `world_from_vehicle(t)` for a dynamic chain `fixed → … → vehicle` (dynamic edges, possibly
@@ -162,14 +172,22 @@ mod tests {
     use glam::{DQuat, DVec3};
 
     fn edge(parent: &str, child: &str, t: Rigid) -> TransformMsg {
-        TransformMsg { stamp_nanos: 0, parent: parent.into(), child: child.into(), parent_from_child: t }
+        TransformMsg {
+            stamp_nanos: 0,
+            parent: parent.into(),
+            child: child.into(),
+            parent_from_child: t,
+        }
     }
 
     #[test]
     fn composes_static_chains_both_ways() {
         let mut tf = TfTree::default();
         let base_from_mount = Rigid::new(DQuat::from_rotation_z(0.3), DVec3::new(1.0, 0.0, 1.5));
-        let mount_from_cam = Rigid::new(DQuat::from_xyzw(-0.5, 0.5, -0.5, 0.5), DVec3::new(0.1, 0.0, 0.0));
+        let mount_from_cam = Rigid::new(
+            DQuat::from_xyzw(-0.5, 0.5, -0.5, 0.5),
+            DVec3::new(0.1, 0.0, 0.0),
+        );
         let base_from_lidar = Rigid::from_translation(DVec3::new(0.0, 0.0, 2.0));
         tf.add_static(&edge("/base_link", "mount", base_from_mount));
         tf.add_static(&edge("mount", "cam", mount_from_cam));
@@ -178,7 +196,8 @@ mod tests {
         let (r, t) = got.difference(base_from_mount * mount_from_cam);
         assert!(r < 1e-12 && t < 1e-12);
         let lidar_from_cam = tf.static_transform("lidar", "cam").unwrap();
-        let (r, t) = lidar_from_cam.difference(base_from_lidar.inverse() * base_from_mount * mount_from_cam);
+        let (r, t) =
+            lidar_from_cam.difference(base_from_lidar.inverse() * base_from_mount * mount_from_cam);
         assert!(r < 1e-12 && t < 1e-12);
         assert!(tf.static_transform("base_link", "elsewhere").is_none());
     }
@@ -188,15 +207,26 @@ mod tests {
         let mut tf = TfTree::default();
         for i in 0..10 {
             let s = i as i64 * 100;
-            let mut m = edge("odom", "base_link", Rigid::from_translation(DVec3::new(i as f64, 0.0, 0.0)));
+            let mut m = edge(
+                "odom",
+                "base_link",
+                Rigid::from_translation(DVec3::new(i as f64, 0.0, 0.0)),
+            );
             m.stamp_nanos = s;
             tf.add_dynamic(&m);
         }
-        let mut m = edge("map", "odom", Rigid::from_translation(DVec3::new(0.0, 5.0, 0.0)));
+        let mut m = edge(
+            "map",
+            "odom",
+            Rigid::from_translation(DVec3::new(0.0, 5.0, 0.0)),
+        );
         tf.add_dynamic(&m);
         m.stamp_nanos = 900;
         tf.add_dynamic(&m);
-        assert_eq!(tf.default_trajectory_frames(), Some(("odom".into(), "base_link".into())));
+        assert_eq!(
+            tf.default_trajectory_frames(),
+            Some(("odom".into(), "base_link".into()))
+        );
         let traj = tf.trajectory("map", "base_link").unwrap();
         assert_eq!(traj.len(), 10);
         let p = traj.world_from_vehicle(450).unwrap();

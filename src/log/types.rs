@@ -1,7 +1,7 @@
 //! Decoded message content shared by the ROS 2 and Foxglove decoders.
 
-use crate::geometry::camera::CameraIntrinsics;
 use crate::geometry::Rigid;
+use crate::geometry::camera::CameraIntrinsics;
 
 /// Nanoseconds since the epoch from a (sec, nsec) stamp.
 pub fn stamp_nanos(sec: i64, nsec: u32) -> i64 {

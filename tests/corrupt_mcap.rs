@@ -1,0 +1,110 @@
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+//! Truncated and bit-flipped MCAP files never panic: they open with problems listed, or fail with
+//! an error naming the file. A property test over many random corruptions of real files.
+
+use std::path::{Path, PathBuf};
+
+use proptest::prelude::*;
+use rigcal::log::Drive;
+
+fn fixture(name: &str) -> Vec<u8> {
+    std::fs::read(
+        PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+            .join("tests/fixtures/mcap")
+            .join(name),
+    )
+    .unwrap()
+}
+
+fn write_tmp(bytes: &[u8], tag: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("rigcal-corrupt-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join(format!("{tag}.mcap"));
+    std::fs::write(&path, bytes).unwrap();
+    path
+}
+
+/// Open and touch every sweep and image; any error must name the file.
+fn exercise(path: &Path) {
+    match Drive::open(path) {
+        Ok(drive) => {
+            for s in &drive.streams {
+                for i in 0..s.frames.len() {
+                    let r = match s.kind {
+                        rigcal::calib::SensorKind::Lidar => {
+                            drive.load_sweep(&s.sensor, i).map(|_| ())
+                        }
+                        rigcal::calib::SensorKind::Camera => {
+                            drive.load_image(&s.sensor, i).map(|_| ())
+                        }
+                    };
+                    if let Err(e) = r {
+                        assert!(e.to_string().contains(&path.display().to_string()), "{e}");
+                    }
+                }
+            }
+            let _ = rigcal::cli::inspect::report(&drive);
+        }
+        Err(e) => assert!(e.to_string().contains(&path.display().to_string()), "{e}"),
+    }
+}
+
+#[test]
+fn truncated_at_every_kind_of_boundary() {
+    for name in ["ros2.mcap", "foxglove_protobuf.mcap", "foxglove_json.mcap"] {
+        let bytes = fixture(name);
+        for cut in [
+            0,
+            4,
+            8,
+            9,
+            20,
+            100,
+            bytes.len() / 3,
+            bytes.len() / 2,
+            bytes.len() - 30,
+            bytes.len() - 1,
+        ] {
+            exercise(&write_tmp(&bytes[..cut], &format!("trunc-{cut}")));
+        }
+    }
+}
+
+#[test]
+fn a_truncated_log_keeps_what_came_before() {
+    let bytes = fixture("ros2.mcap");
+    let path = write_tmp(&bytes[..bytes.len() * 2 / 3], "two-thirds");
+    let drive = Drive::open(&path).unwrap();
+    assert!(!drive.problems.is_empty(), "truncation is reported");
+    let total: u64 = drive.topics.iter().map(|t| t.count).sum();
+    assert!(total > 10, "messages before the damage are kept ({total})");
+}
+
+#[test]
+fn not_mcap_is_a_clear_error() {
+    let path = write_tmp(b"hello, world", "text");
+    let err = Drive::open(&path).unwrap_err().to_string();
+    assert!(
+        err.contains("not an MCAP file") && err.contains("text.mcap"),
+        "{err}"
+    );
+    let err = Drive::open(Path::new("/nonexistent/x.mcap"))
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("/nonexistent/x.mcap"), "{err}");
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 96, ..ProptestConfig::default() })]
+
+    #[test]
+    fn bit_flips_never_panic(file in 0usize..3, flips in proptest::collection::vec((any::<prop::sample::Index>(), 0u8..8), 1..8)) {
+        let name = ["ros2.mcap", "foxglove_protobuf.mcap", "foxglove_json.mcap"][file];
+        let mut bytes = fixture(name);
+        for (idx, bit) in &flips {
+            let i = idx.index(bytes.len());
+            bytes[i] ^= 1 << bit;
+        }
+        exercise(&write_tmp(&bytes, "flip"));
+    }
+}
