@@ -1,1 +1,36 @@
-//! The studio (egui).
+//! The studio: an egui/eframe desktop app over the library.
+//!
+//! The app only draws state and sends commands; everything it shows comes from the library
+//! ([`crate::log::Drive`], [`crate::geometry::projection`]). `run` opens a window; the state
+//! lives in [`state::Studio`], panels are `*_ui` functions in their own files.
+
+mod overlay;
+mod sensors;
+pub mod state;
+
+use std::path::PathBuf;
+
+pub use state::Studio;
+
+/// Open the studio window (blocks until it is closed).
+pub fn run(log: Option<PathBuf>, calibration: Option<PathBuf>) -> anyhow::Result<()> {
+    let options = eframe::NativeOptions {
+        viewport: egui::ViewportBuilder::default().with_inner_size([1600.0, 1000.0]).with_title("rigcal studio"),
+        ..Default::default()
+    };
+    eframe::run_native(
+        "rigcal studio",
+        options,
+        Box::new(move |_cc| {
+            let mut studio = Studio::default();
+            if let Some(path) = log {
+                studio.open_log(&path);
+            }
+            if let Some(path) = calibration {
+                studio.load_calibration(&path);
+            }
+            Ok(Box::new(studio))
+        }),
+    )
+    .map_err(|e| anyhow::anyhow!("cannot open the studio window: {e} (is there a display? set DISPLAY or WAYLAND_DISPLAY, or use the CLI subcommands)"))
+}
