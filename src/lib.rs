@@ -16,8 +16,10 @@
 
 pub mod calib;
 pub mod cli;
+pub mod eval;
 pub mod geometry;
 pub mod log;
+pub mod sim;
 pub mod util;
 
 #[cfg(feature = "app")]

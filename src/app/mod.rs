@@ -15,7 +15,9 @@ pub use state::Studio;
 /// Open the studio window (blocks until it is closed).
 pub fn run(log: Option<PathBuf>, calibration: Option<PathBuf>) -> anyhow::Result<()> {
     let options = eframe::NativeOptions {
-        viewport: egui::ViewportBuilder::default().with_inner_size([1600.0, 1000.0]).with_title("rigcal studio"),
+        viewport: egui::ViewportBuilder::default()
+            .with_inner_size([1600.0, 1000.0])
+            .with_title("rigcal studio"),
         ..Default::default()
     };
     eframe::run_native(

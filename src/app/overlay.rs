@@ -10,7 +10,7 @@ use egui::{Color32, Pos2, Rect, Vec2};
 
 use super::state::{ColorBy, ExtrinsicsView, Studio};
 use crate::calib::{Rig, SensorKind};
-use crate::geometry::projection::{project_sweep, ProjectedPoint, SweepView};
+use crate::geometry::projection::{ProjectedPoint, SweepView, project_sweep};
 use crate::log::LidarSweep;
 
 #[derive(Default)]
@@ -25,19 +25,36 @@ pub(crate) struct OverlayCache {
 /// A perceptual rainbow (turbo-like) for t in [0, 1].
 pub fn colormap(t: f32) -> Color32 {
     let t = t.clamp(0.0, 1.0);
-    let r = (0.13572138 + t * (4.6153926 + t * (-42.66032258 + t * (132.13108234 + t * (-152.94239396 + t * 59.28637943))))).clamp(0.0, 1.0);
-    let g = (0.09140261 + t * (2.19418839 + t * (4.84296658 + t * (-14.18503333 + t * (4.27729857 + t * 2.82956604))))).clamp(0.0, 1.0);
-    let b = (0.1066733 + t * (12.64194608 + t * (-60.58204836 + t * (110.36276771 + t * (-89.90310912 + t * 27.34824973))))).clamp(0.0, 1.0);
+    let r = (0.13572138
+        + t * (4.6153926
+            + t * (-42.66032258 + t * (132.13108234 + t * (-152.94239396 + t * 59.28637943)))))
+        .clamp(0.0, 1.0);
+    let g = (0.09140261
+        + t * (2.19418839
+            + t * (4.84296658 + t * (-14.18503333 + t * (4.27729857 + t * 2.82956604)))))
+        .clamp(0.0, 1.0);
+    let b = (0.1066733
+        + t * (12.64194608
+            + t * (-60.58204836 + t * (110.36276771 + t * (-89.90310912 + t * 27.34824973)))))
+        .clamp(0.0, 1.0);
     Color32::from_rgb((r * 255.0) as u8, (g * 255.0) as u8, (b * 255.0) as u8)
 }
 
 fn camera_names(studio: &Studio) -> Vec<String> {
-    studio.current.sensors.iter().filter(|s| s.kind == SensorKind::Camera && s.camera.is_some()).map(|s| s.name.clone()).collect()
+    studio
+        .current
+        .sensors
+        .iter()
+        .filter(|s| s.kind == SensorKind::Camera && s.camera.is_some())
+        .map(|s| s.name.clone())
+        .collect()
 }
 
 pub(crate) fn viewport_ui(studio: &mut Studio, ui: &mut egui::Ui) {
     let Some(drive) = studio.drive.as_ref() else {
-        ui.centered_and_justified(|ui| ui.heading("Open a drive (File ▸ Open log…, or drop an .mcap here)"));
+        ui.centered_and_justified(|ui| {
+            ui.heading("Open a drive (File ▸ Open log…, or drop an .mcap here)")
+        });
         return;
     };
     let cameras = camera_names(studio);
@@ -49,11 +66,13 @@ pub(crate) fn viewport_ui(studio: &mut Studio, ui: &mut egui::Ui) {
     let camera = cameras[studio.camera].clone();
     let n_frames = drive.stream(&camera).map_or(0, |s| s.frames.len());
     ui.horizontal(|ui| {
-        egui::ComboBox::from_label("camera").selected_text(&camera).show_ui(ui, |ui| {
-            for (i, c) in cameras.iter().enumerate() {
-                ui.selectable_value(&mut studio.camera, i, c);
-            }
-        });
+        egui::ComboBox::from_label("camera")
+            .selected_text(&camera)
+            .show_ui(ui, |ui| {
+                for (i, c) in cameras.iter().enumerate() {
+                    ui.selectable_value(&mut studio.camera, i, c);
+                }
+            });
         if n_frames > 0 {
             ui.add(egui::Slider::new(&mut studio.frame, 0..=n_frames - 1).text("frame"));
         }
@@ -74,23 +93,47 @@ pub(crate) fn viewport_ui(studio: &mut Studio, ui: &mut egui::Ui) {
         studio.status.push(format!("error: {e}"));
     }
     let cache = &studio.overlay_cache;
-    let Some((_, _, texture)) = &cache.texture else { return };
-    let Some(intr) = studio.current.sensor(&camera).and_then(|s| s.camera.clone()) else { return };
+    let Some((_, _, texture)) = &cache.texture else {
+        return;
+    };
+    let Some(intr) = studio
+        .current
+        .sensor(&camera)
+        .and_then(|s| s.camera.clone())
+    else {
+        return;
+    };
     let available = ui.available_size();
     let aspect = intr.width as f32 / intr.height as f32;
-    let size = if available.x / available.y > aspect { Vec2::new(available.y * aspect, available.y) } else { Vec2::new(available.x, available.x / aspect) };
+    let size = if available.x / available.y > aspect {
+        Vec2::new(available.y * aspect, available.y)
+    } else {
+        Vec2::new(available.x, available.x / aspect)
+    };
     let (rect, _response) = ui.allocate_exact_size(size, egui::Sense::hover());
     let painter = ui.painter_at(rect);
-    painter.image(texture.id(), rect, Rect::from_min_max(Pos2::ZERO, Pos2::new(1.0, 1.0)), Color32::WHITE);
+    painter.image(
+        texture.id(),
+        rect,
+        Rect::from_min_max(Pos2::ZERO, Pos2::new(1.0, 1.0)),
+        Color32::WHITE,
+    );
     let scale = rect.width() / intr.width as f32;
     let half = studio.point_size * 0.5;
     let mut mesh = egui::Mesh::default();
     let (lo, hi) = match studio.color_by {
         ColorBy::Range => (0.0, studio.max_range_m),
-        ColorBy::Intensity => (0.0, cache.points.iter().map(|p| p.intensity).fold(1.0, f32::max)),
+        ColorBy::Intensity => (
+            0.0,
+            cache.points.iter().map(|p| p.intensity).fold(1.0, f32::max),
+        ),
     };
     // Far points first so near ones cover them.
-    let mut order: Vec<&ProjectedPoint> = cache.points.iter().filter(|p| p.depth_m <= studio.max_range_m).collect();
+    let mut order: Vec<&ProjectedPoint> = cache
+        .points
+        .iter()
+        .filter(|p| p.depth_m <= studio.max_range_m)
+        .collect();
     order.sort_by(|a, b| b.depth_m.total_cmp(&a.depth_m));
     for p in order {
         let v = match studio.color_by {
@@ -106,7 +149,9 @@ pub(crate) fn viewport_ui(studio: &mut Studio, ui: &mut egui::Ui) {
 
 /// Recompute the texture and projected points when the camera, frame or extrinsics changed.
 fn refresh(studio: &mut Studio, camera: &str, ctx: &egui::Context) -> Result<(), String> {
-    let Some(drive) = studio.drive.as_ref() else { return Ok(()) };
+    let Some(drive) = studio.drive.as_ref() else {
+        return Ok(());
+    };
     let key = (studio.camera, studio.frame, studio.view, studio.stride);
     let rig = studio.shown_rig().clone();
     let cache = &mut studio.overlay_cache;
@@ -116,22 +161,46 @@ fn refresh(studio: &mut Studio, camera: &str, ctx: &egui::Context) -> Result<(),
     let stream = drive.stream(camera).ok_or("no such camera")?;
     let image_stamp = stream.frames[studio.frame].stamp_nanos;
     if cache.texture.as_ref().map(|(c, f, _)| (*c, *f)) != Some((studio.camera, studio.frame)) {
-        let img = drive.load_image(camera, studio.frame).map_err(|e| e.to_string())?;
-        let color = egui::ColorImage::from_rgb([img.width() as usize, img.height() as usize], img.as_raw());
-        let tex = ctx.load_texture(format!("{camera}-{}", studio.frame), color, egui::TextureOptions::LINEAR);
+        let img = drive
+            .load_image(camera, studio.frame)
+            .map_err(|e| e.to_string())?;
+        let color =
+            egui::ColorImage::from_rgb([img.width() as usize, img.height() as usize], img.as_raw());
+        let tex = ctx.load_texture(
+            format!("{camera}-{}", studio.frame),
+            color,
+            egui::TextureOptions::LINEAR,
+        );
         cache.texture = Some((studio.camera, studio.frame, tex));
     }
     let cam = rig.sensor(camera).ok_or("no such camera")?;
     let intr = cam.camera.clone().ok_or("camera has no intrinsics")?;
     let mut points = Vec::new();
     for lidar in rig.lidars() {
-        let Some(ls) = drive.stream(&lidar.name) else { continue };
+        let Some(ls) = drive.stream(&lidar.name) else {
+            continue;
+        };
         // The sweep nearest in time to the image.
-        let Some((idx, _)) = ls.frames.iter().enumerate().min_by_key(|(_, f)| (f.stamp_nanos - image_stamp).abs()) else { continue };
-        let sweep = match cache.sweeps.iter().find(|(n, i, _)| *n == lidar.name && *i == idx) {
+        let Some((idx, _)) = ls
+            .frames
+            .iter()
+            .enumerate()
+            .min_by_key(|(_, f)| (f.stamp_nanos - image_stamp).abs())
+        else {
+            continue;
+        };
+        let sweep = match cache
+            .sweeps
+            .iter()
+            .find(|(n, i, _)| *n == lidar.name && *i == idx)
+        {
             Some((_, _, s)) => s.clone(),
             None => {
-                let s = Arc::new(drive.load_sweep(&lidar.name, idx).map_err(|e| e.to_string())?);
+                let s = Arc::new(
+                    drive
+                        .load_sweep(&lidar.name, idx)
+                        .map_err(|e| e.to_string())?,
+                );
                 cache.sweeps.push((lidar.name.clone(), idx, s.clone()));
                 if cache.sweeps.len() > 8 {
                     cache.sweeps.remove(0);
@@ -145,7 +214,15 @@ fn refresh(studio: &mut Studio, camera: &str, ctx: &egui::Context) -> Result<(),
             time_offset_secs: sweep.time_offset_secs.as_deref(),
             stamp_nanos: sweep.stamp_nanos,
         };
-        match project_sweep(&view, &drive.trajectory, lidar.vehicle_from_sensor, cam.vehicle_from_sensor, &intr, image_stamp, studio.stride) {
+        match project_sweep(
+            &view,
+            &drive.trajectory,
+            lidar.vehicle_from_sensor,
+            cam.vehicle_from_sensor,
+            &intr,
+            image_stamp,
+            studio.stride,
+        ) {
             Ok(p) => points.extend(p),
             Err(e) => return Err(format!("{camera} frame {}: {e}", studio.frame)),
         }

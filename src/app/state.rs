@@ -76,7 +76,12 @@ impl Studio {
                 self.redo.clear();
                 self.camera = 0;
                 self.frame = 0;
-                self.status.push(format!("opened {} ({} sensors, {} problems)", path.display(), drive.rig.sensors.len(), drive.problems.len()));
+                self.status.push(format!(
+                    "opened {} ({} sensors, {} problems)",
+                    path.display(),
+                    drive.rig.sensors.len(),
+                    drive.problems.len()
+                ));
                 self.drive = Some(drive);
                 self.overlay_cache = Default::default();
             }
@@ -100,7 +105,11 @@ impl Studio {
                     }
                 }
                 self.edit(next);
-                self.status.push(format!("loaded {} ({matched} of {} sensors matched)", path.display(), rig.sensors.len()));
+                self.status.push(format!(
+                    "loaded {} ({matched} of {} sensors matched)",
+                    path.display(),
+                    rig.sensors.len()
+                ));
             }
             Err(e) => self.status.push(format!("error: {e}")),
         }
@@ -148,7 +157,9 @@ impl eframe::App for Studio {
         self.handle_dropped_files(ui.ctx());
         egui::Panel::top("menu").show(ui, |ui| self.menu_ui(ui));
         egui::Panel::bottom("status").show(ui, |ui| self.status_ui(ui));
-        egui::Panel::left("sensors").default_size(340.0).show(ui, |ui| super::sensors::sensors_ui(self, ui));
+        egui::Panel::left("sensors")
+            .default_size(340.0)
+            .show(ui, |ui| super::sensors::sensors_ui(self, ui));
         egui::CentralPanel::default().show(ui, |ui| super::overlay::viewport_ui(self, ui));
     }
 }
@@ -157,17 +168,26 @@ impl Studio {
     fn menu_ui(&mut self, ui: &mut egui::Ui) {
         ui.horizontal(|ui| {
             if ui.button("Open log…").clicked() {
-                if let Some(path) = rfd::FileDialog::new().add_filter("MCAP", &["mcap"]).pick_file() {
+                if let Some(path) = rfd::FileDialog::new()
+                    .add_filter("MCAP", &["mcap"])
+                    .pick_file()
+                {
                     self.open_log(&path);
                 }
             }
             if ui.button("Load calibration…").clicked() {
-                if let Some(path) = rfd::FileDialog::new().add_filter("YAML", &["yaml", "yml"]).pick_file() {
+                if let Some(path) = rfd::FileDialog::new()
+                    .add_filter("YAML", &["yaml", "yml"])
+                    .pick_file()
+                {
                     self.load_calibration(&path);
                 }
             }
             if ui.button("Save calibration…").clicked() {
-                if let Some(path) = rfd::FileDialog::new().add_filter("YAML", &["yaml"]).save_file() {
+                if let Some(path) = rfd::FileDialog::new()
+                    .add_filter("YAML", &["yaml"])
+                    .save_file()
+                {
                     match CalibrationFile::from_rig(&self.current).save(&path) {
                         Ok(()) => self.status.push(format!("saved {}", path.display())),
                         Err(e) => self.status.push(format!("error: {e}")),
@@ -175,10 +195,16 @@ impl Studio {
                 }
             }
             ui.separator();
-            if ui.add_enabled(!self.undo.is_empty(), egui::Button::new("Undo")).clicked() {
+            if ui
+                .add_enabled(!self.undo.is_empty(), egui::Button::new("Undo"))
+                .clicked()
+            {
                 self.undo();
             }
-            if ui.add_enabled(!self.redo.is_empty(), egui::Button::new("Redo")).clicked() {
+            if ui
+                .add_enabled(!self.redo.is_empty(), egui::Button::new("Redo"))
+                .clicked()
+            {
                 self.redo();
             }
             ui.separator();
@@ -197,20 +223,40 @@ impl Studio {
                 ui.separator();
                 ui.label(format!("{} · {}", d.path().display(), d.trajectory_source));
                 if !d.problems.is_empty() {
-                    ui.colored_label(egui::Color32::YELLOW, format!("{} problems", d.problems.len()))
-                        .on_hover_text(d.problems.iter().take(20).map(|p| p.to_string()).collect::<Vec<_>>().join("\n"));
+                    ui.colored_label(
+                        egui::Color32::YELLOW,
+                        format!("{} problems", d.problems.len()),
+                    )
+                    .on_hover_text(
+                        d.problems
+                            .iter()
+                            .take(20)
+                            .map(|p| p.to_string())
+                            .collect::<Vec<_>>()
+                            .join("\n"),
+                    );
                 }
             }
         });
     }
 
     fn handle_dropped_files(&mut self, ctx: &egui::Context) {
-        let dropped: Vec<_> = ctx.input(|i| i.raw.dropped_files.iter().map(|f| f.path().to_path_buf()).filter(|p| !p.as_os_str().is_empty()).collect());
+        let dropped: Vec<_> = ctx.input(|i| {
+            i.raw
+                .dropped_files
+                .iter()
+                .map(|f| f.path().to_path_buf())
+                .filter(|p| !p.as_os_str().is_empty())
+                .collect()
+        });
         for path in dropped {
             match path.extension().and_then(|e| e.to_str()) {
                 Some("mcap") => self.open_log(&path),
                 Some("yaml" | "yml") => self.load_calibration(&path),
-                _ => self.status.push(format!("error: {}: not an .mcap or .yaml file", path.display())),
+                _ => self.status.push(format!(
+                    "error: {}: not an .mcap or .yaml file",
+                    path.display()
+                )),
             }
         }
     }

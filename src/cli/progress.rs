@@ -24,6 +24,10 @@ impl Progress {
         }
     }
 
+    pub fn set_total(&mut self, total: u64) {
+        self.total = total.max(1);
+    }
+
     pub fn set(&mut self, done: u64) {
         self.done = done.min(self.total);
         let pct = self.done * 100 / self.total;

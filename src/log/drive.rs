@@ -269,7 +269,7 @@ impl Drive {
             let f = fixed_frame.clone().unwrap_or(f);
             let v = vehicle_frame.clone().unwrap_or(v);
             if let Some(t) = tf.trajectory(&f, &v) {
-                trajectory_source = format!("/tf: {f} → {v} ({} poses)", t.len());
+                trajectory_source = format!("/tf: {f} -> {v} ({} poses)", t.len());
                 trajectory = t;
                 fixed_frame = Some(f);
                 vehicle_frame = Some(v);
@@ -289,7 +289,7 @@ impl Drive {
                 .or(v)
                 .unwrap_or_else(|| "base_link".into());
             trajectory_source =
-                format!("{topic}: {} → {v} ({} poses)", first.frame_id, poses.len());
+                format!("{topic}: {} -> {v} ({} poses)", first.frame_id, poses.len());
             fixed_frame = Some(normalize_frame(&first.frame_id));
             vehicle_frame = Some(v);
             trajectory = Trajectory::new(

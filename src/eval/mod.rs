@@ -1,0 +1,3 @@
+//! Evaluation: metrics that tell how well a calibration aligns the sensors.
+
+pub mod edges;

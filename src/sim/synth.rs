@@ -1,0 +1,293 @@
+//! `rigcal synth`: a whole synthetic drive — trajectory, world, every sensor's stream — written
+//! as a ROS 2 MCAP, with the ground truth as a native calibration file.
+//!
+//! The /tf_static of the MCAP carries the *initial guess*: the ground truth with every sensor
+//! perturbed by exactly `perturb_deg` about a random axis and `perturb_cm` in a random direction
+//! (seeded). Sweeps are stamped when the spinning LiDAR faces forward; each camera triggers when
+//! the LiDAR sweeps past its heading. Frames are simulated in parallel and written in time order.
+
+use std::path::Path;
+
+use glam::DVec3;
+use rayon::prelude::*;
+use thiserror::Error;
+
+use super::camera_sim::{self, Exposure, RayTable};
+use super::lidar_sim::{self, spin_time_offset_secs};
+use super::rigs::SimRig;
+use super::trajectories::{self, TrajectoryConfig, TrajectoryKind};
+use super::world::{SceneKind, World};
+use super::writer::{Ros2McapWriter, WriterError};
+use crate::calib::{CalibFileError, CalibrationFile, Rig};
+use crate::geometry::{Rigid, Trajectory, TrajectoryError, so3};
+
+/// Epoch of simulated drives (2023-11-14T22:13:20Z), so stamps look like real ones.
+pub const EPOCH_NANOS: i64 = 1_700_000_000_000_000_000;
+
+#[derive(Debug, Error)]
+pub enum SimError {
+    #[error(transparent)]
+    Writer(#[from] WriterError),
+    #[error(transparent)]
+    Calibration(#[from] CalibFileError),
+    #[error("trajectory: {0}")]
+    Trajectory(#[from] TrajectoryError),
+    #[error("{0}")]
+    Config(String),
+    #[error("cannot encode an image: {0}")]
+    Image(String),
+}
+
+#[derive(Clone, Debug)]
+pub struct SynthConfig {
+    pub scene: SceneKind,
+    pub rig: SimRig,
+    pub trajectory: TrajectoryKind,
+    pub duration_secs: f64,
+    pub seed: u64,
+    pub perturb_deg: f64,
+    pub perturb_cm: f64,
+    /// Image size factor (0.5 = half-size images, intrinsics scaled to match).
+    pub scale: f64,
+    pub jpeg_quality: u8,
+    /// Camera frame rate; the LiDAR rate is its rotation rate.
+    pub camera_rate_hz: f64,
+}
+
+impl SynthConfig {
+    pub fn new(
+        scene: SceneKind,
+        rig: SimRig,
+        trajectory: TrajectoryKind,
+        duration_secs: f64,
+        seed: u64,
+    ) -> Self {
+        Self {
+            scene,
+            rig,
+            trajectory,
+            duration_secs,
+            seed,
+            perturb_deg: 0.0,
+            perturb_cm: 0.0,
+            scale: 1.0,
+            jpeg_quality: 90,
+            camera_rate_hz: 10.0,
+        }
+    }
+}
+
+/// What a synthesis produced.
+#[derive(Clone, Debug)]
+pub struct SynthOutput {
+    pub ground_truth: Rig,
+    pub initial: Rig,
+    pub sweeps: usize,
+    pub images: usize,
+}
+
+/// Perturb every sensor by exactly `deg` about a random axis and `cm` along a random direction.
+pub fn perturb_rig(rig: &Rig, deg: f64, cm: f64, seed: u64) -> Rig {
+    let mut out = rig.clone();
+    for (k, s) in out.sensors.iter_mut().enumerate() {
+        let u =
+            |j: u64| super::noise::hash3(k as i32, j as i32, 0, seed ^ 0x7E57) as f64 * 2.0 - 1.0;
+        let axis = DVec3::new(u(0), u(1), u(2))
+            .try_normalize()
+            .unwrap_or(DVec3::X);
+        let dir = DVec3::new(u(3), u(4), u(5))
+            .try_normalize()
+            .unwrap_or(DVec3::Y);
+        let delta = Rigid::new(so3::exp(axis * deg.to_radians()), dir * (cm / 100.0));
+        // Perturb in the vehicle frame: rotate about the sensor's origin, then shift.
+        let t = s.vehicle_from_sensor;
+        s.vehicle_from_sensor = Rigid::new(
+            delta.rotation * t.rotation,
+            t.translation + delta.translation,
+        );
+    }
+    out
+}
+
+/// Camera trigger offset relative to the sweep stamp: when the first spinning LiDAR faces it.
+fn trigger_offset_secs(rig: &SimRig, vehicle_from_camera: Rigid) -> f64 {
+    let Some(lidar) = rig.lidars.iter().find(|l| l.spinning) else {
+        return 0.0;
+    };
+    let axis = vehicle_from_camera.rotation * DVec3::Z;
+    let lidar_axis = lidar.vehicle_from_lidar.inverse().transform_vector(axis);
+    spin_time_offset_secs(
+        lidar_axis.y.atan2(lidar_axis.x),
+        1.0 / lidar.rotation_hz.max(1e-3),
+    )
+}
+
+/// Simulate and write the drive; `progress(done, total)` is called as frames complete.
+pub fn synthesize(
+    cfg: &SynthConfig,
+    out_mcap: &Path,
+    ground_truth_path: &Path,
+    progress: &mut dyn FnMut(usize, usize),
+) -> Result<SynthOutput, SimError> {
+    if !(cfg.duration_secs > 0.2) {
+        return Err(SimError::Config(format!(
+            "--seconds must be more than 0.2, got {}",
+            cfg.duration_secs
+        )));
+    }
+    if !(cfg.scale > 0.0 && cfg.scale <= 4.0) {
+        return Err(SimError::Config(format!(
+            "--scale must be in (0, 4], got {}",
+            cfg.scale
+        )));
+    }
+    let rig = if (cfg.scale - 1.0).abs() > 1e-12 {
+        cfg.rig.scaled(cfg.scale)
+    } else {
+        cfg.rig.clone()
+    };
+    let ground_truth = rig.to_rig();
+    let initial = perturb_rig(&ground_truth, cfg.perturb_deg, cfg.perturb_cm, cfg.seed);
+
+    // Trajectory at 100 Hz with a margin either side so every sensor time is covered.
+    let margin = 0.2;
+    let traj_cfg = TrajectoryConfig {
+        kind: cfg.trajectory,
+        duration_secs: cfg.duration_secs + 2.0 * margin,
+        rate_hz: 100.0,
+        speed_mps: 8.0,
+        seed: cfg.seed,
+    };
+    let samples = trajectories::generate(&traj_cfg);
+    let start = EPOCH_NANOS;
+    let poses: Vec<(i64, Rigid)> = samples.iter().map(|(t, p)| (start + t, *p)).collect();
+    let trajectory = Trajectory::new(poses.clone());
+    let path = trajectories::path_polyline(&traj_cfg, 1.0);
+    let world = World::build(cfg.scene, &path, cfg.seed);
+
+    // Sweep stamps: every LiDAR period inside [margin + period/2, margin + duration - period/2].
+    let lidar_hz = rig
+        .lidars
+        .iter()
+        .map(|l| l.rotation_hz)
+        .fold(10.0, f64::max);
+    let period = 1.0 / lidar_hz;
+    let n_sweeps = ((cfg.duration_secs / period).floor() as usize).max(1);
+    let sweep_stamps: Vec<i64> = (0..n_sweeps)
+        .map(|k| start + ((margin + period * (k as f64 + 0.5)) * 1e9) as i64)
+        .collect();
+    let camera_every = ((lidar_hz / cfg.camera_rate_hz.max(1e-3)).round() as usize).max(1);
+
+    let mut writer = Ros2McapWriter::create(out_mcap)?;
+    let vehicle = ground_truth.vehicle_frame.clone();
+    let statics: Vec<(String, String, Rigid)> = initial
+        .sensors
+        .iter()
+        .map(|s| (vehicle.clone(), s.frame_id.clone(), s.vehicle_from_sensor))
+        .collect();
+    writer.write_tf_static(start, &statics)?;
+    for (t, p) in &poses {
+        writer.write_tf(*t, "odom", &vehicle, *p)?;
+    }
+    let ray_tables: Vec<RayTable> = rig
+        .cameras
+        .iter()
+        .map(|c| RayTable::new(&c.intrinsics))
+        .collect();
+    let total = n_sweeps;
+    let (mut sweeps_written, mut images_written) = (0, 0);
+    for (k, &stamp) in sweep_stamps.iter().enumerate() {
+        for (li, lidar) in rig.lidars.iter().enumerate() {
+            let sweep = lidar_sim::simulate_sweep(
+                &world,
+                lidar,
+                &trajectory,
+                stamp,
+                cfg.seed ^ (li as u64) << 32,
+            )?;
+            let times = sweep.time_offset_secs.clone().unwrap_or_default();
+            writer.write_pointcloud(
+                &format!("/{}/points", lidar.name),
+                stamp,
+                &lidar.name,
+                &sweep.points_in_sensor,
+                &sweep.intensity,
+                &times,
+            )?;
+            sweeps_written += 1;
+        }
+        if k % camera_every == 0 {
+            let frames: Vec<Result<(i64, Vec<u8>), SimError>> = rig
+                .cameras
+                .par_iter()
+                .zip(ray_tables.par_iter())
+                .enumerate()
+                .map(|(ci, (cam, rays))| {
+                    let trigger =
+                        stamp + (trigger_offset_secs(&rig, cam.vehicle_from_camera) * 1e9) as i64;
+                    let world_from_camera =
+                        trajectory.world_from_vehicle(trigger)? * cam.vehicle_from_camera;
+                    let exposure = Exposure {
+                        gain: cam.exposure_gain as f32,
+                        tint: cam.tint_rgb.map(|v| v as f32),
+                        noise_sigma: 2.0,
+                        seed: cfg.seed ^ (trigger as u64) ^ ci as u64,
+                    };
+                    let img = camera_sim::render(
+                        &world,
+                        rays,
+                        &cam.intrinsics,
+                        world_from_camera,
+                        exposure,
+                    );
+                    let mut jpeg = Vec::new();
+                    image::codecs::jpeg::JpegEncoder::new_with_quality(&mut jpeg, cfg.jpeg_quality)
+                        .encode_image(&img)
+                        .map_err(|e| SimError::Image(e.to_string()))?;
+                    Ok((trigger, jpeg))
+                })
+                .collect();
+            for (cam, frame) in rig.cameras.iter().zip(frames) {
+                let (trigger, jpeg) = frame?;
+                writer.write_compressed_image(
+                    &format!("/{}/image/compressed", cam.name),
+                    trigger,
+                    &cam.name,
+                    "jpeg",
+                    &jpeg,
+                )?;
+                writer.write_camera_info(
+                    &format!("/{}/camera_info", cam.name),
+                    trigger,
+                    &cam.name,
+                    &cam.intrinsics,
+                )?;
+                images_written += 1;
+            }
+        }
+        progress(k + 1, total);
+    }
+    writer.finish()?;
+
+    let mut file = CalibrationFile::from_rig(&ground_truth);
+    let mut prov = std::collections::BTreeMap::new();
+    prov.insert("source".into(), "rigcal synth (ground truth)".into());
+    prov.insert("scene".into(), cfg.scene.as_str().into());
+    prov.insert("rig".into(), cfg.rig.name.clone().into());
+    prov.insert("trajectory".into(), cfg.trajectory.as_str().into());
+    prov.insert("seconds".into(), cfg.duration_secs.into());
+    prov.insert("seed".into(), cfg.seed.into());
+    prov.insert("perturb_deg".into(), cfg.perturb_deg.into());
+    prov.insert("perturb_cm".into(), cfg.perturb_cm.into());
+    prov.insert("scale".into(), cfg.scale.into());
+    prov.insert("mcap".into(), out_mcap.display().to_string().into());
+    prov.insert("version".into(), env!("CARGO_PKG_VERSION").into());
+    file.provenance = prov;
+    file.save(ground_truth_path)?;
+    Ok(SynthOutput {
+        ground_truth,
+        initial,
+        sweeps: sweeps_written,
+        images: images_written,
+    })
+}

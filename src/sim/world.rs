@@ -1,0 +1,1226 @@
+//! The procedural static world the simulator renders: a road laid along the driven path (lanes,
+//! markings, curbs, sidewalks) and, per scene, buildings with windows, doors and signs, poles and
+//! street lights, parked cars, trees, bushes, posters and checkerboards.
+//!
+//! How it works: the ground is the analytic plane z = 0, shaded from a raster of (distance to the
+//! path, distance along it) so markings follow any trajectory; everything else is triangles in a
+//! [`Bvh`]. Objects are placed along the path on both sides with a seeded RNG and an occupancy
+//! grid, never within the road of any part of the path (figure-8 crossings stay clear). Every
+//! material has an albedo texture (procedural, band-limited to the pixel footprint) and a LiDAR
+//! reflectivity.
+
+use std::collections::HashSet;
+use std::str::FromStr;
+
+use glam::{DVec3, Vec3};
+
+use super::bvh::{Bvh, Triangle};
+use super::noise::{band, fbm2, hash3, hash64, stripe, value2};
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SceneKind {
+    Urban,
+    ParkingLot,
+    Featureless,
+    Checkerboard,
+}
+
+impl SceneKind {
+    pub const ALL: [SceneKind; 4] = [
+        Self::Urban,
+        Self::ParkingLot,
+        Self::Featureless,
+        Self::Checkerboard,
+    ];
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Self::Urban => "urban",
+            Self::ParkingLot => "parking-lot",
+            Self::Featureless => "featureless",
+            Self::Checkerboard => "checkerboard",
+        }
+    }
+}
+
+impl FromStr for SceneKind {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        Self::ALL.into_iter().find(|k| k.as_str() == s).ok_or_else(|| {
+            format!("unknown scene '{s}' (expected one of: urban, parking-lot, featureless, checkerboard)")
+        })
+    }
+}
+
+/// Half-width of the paved road around the path, metres.
+pub const ROAD_HALF_WIDTH_M: f32 = 7.0;
+const SIDEWALK_OUTER_M: f32 = 10.0;
+const CURB_HEIGHT_M: f32 = 0.15;
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Material {
+    Facade { color: [f32; 3], seed: u32 },
+    Concrete,
+    Sidewalk,
+    Metal { color: [f32; 3] },
+    CarPaint { color: [f32; 3] },
+    Glass,
+    Tire,
+    Bark,
+    Foliage { color: [f32; 3] },
+    Poster { seed: u32 },
+    Board { index: u32 },
+    LampHead,
+}
+
+/// A checkerboard target: `squares_u × squares_v` squares of `square_m`, inner corners known.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Checkerboard {
+    /// World position of the board's first square corner.
+    pub origin: Vec3,
+    pub u_axis: Vec3,
+    pub v_axis: Vec3,
+    pub squares_u: u32,
+    pub squares_v: u32,
+    pub square_m: f32,
+    /// White border around the squares, metres.
+    pub margin_m: f32,
+}
+
+impl Checkerboard {
+    /// Inner corners (where four squares meet), in world coordinates.
+    pub fn inner_corners(&self) -> Vec<Vec3> {
+        let mut out = Vec::new();
+        for j in 1..self.squares_v {
+            for i in 1..self.squares_u {
+                out.push(
+                    self.origin
+                        + self.u_axis * (i as f32 * self.square_m)
+                        + self.v_axis * (j as f32 * self.square_m),
+                );
+            }
+        }
+        out
+    }
+}
+
+/// Distance to the path (signed: left positive) and along it, rasterised.
+#[derive(Clone, Debug)]
+pub struct GroundMap {
+    x0: f32,
+    y0: f32,
+    res: f32,
+    w: usize,
+    h: usize,
+    dist: Vec<f32>,
+    along: Vec<f32>,
+}
+
+impl GroundMap {
+    const FAR: f32 = 1.0e3;
+
+    fn build(path: &[Vec3], res: f32, reach: f32) -> Self {
+        let (mut lo, mut hi) = (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN));
+        for p in path {
+            lo = lo.min(*p);
+            hi = hi.max(*p);
+        }
+        let margin = reach + 5.0;
+        let (x0, y0) = (lo.x - margin, lo.y - margin);
+        let w = (((hi.x - lo.x) + 2.0 * margin) / res).ceil() as usize + 1;
+        let h = (((hi.y - lo.y) + 2.0 * margin) / res).ceil() as usize + 1;
+        let mut dist = vec![Self::FAR; w * h];
+        let mut along = vec![0.0f32; w * h];
+        let mut s_acc = 0.0f32;
+        for seg in path.windows(2) {
+            let (a, b) = (seg[0], seg[1]);
+            let ab = Vec3::new(b.x - a.x, b.y - a.y, 0.0);
+            let len = ab.length();
+            if len < 1e-6 {
+                continue;
+            }
+            let dir = ab / len;
+            let left = Vec3::new(-dir.y, dir.x, 0.0);
+            let (bx0, bx1) = (a.x.min(b.x) - reach, a.x.max(b.x) + reach);
+            let (by0, by1) = (a.y.min(b.y) - reach, a.y.max(b.y) + reach);
+            let (i0, i1) = (
+                ((bx0 - x0) / res).floor().max(0.0) as usize,
+                (((bx1 - x0) / res).ceil() as usize).min(w - 1),
+            );
+            let (j0, j1) = (
+                ((by0 - y0) / res).floor().max(0.0) as usize,
+                (((by1 - y0) / res).ceil() as usize).min(h - 1),
+            );
+            for j in j0..=j1 {
+                for i in i0..=i1 {
+                    let p = Vec3::new(x0 + i as f32 * res - a.x, y0 + j as f32 * res - a.y, 0.0);
+                    let t = p.dot(dir).clamp(0.0, len);
+                    let d_abs = (p - dir * t).length();
+                    let k = j * w + i;
+                    if d_abs < dist[k].abs() {
+                        let side = if p.dot(left) >= 0.0 { 1.0 } else { -1.0 };
+                        dist[k] = side * d_abs;
+                        along[k] = s_acc + t;
+                    }
+                }
+            }
+            s_acc += len;
+        }
+        Self {
+            x0,
+            y0,
+            res,
+            w,
+            h,
+            dist,
+            along,
+        }
+    }
+
+    /// (signed distance to the path, distance along it) at a ground point, bilinear.
+    pub fn sample(&self, x: f32, y: f32) -> (f32, f32) {
+        let fx = (x - self.x0) / self.res;
+        let fy = (y - self.y0) / self.res;
+        if fx < 0.0 || fy < 0.0 || fx >= (self.w - 1) as f32 || fy >= (self.h - 1) as f32 {
+            return (Self::FAR, 0.0);
+        }
+        let (i, j) = (fx as usize, fy as usize);
+        let (tx, ty) = (fx - i as f32, fy - j as f32);
+        let k = j * self.w + i;
+        let lerp = |v: &[f32]| {
+            let top = v[k] + (v[k + 1] - v[k]) * tx;
+            let bot = v[k + self.w] + (v[k + self.w + 1] - v[k + self.w]) * tx;
+            top + (bot - top) * ty
+        };
+        // Signed distance flips sign across the path: interpolate magnitudes, keep the sign of
+        // the nearest sample (the road is symmetric, so only |d| matters for shading).
+        let d = [
+            self.dist[k],
+            self.dist[k + 1],
+            self.dist[k + self.w],
+            self.dist[k + self.w + 1],
+        ];
+        let mag = {
+            let m = [d[0].abs(), d[1].abs(), d[2].abs(), d[3].abs()];
+            let top = m[0] + (m[1] - m[0]) * tx;
+            let bot = m[2] + (m[3] - m[2]) * tx;
+            top + (bot - top) * ty
+        };
+        (mag * d[0].signum(), lerp(&self.along))
+    }
+
+    pub fn abs_distance(&self, x: f32, y: f32) -> f32 {
+        self.sample(x, y).0.abs()
+    }
+}
+
+/// Where a ray ended.
+#[derive(Clone, Copy, Debug)]
+pub struct SurfaceHit {
+    pub t: f32,
+    pub point: Vec3,
+    pub normal: Vec3,
+    /// `None` for the ground plane.
+    pub material: Option<u32>,
+    /// Identifies the primitive (for edge-adaptive anti-aliasing); the ground is u32::MAX.
+    pub primitive: u32,
+}
+
+/// What a surface looks like to a camera and to a LiDAR.
+#[derive(Clone, Copy, Debug)]
+pub struct Surface {
+    pub albedo: Vec3,
+    /// Diffuse LiDAR reflectivity in [0, 1].
+    pub reflectivity: f32,
+}
+
+pub struct World {
+    pub kind: SceneKind,
+    pub bvh: Bvh,
+    pub materials: Vec<Material>,
+    pub ground: GroundMap,
+    pub boards: Vec<Checkerboard>,
+    pub sun_dir: Vec3,
+    pub seed: u64,
+}
+
+impl std::fmt::Debug for World {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("World")
+            .field("kind", &self.kind)
+            .field("triangles", &self.bvh.triangles.len())
+            .finish()
+    }
+}
+
+/// A tiny seeded RNG for placement.
+struct Rng(u64);
+impl Rng {
+    fn next(&mut self) -> f32 {
+        self.0 = hash64(self.0);
+        (self.0 >> 40) as f32 / (1u64 << 24) as f32
+    }
+    fn range(&mut self, lo: f32, hi: f32) -> f32 {
+        lo + (hi - lo) * self.next()
+    }
+    fn pick<T: Copy>(&mut self, items: &[T]) -> T {
+        items[((self.next() * items.len() as f32) as usize).min(items.len() - 1)]
+    }
+}
+
+struct Builder {
+    tris: Vec<Triangle>,
+    materials: Vec<Material>,
+    occupied: HashSet<(i32, i32)>,
+}
+
+impl Builder {
+    fn material(&mut self, m: Material) -> u32 {
+        if let Some(i) = self.materials.iter().position(|x| *x == m) {
+            return i as u32;
+        }
+        self.materials.push(m);
+        (self.materials.len() - 1) as u32
+    }
+
+    fn quad(&mut self, a: Vec3, b: Vec3, c: Vec3, d: Vec3, m: u32) {
+        self.tris.push(Triangle::new(a, b, c, m));
+        self.tris.push(Triangle::new(a, c, d, m));
+    }
+
+    /// An oriented box: base centre on the ground plane at `base`, heading `yaw`, size (l, w, h).
+    fn boxed(&mut self, base: Vec3, yaw: f32, size: Vec3, m: u32) {
+        let (f, l) = (
+            Vec3::new(yaw.cos(), yaw.sin(), 0.0),
+            Vec3::new(-yaw.sin(), yaw.cos(), 0.0),
+        );
+        let (hx, hy) = (f * size.x * 0.5, l * size.y * 0.5);
+        let z0 = Vec3::new(0.0, 0.0, base.z);
+        let z1 = Vec3::new(0.0, 0.0, base.z + size.z);
+        let c = Vec3::new(base.x, base.y, 0.0);
+        let corners = [c - hx - hy, c + hx - hy, c + hx + hy, c - hx + hy];
+        for k in 0..4 {
+            let (a, b) = (corners[k], corners[(k + 1) % 4]);
+            self.quad(a + z0, b + z0, b + z1, a + z1, m);
+        }
+        self.quad(
+            corners[0] + z1,
+            corners[1] + z1,
+            corners[2] + z1,
+            corners[3] + z1,
+            m,
+        );
+        self.quad(
+            corners[3] + z0,
+            corners[2] + z0,
+            corners[1] + z0,
+            corners[0] + z0,
+            m,
+        );
+    }
+
+    fn cylinder(&mut self, base: Vec3, radius: f32, height: f32, sides: u32, m: u32) {
+        let ring = |k: u32| {
+            let a = k as f32 / sides as f32 * std::f32::consts::TAU;
+            base + Vec3::new(a.cos() * radius, a.sin() * radius, 0.0)
+        };
+        let up = Vec3::new(0.0, 0.0, height);
+        for k in 0..sides {
+            let (a, b) = (ring(k), ring(k + 1));
+            self.quad(a, b, b + up, a + up, m);
+            self.tris.push(Triangle::new(base + up, a + up, b + up, m));
+        }
+    }
+
+    /// A lumpy sphere (subdivided octahedron with noise displacement), for foliage.
+    fn blob(&mut self, center: Vec3, radius: f32, seed: u64, m: u32) {
+        let dirs = [Vec3::X, Vec3::Y, -Vec3::X, -Vec3::Y];
+        let n = 4;
+        let point = |d: Vec3| {
+            let d = d.normalize_or_zero();
+            let bump = 0.75 + 0.5 * value2(d.x * 2.3 + d.z * 1.7, d.y * 2.3 - d.z, seed);
+            center + d * radius * bump
+        };
+        for pole in [Vec3::Z, -Vec3::Z] {
+            for k in 0..4 {
+                let (a, b) = (dirs[k], dirs[(k + 1) % 4]);
+                // Subdivide the face (pole, a, b) into n² triangles.
+                let p = |i: u32, j: u32| {
+                    let (fi, fj) = (i as f32 / n as f32, j as f32 / n as f32);
+                    pole * (1.0 - fi - fj) + a * fi + b * fj
+                };
+                for i in 0..n {
+                    for j in 0..n - i {
+                        let (v0, v1, v2) = (point(p(i, j)), point(p(i + 1, j)), point(p(i, j + 1)));
+                        if pole.z > 0.0 {
+                            self.tris.push(Triangle::new(v0, v1, v2, m))
+                        } else {
+                            self.tris.push(Triangle::new(v0, v2, v1, m))
+                        }
+                        if i + j + 1 < n {
+                            let v3 = point(p(i + 1, j + 1));
+                            if pole.z > 0.0 {
+                                self.tris.push(Triangle::new(v1, v3, v2, m))
+                            } else {
+                                self.tris.push(Triangle::new(v1, v2, v3, m))
+                            }
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    /// Claim the 1 m cells of a footprint; false (and nothing claimed) if any is taken.
+    fn claim(&mut self, center: Vec3, yaw: f32, length: f32, width: f32) -> bool {
+        let (f, l) = (
+            Vec3::new(yaw.cos(), yaw.sin(), 0.0),
+            Vec3::new(-yaw.sin(), yaw.cos(), 0.0),
+        );
+        let mut cells = Vec::new();
+        let (nl, nw) = ((length / 0.5).ceil() as i32, (width / 0.5).ceil() as i32);
+        for a in 0..=nl {
+            for b in 0..=nw {
+                let p = center
+                    + f * (a as f32 * 0.5 - length * 0.5)
+                    + l * (b as f32 * 0.5 - width * 0.5);
+                cells.push((p.x.floor() as i32, p.y.floor() as i32));
+            }
+        }
+        if cells.iter().any(|c| self.occupied.contains(c)) {
+            return false;
+        }
+        self.occupied.extend(cells);
+        true
+    }
+}
+
+/// Points along the path every `step` metres with their heading (yaw) and the left normal.
+fn stations(path: &[Vec3], step: f32) -> Vec<(Vec3, f32)> {
+    let mut out = Vec::new();
+    let mut carry = 0.0;
+    for seg in path.windows(2) {
+        let (a, b) = (seg[0], seg[1]);
+        let d = Vec3::new(b.x - a.x, b.y - a.y, 0.0);
+        let len = d.length();
+        if len < 1e-6 {
+            continue;
+        }
+        let yaw = d.y.atan2(d.x);
+        let mut s = carry;
+        while s < len {
+            out.push((a + d * (s / len), yaw));
+            s += step;
+        }
+        carry = s - len;
+    }
+    out
+}
+
+fn footprint_clear(
+    ground: &GroundMap,
+    center: Vec3,
+    yaw: f32,
+    length: f32,
+    width: f32,
+    min_d: f32,
+) -> bool {
+    let (f, l) = (
+        Vec3::new(yaw.cos(), yaw.sin(), 0.0),
+        Vec3::new(-yaw.sin(), yaw.cos(), 0.0),
+    );
+    for (a, b) in [
+        (-0.5, -0.5),
+        (0.5, -0.5),
+        (0.5, 0.5),
+        (-0.5, 0.5),
+        (0.0, 0.0),
+    ] {
+        let p = center + f * (a * length) + l * (b * width);
+        if ground.abs_distance(p.x, p.y) < min_d {
+            return false;
+        }
+    }
+    true
+}
+
+const CAR_COLORS: [[f32; 3]; 8] = [
+    [0.85, 0.85, 0.87],
+    [0.08, 0.08, 0.09],
+    [0.55, 0.06, 0.05],
+    [0.10, 0.18, 0.45],
+    [0.45, 0.47, 0.50],
+    [0.80, 0.75, 0.60],
+    [0.12, 0.30, 0.16],
+    [0.90, 0.55, 0.10],
+];
+const FACADE_COLORS: [[f32; 3]; 6] = [
+    [0.62, 0.55, 0.48],
+    [0.70, 0.68, 0.62],
+    [0.45, 0.30, 0.24],
+    [0.78, 0.74, 0.66],
+    [0.52, 0.56, 0.60],
+    [0.66, 0.50, 0.38],
+];
+
+impl World {
+    /// Build a scene around the driven path (points in the world frame, z ignored).
+    pub fn build(kind: SceneKind, path: &[DVec3], seed: u64) -> Self {
+        let path: Vec<Vec3> = path
+            .iter()
+            .map(|p| Vec3::new(p.x as f32, p.y as f32, 0.0))
+            .collect();
+        let ground = GroundMap::build(&path, 0.25, 45.0);
+        let mut b = Builder {
+            tris: Vec::new(),
+            materials: Vec::new(),
+            occupied: HashSet::new(),
+        };
+        let mut rng = Rng(hash64(seed ^ 0x5157));
+        if kind != SceneKind::ParkingLot {
+            add_sidewalks(&mut b, &path, &ground);
+        }
+        let mut boards = Vec::new();
+        match kind {
+            SceneKind::Urban => add_urban(&mut b, &path, &ground, &mut rng),
+            SceneKind::ParkingLot => add_parking_lot(&mut b, &path, &ground, &mut rng),
+            SceneKind::Featureless => add_featureless(&mut b, &path, &ground, &mut rng),
+            SceneKind::Checkerboard => {
+                boards = add_checkerboards(&mut b, &path, &mut rng);
+                add_urban(&mut b, &path, &ground, &mut rng);
+            }
+        }
+        let sun_dir = Vec3::new(0.45, -0.35, 0.82).normalize_or_zero();
+        Self {
+            kind,
+            bvh: Bvh::build(b.tris),
+            materials: b.materials,
+            ground,
+            boards,
+            sun_dir,
+            seed,
+        }
+    }
+
+    /// Nearest surface along a ray (ground plane or triangles).
+    pub fn trace(&self, origin: Vec3, dir: Vec3, t_max: f32) -> Option<SurfaceHit> {
+        let mut best: Option<SurfaceHit> = None;
+        if dir.z < -1e-6 {
+            let t = -origin.z / dir.z;
+            if t > 1e-3 && t < t_max {
+                best = Some(SurfaceHit {
+                    t,
+                    point: origin + dir * t,
+                    normal: Vec3::Z,
+                    material: None,
+                    primitive: u32::MAX,
+                });
+            }
+        }
+        let limit = best.map_or(t_max, |h| h.t);
+        if let Some(h) = self.bvh.intersect(origin, dir, 1e-3, limit) {
+            let tri = &self.bvh.triangles[h.triangle as usize];
+            let mut n = tri.normal();
+            if n.dot(dir) > 0.0 {
+                n = -n;
+            }
+            best = Some(SurfaceHit {
+                t: h.t,
+                point: origin + dir * h.t,
+                normal: n,
+                material: Some(tri.material),
+                primitive: h.triangle,
+            });
+        }
+        best
+    }
+
+    pub fn occluded(&self, origin: Vec3, dir: Vec3, t_max: f32) -> bool {
+        self.bvh.occluded(origin, dir, 1e-3, t_max)
+    }
+
+    /// Albedo and reflectivity at a hit; `footprint` is the pixel's size on the surface (m), which
+    /// band-limits the procedural textures.
+    pub fn surface(&self, hit: &SurfaceHit, footprint: f32) -> Surface {
+        let p = hit.point;
+        let fp = footprint.max(1e-4);
+        match hit.material.and_then(|m| self.materials.get(m as usize)) {
+            None => self.ground_surface(p, fp),
+            Some(m) => {
+                // Planar texture coordinates: along the face (horizontal) and height.
+                let n = hit.normal;
+                let t = Vec3::new(-n.y, n.x, 0.0).normalize_or_zero();
+                let (u, v) = if n.z.abs() > 0.7 {
+                    (p.x, p.y)
+                } else {
+                    (p.dot(t), p.z)
+                };
+                material_surface(m, u, v, p, n, fp, &self.boards, self.seed)
+            }
+        }
+    }
+
+    fn ground_surface(&self, p: Vec3, fp: f32) -> Surface {
+        let seed = self.seed;
+        let grain = fbm2(p.x, p.y, 0.6, 6, fp, seed ^ 11);
+        let (d, s) = self.ground.sample(p.x, p.y);
+        let ad = d.abs();
+        let asphalt = Vec3::splat(0.16 + 0.10 * grain) + Vec3::new(0.0, 0.0, 0.01);
+        let patch = fbm2(p.x, p.y, 0.05, 3, fp, seed ^ 12);
+        let asphalt = asphalt * (0.85 + 0.3 * patch);
+        if self.kind == SceneKind::ParkingLot {
+            // Parking bays: lines every 2.6 m across, rows 5.5 m deep.
+            let (lx, ly) = (p.x / 2.6, p.y / 11.0);
+            let bay_line =
+                stripe(lx + 0.02, 0.04, fp / 2.6) * (1.0 - stripe(ly + 0.25, 0.5, fp / 11.0));
+            let row_line = band((p.y.rem_euclid(11.0)) - 5.5, 0.06, fp);
+            let paint = (bay_line + row_line).min(1.0) * if ad > 4.0 { 1.0 } else { 0.0 };
+            let albedo = asphalt * (1.0 - paint) + Vec3::splat(0.80) * paint;
+            return Surface {
+                albedo,
+                reflectivity: 0.08 + 0.6 * paint,
+            };
+        }
+        if ad <= ROAD_HALF_WIDTH_M + 0.5 {
+            let dash = stripe(s / 9.0, 0.35, fp / 9.0);
+            let mut paint = 0.0;
+            let mut yellow = 0.0;
+            if self.kind != SceneKind::Featureless {
+                // Lane dividers at ±1.75 m (dashed), ±5.25 m (dashed), edge lines at ±6.7 m.
+                paint += band(ad - 1.85, 0.07, fp) * dash;
+                paint += band(ad - 5.25, 0.07, fp) * dash;
+                // Crosswalk blocks every 120 m.
+                let cw = band((s + 30.0).rem_euclid(120.0) - 60.0, 2.0, fp)
+                    * stripe(d / 1.2, 0.5, fp / 1.2)
+                    * if ad < 6.5 { 1.0 } else { 0.0 };
+                paint += cw;
+                yellow = band(ad - 0.0, 0.08, fp).max(0.0) * 0.0;
+            }
+            paint += band(ad - 6.7, 0.08, fp);
+            let paint = paint.min(1.0);
+            let wear = 0.75 + 0.25 * value2(p.x * 3.0, p.y * 3.0, seed ^ 13);
+            let marking = Vec3::new(0.85, 0.85, 0.82) * wear;
+            let albedo =
+                asphalt * (1.0 - paint) + marking * paint + Vec3::new(0.1, 0.08, 0.0) * yellow;
+            // Road paint is retro-reflective: bright in LiDAR intensity.
+            return Surface {
+                albedo,
+                reflectivity: 0.07 + 0.08 * grain + 0.55 * paint,
+            };
+        }
+        // Off-road: grass and dirt.
+        let g = fbm2(p.x, p.y, 0.3, 6, fp, seed ^ 14);
+        let dirt = fbm2(p.x, p.y, 0.04, 3, fp, seed ^ 15);
+        let grass = Vec3::new(0.18, 0.30, 0.10) * (0.7 + 0.6 * g);
+        let soil = Vec3::new(0.36, 0.29, 0.20) * (0.8 + 0.4 * g);
+        let mix = ((dirt - 0.45) * 6.0).clamp(0.0, 1.0);
+        Surface {
+            albedo: grass * (1.0 - mix) + soil * mix,
+            reflectivity: 0.35 + 0.15 * g,
+        }
+    }
+}
+
+fn material_surface(
+    m: &Material,
+    u: f32,
+    v: f32,
+    p: Vec3,
+    n: Vec3,
+    fp: f32,
+    boards: &[Checkerboard],
+    seed: u64,
+) -> Surface {
+    let s = |k: u64| seed ^ k;
+    match *m {
+        Material::Facade { color, seed: fs } => {
+            let base =
+                Vec3::from_array(color) * (0.85 + 0.3 * fbm2(u, v, 0.8, 5, fp, s(21 + fs as u64)));
+            // Bricks on some façades.
+            let brick = if fs % 3 == 0 {
+                let row = (v / 0.075).floor();
+                let mortar = stripe(v / 0.075, 0.15, fp / 0.075).max(stripe(
+                    u / 0.24 + 0.5 * (row % 2.0),
+                    0.06,
+                    fp / 0.24,
+                ));
+                1.0 - 0.35 * mortar
+            } else {
+                1.0
+            };
+            // Window grid: 3 m bays, 3.2 m floors, ground floor shop fronts.
+            let (bay, floor) = (3.0 + (fs % 3) as f32 * 0.4, 3.2);
+            let wu = stripe(u / bay + 0.2, 0.55, fp / bay);
+            let wv = stripe((v - 0.9) / floor, 0.5, fp / floor);
+            let ground_floor = if v < 3.0 { 1.0 } else { 0.0 };
+            let shop = ground_floor * stripe(u / 7.0, 0.7, fp / 7.0) * band(v - 1.6, 1.1, fp);
+            let window = (wu * wv * (1.0 - ground_floor) + shop).min(1.0);
+            let frame_edge = (wu * wv * (1.0 - ground_floor))
+                * (1.0
+                    - stripe(u / bay + 0.23, 0.49, fp / bay)
+                        * stripe((v - 0.82) / floor, 0.45, fp / floor));
+            let sky_reflection = Vec3::new(0.25, 0.32, 0.40)
+                * (0.6 + 0.8 * value2(u * 0.3, v * 0.5, s(23 + fs as u64)));
+            let albedo = base * brick * (1.0 - window)
+                + sky_reflection * window * 0.6
+                + Vec3::splat(0.9) * frame_edge * 0.3;
+            Surface {
+                albedo,
+                reflectivity: 0.45 * (1.0 - window) + 0.05 * window,
+            }
+        }
+        Material::Concrete => {
+            let g = fbm2(u, v, 1.0, 5, fp, s(31));
+            Surface {
+                albedo: Vec3::splat(0.5 + 0.2 * g),
+                reflectivity: 0.5,
+            }
+        }
+        Material::Sidewalk => {
+            let g = fbm2(p.x, p.y, 1.5, 5, fp, s(32));
+            let joints = stripe(p.x / 1.5, 0.03, fp / 1.5).max(stripe(p.y / 1.5, 0.03, fp / 1.5));
+            let top = if n.z > 0.7 { 1.0 - 0.4 * joints } else { 0.9 };
+            Surface {
+                albedo: Vec3::splat((0.52 + 0.15 * g) * top),
+                reflectivity: 0.55,
+            }
+        }
+        Material::Metal { color } => {
+            let g = fbm2(u, v, 2.0, 4, fp, s(33));
+            Surface {
+                albedo: Vec3::from_array(color) * (0.8 + 0.3 * g),
+                reflectivity: 0.6,
+            }
+        }
+        Material::CarPaint { color } => {
+            let shade = 0.9 + 0.1 * (n.z * 0.5 + 0.5);
+            // A dark belt line and door seams.
+            let belt = band(v - 0.95, 0.03, fp);
+            let seam = stripe(u / 1.3 + 0.1, 0.02, fp / 1.3) * band(v - 0.6, 0.3, fp);
+            let albedo = Vec3::from_array(color) * shade * (1.0 - 0.7 * (belt + seam).min(1.0));
+            Surface {
+                albedo,
+                reflectivity: 0.7,
+            }
+        }
+        Material::Glass => Surface {
+            albedo: Vec3::new(0.06, 0.07, 0.09),
+            reflectivity: 0.03,
+        },
+        Material::Tire => Surface {
+            albedo: Vec3::splat(0.04),
+            reflectivity: 0.04,
+        },
+        Material::Bark => {
+            let g = fbm2(u * 3.0, v * 0.5, 2.0, 4, fp, s(34));
+            Surface {
+                albedo: Vec3::new(0.28, 0.20, 0.13) * (0.6 + 0.6 * g),
+                reflectivity: 0.35,
+            }
+        }
+        Material::Foliage { color } => {
+            let g = fbm2(p.x + p.z, p.y - p.z, 3.0, 5, fp, s(35));
+            Surface {
+                albedo: Vec3::from_array(color) * (0.5 + 0.9 * g),
+                reflectivity: 0.5,
+            }
+        }
+        Material::Poster { seed: ps } => poster(u, v, fp, seed ^ (ps as u64 * 7919)),
+        Material::Board { index } => match boards.get(index as usize) {
+            Some(b) => {
+                let rel = p - b.origin;
+                let (a, c) = (
+                    rel.dot(b.u_axis) / b.square_m,
+                    rel.dot(b.v_axis) / b.square_m,
+                );
+                let inside =
+                    a >= 0.0 && c >= 0.0 && a < b.squares_u as f32 && c < b.squares_v as f32;
+                let front = n.dot(b.u_axis.cross(b.v_axis)) < 0.0;
+                if inside && front {
+                    // Box-filtered checker: product of two ±1 square waves.
+                    let w = fp / b.square_m;
+                    let sa = 2.0 * stripe(a, 0.5, w) - 1.0;
+                    let sc = 2.0 * stripe(c, 0.5, w) - 1.0;
+                    let black = 0.5 + 0.5 * sa * sc;
+                    Surface {
+                        albedo: Vec3::splat(0.9 - 0.85 * black),
+                        reflectivity: 0.8 - 0.7 * black,
+                    }
+                } else {
+                    Surface {
+                        albedo: Vec3::splat(if front { 0.92 } else { 0.35 }),
+                        reflectivity: 0.8,
+                    }
+                }
+            }
+            None => Surface {
+                albedo: Vec3::splat(0.5),
+                reflectivity: 0.5,
+            },
+        },
+        Material::LampHead => Surface {
+            albedo: Vec3::new(0.9, 0.88, 0.8),
+            reflectivity: 0.8,
+        },
+    }
+}
+
+/// A high-contrast poster: coloured panels, bold "text" bars and a logo disc.
+fn poster(u: f32, v: f32, fp: f32, seed: u64) -> Surface {
+    let cell = (u / 0.8).floor() as i32;
+    let row = (v / 0.6).floor() as i32;
+    let palette = [
+        Vec3::new(0.9, 0.15, 0.1),
+        Vec3::new(0.95, 0.85, 0.1),
+        Vec3::new(0.1, 0.3, 0.8),
+        Vec3::new(0.95, 0.95, 0.92),
+        Vec3::new(0.05, 0.05, 0.06),
+        Vec3::new(0.1, 0.6, 0.3),
+    ];
+    let pick = |a: i32, b: i32, k: u64| {
+        palette[(hash3(a, b, 0, seed ^ k) * palette.len() as f32) as usize % palette.len()]
+    };
+    let bg = pick(cell / 3, row / 3, 1);
+    let text_row = stripe(v / 0.18, 0.45, fp / 0.18);
+    let word = stripe(u / (0.3 + 0.4 * hash3(row, 0, 0, seed)), 0.7, fp / 0.5);
+    let text = text_row
+        * word
+        * if hash3(cell, row, 1, seed) > 0.4 {
+            1.0
+        } else {
+            0.0
+        };
+    let ink = pick(cell, row, 2);
+    let cu = u.rem_euclid(2.4) - 1.2;
+    let cv = v.rem_euclid(1.8) - 0.9;
+    let disc = band((cu * cu + cv * cv).sqrt() - 0.0, 0.45, fp);
+    let logo = pick(cell / 3, row / 3, 3);
+    let albedo = bg * (1.0 - text) + ink * text;
+    let albedo = albedo * (1.0 - disc * 0.8) + logo * disc * 0.8;
+    Surface {
+        albedo,
+        reflectivity: 0.3 + 0.4 * albedo.length() / 1.7,
+    }
+}
+
+fn add_sidewalks(b: &mut Builder, path: &[Vec3], ground: &GroundMap) {
+    let m = b.material(Material::Sidewalk);
+    let st = stations(path, 2.0);
+    let up = Vec3::new(0.0, 0.0, CURB_HEIGHT_M);
+    for w in st.windows(2) {
+        let ((p0, y0), (p1, y1)) = (w[0], w[1]);
+        for side in [1.0f32, -1.0] {
+            let l0 = Vec3::new(-y0.sin(), y0.cos(), 0.0) * side;
+            let l1 = Vec3::new(-y1.sin(), y1.cos(), 0.0) * side;
+            let (a0, a1) = (p0 + l0 * ROAD_HALF_WIDTH_M, p1 + l1 * ROAD_HALF_WIDTH_M);
+            let (o0, o1) = (p0 + l0 * SIDEWALK_OUTER_M, p1 + l1 * SIDEWALK_OUTER_M);
+            // Skip where this piece of sidewalk would lie on another part of the road.
+            let clear = [a0, a1, o0, o1, (o0 + o1) * 0.5]
+                .iter()
+                .all(|q| ground.abs_distance(q.x, q.y) > ROAD_HALF_WIDTH_M - 0.2);
+            if !clear {
+                continue;
+            }
+            let (a, bq, c, d) = if side > 0.0 {
+                (a0, a1, o1, o0)
+            } else {
+                (a1, a0, o0, o1)
+            };
+            b.quad(a + up, bq + up, c + up, d + up, m); // top
+            b.quad(bq, a, a + up, bq + up, m); // curb face
+        }
+    }
+}
+
+fn add_car(b: &mut Builder, pos: Vec3, yaw: f32, rng: &mut Rng) {
+    let paint = b.material(Material::CarPaint {
+        color: rng.pick(&CAR_COLORS),
+    });
+    let glass = b.material(Material::Glass);
+    let tire = b.material(Material::Tire);
+    let (len, wid) = (rng.range(4.2, 4.9), rng.range(1.75, 1.9));
+    let f = Vec3::new(yaw.cos(), yaw.sin(), 0.0);
+    let l = Vec3::new(-yaw.sin(), yaw.cos(), 0.0);
+    b.boxed(
+        pos + Vec3::new(0.0, 0.0, 0.3),
+        yaw,
+        Vec3::new(len, wid, 0.75),
+        paint,
+    );
+    b.boxed(
+        pos - f * 0.2 + Vec3::new(0.0, 0.0, 1.05),
+        yaw,
+        Vec3::new(len * 0.5, wid * 0.9, 0.45),
+        glass,
+    );
+    b.boxed(
+        pos - f * 0.2 + Vec3::new(0.0, 0.0, 1.5),
+        yaw,
+        Vec3::new(len * 0.48, wid * 0.88, 0.05),
+        paint,
+    );
+    for (a, c) in [(0.33, 0.5), (0.33, -0.5), (-0.33, 0.5), (-0.33, -0.5)] {
+        let wheel = pos + f * (a * len) + l * (c * (wid - 0.1));
+        b.cylinder(wheel, 0.33, 0.45, 10, tire);
+    }
+}
+
+fn add_pole(b: &mut Builder, pos: Vec3, yaw_to_road: f32, light: bool) {
+    let metal = b.material(Material::Metal {
+        color: [0.35, 0.36, 0.38],
+    });
+    let h = if light { 7.5 } else { 3.0 };
+    b.cylinder(pos, 0.1, h, 8, metal);
+    if light {
+        let dir = Vec3::new(yaw_to_road.cos(), yaw_to_road.sin(), 0.0);
+        let head = b.material(Material::LampHead);
+        b.boxed(
+            pos + dir * 1.0 + Vec3::new(0.0, 0.0, h - 0.15),
+            yaw_to_road,
+            Vec3::new(2.0, 0.12, 0.12),
+            metal,
+        );
+        b.boxed(
+            pos + dir * 1.9 + Vec3::new(0.0, 0.0, h - 0.3),
+            yaw_to_road,
+            Vec3::new(0.6, 0.3, 0.18),
+            head,
+        );
+    } else {
+        // A traffic sign plate.
+        let sign = b.material(Material::Poster {
+            seed: (pos.x.to_bits() ^ pos.y.to_bits()) % 97,
+        });
+        b.boxed(
+            pos + Vec3::new(0.0, 0.0, 2.2),
+            yaw_to_road + std::f32::consts::FRAC_PI_2,
+            Vec3::new(0.05, 0.75, 0.75),
+            sign,
+        );
+    }
+}
+
+fn add_tree(b: &mut Builder, pos: Vec3, rng: &mut Rng) {
+    let bark = b.material(Material::Bark);
+    let leaf = b.material(Material::Foliage {
+        color: rng.pick(&[[0.20, 0.33, 0.12], [0.15, 0.28, 0.10], [0.28, 0.36, 0.14]]),
+    });
+    let h = rng.range(2.5, 4.0);
+    b.cylinder(pos, 0.15, h, 8, bark);
+    let r = rng.range(1.6, 2.6);
+    b.blob(
+        pos + Vec3::new(0.0, 0.0, h + r * 0.6),
+        r,
+        (pos.x * 100.0) as u64,
+        leaf,
+    );
+}
+
+fn add_urban(b: &mut Builder, path: &[Vec3], ground: &GroundMap, rng: &mut Rng) {
+    // Buildings in rows on both sides.
+    for side in [1.0f32, -1.0] {
+        for (p, yaw) in stations(path, 4.0) {
+            let l = Vec3::new(-yaw.sin(), yaw.cos(), 0.0) * side;
+            let (width, depth, height) = (
+                rng.range(8.0, 20.0),
+                rng.range(8.0, 14.0),
+                rng.range(5.5, 22.0),
+            );
+            let setback = SIDEWALK_OUTER_M + rng.range(0.5, 4.0);
+            let center = p + l * (setback + depth * 0.5);
+            if !footprint_clear(ground, center, yaw, width, depth, SIDEWALK_OUTER_M + 0.3)
+                || !b.claim(center, yaw, width, depth)
+            {
+                continue;
+            }
+            let facade = b.material(Material::Facade {
+                color: rng.pick(&FACADE_COLORS),
+                seed: (rng.next() * 1000.0) as u32,
+            });
+            b.boxed(center, yaw, Vec3::new(width, depth, height), facade);
+            // Door, signs and posters on the street face.
+            let f = Vec3::new(yaw.cos(), yaw.sin(), 0.0);
+            let face = center - l * (depth * 0.5 + 0.03);
+            let door = b.material(Material::Metal {
+                color: [0.25, 0.15, 0.10],
+            });
+            b.boxed(
+                face + f * rng.range(-width * 0.3, width * 0.3),
+                yaw,
+                Vec3::new(1.2, 0.08, 2.2),
+                door,
+            );
+            if rng.next() < 0.7 {
+                let poster = b.material(Material::Poster {
+                    seed: (rng.next() * 10_000.0) as u32,
+                });
+                let at = face - l * 0.02
+                    + f * rng.range(-width * 0.3, width * 0.3)
+                    + Vec3::new(0.0, 0.0, rng.range(0.4, 1.0));
+                b.boxed(
+                    at,
+                    yaw,
+                    Vec3::new(rng.range(1.5, 3.5), 0.05, rng.range(1.2, 2.2)),
+                    poster,
+                );
+            }
+            if rng.next() < 0.5 {
+                let sign = b.material(Material::Poster {
+                    seed: (rng.next() * 10_000.0) as u32,
+                });
+                let at = face - l * 0.3
+                    + f * rng.range(-width * 0.3, width * 0.3)
+                    + Vec3::new(0.0, 0.0, 3.3);
+                b.boxed(at, yaw, Vec3::new(rng.range(2.0, 5.0), 0.25, 0.8), sign);
+            }
+            if rng.next() < 0.25 {
+                let billboard = b.material(Material::Poster {
+                    seed: (rng.next() * 10_000.0) as u32,
+                });
+                b.boxed(
+                    center + Vec3::new(0.0, 0.0, height),
+                    yaw,
+                    Vec3::new(6.0, 0.3, 3.0),
+                    billboard,
+                );
+            }
+        }
+        // Street furniture on the sidewalk.
+        for (k, (p, yaw)) in stations(path, 12.5).into_iter().enumerate() {
+            let l = Vec3::new(-yaw.sin(), yaw.cos(), 0.0) * side;
+            let at = p + l * (ROAD_HALF_WIDTH_M + 0.6) + Vec3::new(0.0, 0.0, CURB_HEIGHT_M);
+            if !footprint_clear(ground, at, yaw, 0.5, 0.5, ROAD_HALF_WIDTH_M + 0.3)
+                || !b.claim(at, yaw, 0.6, 0.6)
+            {
+                continue;
+            }
+            let to_road = (-l.y).atan2(-l.x);
+            match k % 4 {
+                0 => add_pole(b, at, to_road, true),
+                2 => add_tree(b, at + l * 1.2, rng),
+                1 if rng.next() < 0.5 => add_pole(b, at, to_road, false),
+                _ => {
+                    if rng.next() < 0.5 {
+                        let bush = b.material(Material::Foliage {
+                            color: [0.18, 0.30, 0.12],
+                        });
+                        b.blob(at + l * 1.5 + Vec3::new(0.0, 0.0, 0.4), 0.7, k as u64, bush);
+                    }
+                }
+            }
+        }
+        // Parked cars in the outer lane.
+        for (p, yaw) in stations(path, 7.0) {
+            if rng.next() < 0.45 {
+                continue;
+            }
+            let l = Vec3::new(-yaw.sin(), yaw.cos(), 0.0) * side;
+            let at = p + l * 5.6;
+            // Not on any other part of the road's inner lanes (crossings).
+            if ground.abs_distance(at.x, at.y) < 5.0 || !b.claim(at, yaw, 5.0, 2.0) {
+                continue;
+            }
+            let heading = if side > 0.0 {
+                yaw
+            } else {
+                yaw + std::f32::consts::PI
+            };
+            add_car(b, at, heading, rng);
+        }
+    }
+}
+
+fn add_parking_lot(b: &mut Builder, path: &[Vec3], ground: &GroundMap, rng: &mut Rng) {
+    // A few parked cars in bays away from the driven path, light poles and one low building.
+    let (mut lo, mut hi) = (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN));
+    for p in path {
+        lo = lo.min(*p);
+        hi = hi.max(*p);
+    }
+    for _ in 0..40 {
+        let x = (rng.range(lo.x - 25.0, hi.x + 25.0) / 2.6).floor() * 2.6 + 1.3;
+        let y = (rng.range(lo.y - 25.0, hi.y + 25.0) / 11.0).floor() * 11.0
+            + 2.75 * if rng.next() < 0.5 { 1.0 } else { 3.0 };
+        let at = Vec3::new(x, y, 0.0);
+        if ground.abs_distance(x, y) < 4.0 || !b.claim(at, std::f32::consts::FRAC_PI_2, 5.0, 2.2) {
+            continue;
+        }
+        add_car(
+            b,
+            at,
+            std::f32::consts::FRAC_PI_2
+                + if rng.next() < 0.5 {
+                    0.0
+                } else {
+                    std::f32::consts::PI
+                },
+            rng,
+        );
+    }
+    for k in 0..8 {
+        let at = Vec3::new(
+            rng.range(lo.x - 30.0, hi.x + 30.0),
+            rng.range(lo.y - 30.0, hi.y + 30.0),
+            0.0,
+        );
+        if ground.abs_distance(at.x, at.y) > 4.0 && b.claim(at, 0.0, 0.6, 0.6) {
+            add_pole(b, at, k as f32, true);
+        }
+    }
+    let facade = b.material(Material::Facade {
+        color: [0.7, 0.68, 0.62],
+        seed: 4,
+    });
+    let at = Vec3::new((lo.x + hi.x) * 0.5, hi.y + 40.0, 0.0);
+    b.boxed(at, 0.0, Vec3::new(60.0, 15.0, 6.0), facade);
+}
+
+fn add_featureless(b: &mut Builder, path: &[Vec3], ground: &GroundMap, rng: &mut Rng) {
+    for (k, (p, yaw)) in stations(path, 60.0).into_iter().enumerate() {
+        let side = if k % 2 == 0 { 1.0 } else { -1.0 };
+        let l = Vec3::new(-yaw.sin(), yaw.cos(), 0.0) * side;
+        let at = p + l * (ROAD_HALF_WIDTH_M + 0.8) + Vec3::new(0.0, 0.0, CURB_HEIGHT_M);
+        if footprint_clear(ground, at, yaw, 0.5, 0.5, ROAD_HALF_WIDTH_M + 0.3)
+            && b.claim(at, 0.0, 0.6, 0.6)
+            && rng.next() < 0.8
+        {
+            add_pole(b, at, (-l.y).atan2(-l.x), true);
+        }
+    }
+}
+
+/// Stationary scene: boards in front of and beside the vehicle, facing it, in varied poses.
+fn add_checkerboards(b: &mut Builder, path: &[Vec3], rng: &mut Rng) -> Vec<Checkerboard> {
+    let origin = path.first().copied().unwrap_or(Vec3::ZERO);
+    let heading = match path {
+        [a, c, ..] => (c.y - a.y).atan2(c.x - a.x),
+        _ => 0.0,
+    };
+    let metal = b.material(Material::Metal {
+        color: [0.3, 0.3, 0.3],
+    });
+    let mut boards = Vec::new();
+    // (bearing from heading in degrees, distance m, height m, tilt deg, swing deg)
+    let layout = [
+        (0.0, 7.0, 1.6, 0.0, 0.0),
+        (-25.0, 6.0, 1.2, 15.0, -20.0),
+        (25.0, 8.0, 1.8, -10.0, 25.0),
+        (60.0, 6.5, 1.4, 10.0, 10.0),
+        (-60.0, 7.5, 1.5, -15.0, -10.0),
+        (90.0, 6.0, 1.5, 5.0, 0.0),
+        (-90.0, 6.0, 1.5, -5.0, 0.0),
+        (180.0, 7.0, 1.5, 0.0, 15.0),
+    ];
+    for (k, (bearing, dist, height, tilt, swing)) in layout.into_iter().enumerate() {
+        let bearing = heading + (bearing as f32 + rng.range(-4.0, 4.0)).to_radians();
+        let center = origin
+            + Vec3::new(bearing.cos(), bearing.sin(), 0.0) * dist
+            + Vec3::new(0.0, 0.0, height);
+        // Board normal points back at the vehicle, then swung and tilted.
+        let toward = (origin + Vec3::new(0.0, 0.0, 1.5) - center).normalize_or_zero();
+        let yaw = toward.y.atan2(toward.x) + (swing as f32).to_radians();
+        let pitch = (tilt as f32).to_radians();
+        let normal = Vec3::new(
+            yaw.cos() * pitch.cos(),
+            yaw.sin() * pitch.cos(),
+            pitch.sin(),
+        );
+        let u_axis = Vec3::Z.cross(normal).normalize_or_zero();
+        let v_axis = normal.cross(u_axis).normalize_or_zero() * -1.0; // v points down
+        let (su, sv, sq, margin) = (8u32, 6u32, 0.1f32, 0.08f32);
+        let board_origin =
+            center - u_axis * (su as f32 * sq * 0.5) - v_axis * (sv as f32 * sq * 0.5);
+        let index = boards.len() as u32;
+        let m = b.material(Material::Board { index });
+        let w = su as f32 * sq + 2.0 * margin;
+        let h = sv as f32 * sq + 2.0 * margin;
+        let c0 = board_origin - u_axis * margin - v_axis * margin;
+        let (a, bb, c, d) = (
+            c0,
+            c0 + u_axis * w,
+            c0 + u_axis * w + v_axis * h,
+            c0 + v_axis * h,
+        );
+        // Front face toward the vehicle (normal = -(u × v) is handled in shading), back face too.
+        b.quad(a, d, c, bb, m);
+        b.quad(
+            a + normal * -0.02,
+            bb + normal * -0.02,
+            c + normal * -0.02,
+            d + normal * -0.02,
+            m,
+        );
+        // A stand.
+        let foot = Vec3::new(center.x, center.y, 0.0) - normal * 0.1;
+        b.cylinder(foot, 0.03, (center.z - h * 0.5).max(0.1), 6, metal);
+        boards.push(Checkerboard {
+            origin: board_origin,
+            u_axis,
+            v_axis,
+            squares_u: su,
+            squares_v: sv,
+            square_m: sq,
+            margin_m: margin,
+        });
+        let _ = k;
+    }
+    boards
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn straight_path() -> Vec<DVec3> {
+        (0..=100)
+            .map(|i| DVec3::new(i as f64 - 50.0, 0.0, 0.0))
+            .collect()
+    }
+
+    #[test]
+    fn every_scene_builds_and_the_road_stays_clear() {
+        for kind in SceneKind::ALL {
+            let w = World::build(kind, &straight_path(), 1);
+            assert!(
+                !w.bvh.triangles.is_empty() || kind == SceneKind::Featureless,
+                "{kind:?}"
+            );
+            // Looking down the road from the driver's seat: the first hit straight ahead is far.
+            if let Some(h) = w.trace(Vec3::new(-40.0, 0.0, 1.5), Vec3::X, 200.0) {
+                assert!(h.t > 20.0, "{kind:?}: something on the road at {}", h.t);
+            }
+        }
+    }
+
+    #[test]
+    fn urban_has_buildings_beside_the_road() {
+        let w = World::build(SceneKind::Urban, &straight_path(), 2);
+        let hits = (0..20)
+            .filter(|i| {
+                let o = Vec3::new(-30.0 + *i as f32 * 3.0, 0.0, 2.0);
+                w.trace(o, Vec3::Y, 60.0)
+                    .is_some_and(|h| h.t > SIDEWALK_OUTER_M && h.t < 30.0)
+            })
+            .count();
+        assert!(hits >= 10, "{hits}");
+        assert_eq!(w.ground.abs_distance(0.0, 3.0).round(), 3.0);
+    }
+
+    #[test]
+    fn checkerboard_scene_has_boards_with_corners() {
+        let w = World::build(
+            SceneKind::Checkerboard,
+            &[DVec3::ZERO, DVec3::new(1.0, 0.0, 0.0)],
+            3,
+        );
+        assert!(w.boards.len() >= 6);
+        assert_eq!(w.boards[0].inner_corners().len(), 7 * 5);
+    }
+
+    #[test]
+    fn scene_names_parse() {
+        for k in SceneKind::ALL {
+            assert_eq!(k.as_str().parse::<SceneKind>().unwrap(), k);
+        }
+        assert!("moon".parse::<SceneKind>().is_err());
+    }
+}
