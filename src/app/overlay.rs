@@ -24,7 +24,7 @@ pub(crate) struct OverlayCache {
 
 /// A perceptual rainbow (turbo-like) for t in [0, 1].
 pub fn colormap(t: f32) -> Color32 {
-    let t = t.clamp(0.0, 1.0);
+    let t = f64::from(t.clamp(0.0, 1.0));
     let r = (0.13572138
         + t * (4.6153926
             + t * (-42.66032258 + t * (132.13108234 + t * (-152.94239396 + t * 59.28637943)))))

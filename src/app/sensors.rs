@@ -91,11 +91,11 @@ pub(crate) fn sensors_ui(studio: &mut Studio, ui: &mut egui::Ui) {
                             }
                         });
                     ui.horizontal(|ui| {
-                        if ui.button("reset to initial").clicked() {
-                            if let Some(init) = studio.initial.sensor(&name) {
-                                let init = init.vehicle_from_sensor;
-                                studio.set_extrinsic(&name, init);
-                            }
+                        if ui.button("reset to initial").clicked()
+                            && let Some(init) = studio.initial.sensor(&name)
+                        {
+                            let init = init.vehicle_from_sensor;
+                            studio.set_extrinsic(&name, init);
                         }
                         if ui
                             .button("copy")

@@ -167,31 +167,28 @@ impl eframe::App for Studio {
 impl Studio {
     fn menu_ui(&mut self, ui: &mut egui::Ui) {
         ui.horizontal(|ui| {
-            if ui.button("Open log…").clicked() {
-                if let Some(path) = rfd::FileDialog::new()
+            if ui.button("Open log…").clicked()
+                && let Some(path) = rfd::FileDialog::new()
                     .add_filter("MCAP", &["mcap"])
                     .pick_file()
-                {
-                    self.open_log(&path);
-                }
+            {
+                self.open_log(&path);
             }
-            if ui.button("Load calibration…").clicked() {
-                if let Some(path) = rfd::FileDialog::new()
+            if ui.button("Load calibration…").clicked()
+                && let Some(path) = rfd::FileDialog::new()
                     .add_filter("YAML", &["yaml", "yml"])
                     .pick_file()
-                {
-                    self.load_calibration(&path);
-                }
+            {
+                self.load_calibration(&path);
             }
-            if ui.button("Save calibration…").clicked() {
-                if let Some(path) = rfd::FileDialog::new()
+            if ui.button("Save calibration…").clicked()
+                && let Some(path) = rfd::FileDialog::new()
                     .add_filter("YAML", &["yaml"])
                     .save_file()
-                {
-                    match CalibrationFile::from_rig(&self.current).save(&path) {
-                        Ok(()) => self.status.push(format!("saved {}", path.display())),
-                        Err(e) => self.status.push(format!("error: {e}")),
-                    }
+            {
+                match CalibrationFile::from_rig(&self.current).save(&path) {
+                    Ok(()) => self.status.push(format!("saved {}", path.display())),
+                    Err(e) => self.status.push(format!("error: {e}")),
                 }
             }
             ui.separator();

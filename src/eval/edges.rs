@@ -200,8 +200,8 @@ mod tests {
         let d = distance_transform(&mask, w, h);
         for y in 0..h {
             for x in 0..w {
-                let a = (((x as f32 - 3.0).powi(2) + (y as f32 - 2.0).powi(2)) as f32).sqrt();
-                let b = (((x as f32).powi(2) + (y as f32 - 4.0).powi(2)) as f32).sqrt();
+                let a = ((x as f32 - 3.0).powi(2) + (y as f32 - 2.0).powi(2)).sqrt();
+                let b = ((x as f32).powi(2) + (y as f32 - 4.0).powi(2)).sqrt();
                 assert!((d[y * w + x] - a.min(b)).abs() < 1e-5, "({x},{y})");
             }
         }

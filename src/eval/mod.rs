@@ -1,3 +1,4 @@
 //! Evaluation: metrics that tell how well a calibration aligns the sensors.
 
 pub mod edges;
+pub mod fast;

@@ -3,7 +3,7 @@
 //! from reflectivity and incidence angle.
 //!
 //! A spinning LiDAR turns clockwise seen from above; its sweep stamp is the moment it faces
-//! forward, so a point at azimuth a (rad, CCW from forward) fires at −a / 2π · period relative to
+//! the vehicle's forward direction, so a point at azimuth a (rad, CCW from forward) fires at −a / 2π · period relative to
 //! the stamp: the back fires half a period early, as on PandaSet. Points are returned in the
 //! LiDAR frame at their own firing time (raw, not deskewed).
 
@@ -17,8 +17,11 @@ use crate::geometry::{Rigid, Trajectory, TrajectoryError};
 use crate::log::LidarSweep;
 
 /// Firing-time offset (s) of azimuth `az_rad` for a spinning LiDAR of the given period.
+/// `az_rad` is measured from the LiDAR's forward direction and wrapped to [−π, π).
 pub fn spin_time_offset_secs(az_rad: f64, period_secs: f64) -> f64 {
-    -az_rad / std::f64::consts::TAU * period_secs
+    let wrapped =
+        (az_rad + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU) - std::f64::consts::PI;
+    -wrapped / std::f64::consts::TAU * period_secs
 }
 
 fn gaussian(a: i32, b: i32, seed: u64) -> f32 {
@@ -46,11 +49,12 @@ pub fn simulate_sweep(
     // Azimuth columns and their firing times. Like real sensors, the firing azimuths drift from
     // one revolution to the next: a per-sweep phase within one azimuth step.
     let phase = hash3((stamp_nanos / 1_000_000) as i32, 0, 5, seed) as f64 - 0.5;
+    let forward = lidar.forward_azimuth_deg().to_radians();
     let columns: Vec<(f64, f64)> = (0..steps)
         .map(|k| {
             let az = az0 + (az1 - az0) * (k as f64 + 0.5 + phase) / steps as f64;
             let t = if lidar.spinning {
-                spin_time_offset_secs(az, period)
+                spin_time_offset_secs(az - forward, period)
             } else {
                 ((k as f64 + 0.5) / steps as f64 - 0.5) * period
             };

@@ -13,7 +13,7 @@ use rayon::prelude::*;
 use thiserror::Error;
 
 use super::camera_sim::{self, Exposure, RayTable};
-use super::lidar_sim::{self, spin_time_offset_secs};
+use super::lidar_sim;
 use super::rigs::SimRig;
 use super::trajectories::{self, TrajectoryConfig, TrajectoryKind};
 use super::world::{SceneKind, World};
@@ -109,19 +109,6 @@ pub fn perturb_rig(rig: &Rig, deg: f64, cm: f64, seed: u64) -> Rig {
     out
 }
 
-/// Camera trigger offset relative to the sweep stamp: when the first spinning LiDAR faces it.
-fn trigger_offset_secs(rig: &SimRig, vehicle_from_camera: Rigid) -> f64 {
-    let Some(lidar) = rig.lidars.iter().find(|l| l.spinning) else {
-        return 0.0;
-    };
-    let axis = vehicle_from_camera.rotation * DVec3::Z;
-    let lidar_axis = lidar.vehicle_from_lidar.inverse().transform_vector(axis);
-    spin_time_offset_secs(
-        lidar_axis.y.atan2(lidar_axis.x),
-        1.0 / lidar.rotation_hz.max(1e-3),
-    )
-}
-
 /// Simulate and write the drive; `progress(done, total)` is called as frames complete.
 pub fn synthesize(
     cfg: &SynthConfig,
@@ -129,13 +116,13 @@ pub fn synthesize(
     ground_truth_path: &Path,
     progress: &mut dyn FnMut(usize, usize),
 ) -> Result<SynthOutput, SimError> {
-    if !(cfg.duration_secs > 0.2) {
+    if cfg.duration_secs.is_nan() || cfg.duration_secs <= 0.2 {
         return Err(SimError::Config(format!(
             "--seconds must be more than 0.2, got {}",
             cfg.duration_secs
         )));
     }
-    if !(cfg.scale > 0.0 && cfg.scale <= 4.0) {
+    if cfg.scale.is_nan() || cfg.scale <= 0.0 || cfg.scale > 4.0 {
         return Err(SimError::Config(format!(
             "--scale must be in (0, 4], got {}",
             cfg.scale
@@ -223,8 +210,7 @@ pub fn synthesize(
                 .zip(ray_tables.par_iter())
                 .enumerate()
                 .map(|(ci, (cam, rays))| {
-                    let trigger =
-                        stamp + (trigger_offset_secs(&rig, cam.vehicle_from_camera) * 1e9) as i64;
+                    let trigger = stamp + (cam.trigger_offset_secs * 1e9) as i64;
                     let world_from_camera =
                         trajectory.world_from_vehicle(trigger)? * cam.vehicle_from_camera;
                     let exposure = Exposure {

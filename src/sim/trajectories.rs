@@ -13,9 +13,10 @@
 //! The vehicle follows the path at a smooth speed `v(t)`: a rolling start at half the cruise speed
 //! that eases up over the first seconds, with gentle, seeded variations. Yaw is always the path
 //! heading (no side-slip); the vehicle frame is x forward, y left, z up, with its origin on the
-//! ground (`z = 0` of the world). Cruise speed is capped so that the tightest curve of the shape
-//! stays within a car's yaw rate (0.5 rad/s) and lateral acceleration (4 m/s²); above ~9 m/s the
-//! shapes grow first, as far as the ±120 m box allows, and the speed is lowered only after that.
+//! ground (`z = 0` of the world). If the drive reaches a curve, cruise speed is capped so that
+//! the tightest curve of the shape stays within a car's yaw rate (0.5 rad/s) and lateral
+//! acceleration (4 m/s²); above ~9 m/s the shape grows first, as far as the ±120 m box allows,
+//! and the speed is lowered only after that. A drive that stays on a straight keeps its speed.
 
 use std::f64::consts::{FRAC_PI_2, FRAC_PI_4, PI, TAU};
 use std::fmt;
@@ -94,8 +95,8 @@ impl FromStr for TrajectoryKind {
         let name = s.trim().to_ascii_lowercase();
         Ok(match name.as_str() {
             "straight" | "line" => TrajectoryKind::Straight,
-            "circle" | "circular" | "loop" => TrajectoryKind::Circle,
-            "s-curve" | "scurve" | "s_curve" | "s" => TrajectoryKind::SCurve,
+            "circle" | "circular" => TrajectoryKind::Circle,
+            "s-curve" | "scurve" | "s_curve" => TrajectoryKind::SCurve,
             "figure8" | "figure-8" | "figure_8" | "figure-eight" | "eight" | "infinity" | "∞" => {
                 TrajectoryKind::Figure8
             }
@@ -178,7 +179,7 @@ pub fn path_polyline(cfg: &TrajectoryConfig, spacing_m: f64) -> Vec<DVec3> {
             DVec3::new(d, 0.0, 0.0)
         });
     };
-    let driven = plan.speed.distance_between(0.0, cfg.duration_secs.max(0.0));
+    let driven = plan.speed.distance_between(0.0, plan.duration_secs);
     let lap = shape.lap_length();
     let at = |d: f64| shape.position(d).extend(0.0);
     if driven + 2.0 * ROAD_MARGIN_M < lap {
@@ -207,19 +208,24 @@ fn effective_rate(rate_hz: f64) -> f64 {
     }
 }
 
-fn sample_count(duration_secs: f64, rate: f64) -> usize {
-    let duration = if duration_secs.is_finite() {
+fn finite_duration(duration_secs: f64) -> f64 {
+    if duration_secs.is_finite() {
         duration_secs.max(0.0)
     } else {
         0.0
-    };
-    (duration * rate + 1e-6).floor() as usize + 1
+    }
+}
+
+fn sample_count(duration_secs: f64, rate: f64) -> usize {
+    (finite_duration(duration_secs) * rate + 1e-6).floor() as usize + 1
 }
 
 /// A shape placed in the world, the speed along it, or nothing for a vehicle standing still.
 struct Plan {
     shape: Option<Shape>,
     speed: SpeedProfile,
+    /// The config's duration, made finite and non-negative.
+    duration_secs: f64,
 }
 
 impl Plan {
@@ -234,21 +240,19 @@ impl Plan {
             TrajectoryConfig::default().speed_mps
         };
         speed.cruise_mps = requested * speed_factor;
-        let mut shape = match cfg.kind {
-            TrajectoryKind::Stationary => None,
-            kind => Some(Shape::new(kind, size_factor, &mut speed)),
-        };
-        match &mut shape {
-            None => speed.cruise_mps = 0.0,
-            Some(shape) => {
-                // Centre the drive on the shape's feature (the middle of the straight, the
-                // inflection of the S) as far as the shape allows.
-                let driven = speed.distance_between(0.0, cfg.duration_secs.max(0.0));
-                shape.start_distance =
-                    (shape.feature_centre - 0.5 * driven).clamp(0.0, shape.feature_centre);
+        let duration = finite_duration(cfg.duration_secs);
+        let shape = match cfg.kind {
+            TrajectoryKind::Stationary => {
+                speed.cruise_mps = 0.0;
+                None
             }
+            kind => Some(Shape::new(kind, size_factor, &mut speed, duration)),
+        };
+        Self {
+            shape,
+            speed,
+            duration_secs: duration,
         }
-        Self { shape, speed }
     }
 
     fn pose_at_distance(&self, distance: f64) -> Rigid {
@@ -266,40 +270,73 @@ impl Plan {
 struct Shape {
     path: Path,
     scale: f64,
+    /// The point of the design placed on the world origin, and the design's yaw in the world.
+    origin: DVec2,
     world_yaw: f64,
-    world_offset: DVec2,
+    /// Design distance the drive is centred on, when the drive is short enough.
+    feature_centre: f64,
     /// Path distance (world metres) where the drive starts.
     start_distance: f64,
-    /// Path distance (world metres) the drive is centred on, when it is short enough.
-    feature_centre: f64,
 }
 
 impl Shape {
-    /// The shape of `kind` at `size_factor` times its nominal size (more if the speed needs it),
-    /// lowering `speed.cruise_mps` if even the largest shape that fits is too tight for it.
-    fn new(kind: TrajectoryKind, size_factor: f64, speed: &mut SpeedProfile) -> Self {
+    /// The shape of `kind` at `size_factor` times its nominal size, with the drive of
+    /// `duration` seconds centred on its feature. If the drive reaches a curve too tight for
+    /// `speed`, the shape grows (as far as [`MAX_EXTENT_M`] allows) and then `speed` is lowered.
+    fn new(
+        kind: TrajectoryKind,
+        size_factor: f64,
+        speed: &mut SpeedProfile,
+        duration: f64,
+    ) -> Self {
         let design = Design::of(kind);
-        let path = Path::new(&design.segments);
-        let kappa = path.max_abs_curvature();
-        let extent = path.max_abs_coordinate(design.origin, design.world_yaw);
+        let mut shape = Self {
+            path: Path::new(&design.segments),
+            scale: size_factor,
+            origin: design.origin,
+            world_yaw: design.world_yaw,
+            feature_centre: design.feature_centre,
+            start_distance: 0.0,
+        };
+        let driven = speed.distance_between(0.0, duration);
+        shape.centre_drive(driven);
+        if shape.max_curvature_between(shape.start_distance, shape.start_distance + driven) == 0.0 {
+            // Straight road only: any speed will do.
+            return shape;
+        }
+        let kappa = shape.path.max_abs_curvature();
+        let extent = shape
+            .path
+            .max_abs_coordinate(design.origin, design.world_yaw);
         let peak = speed.peak_factor();
         let needed = |v: f64| (kappa * v / MAX_YAW_RATE).max(kappa * v * v / MAX_LATERAL_ACCEL);
         let largest = (MAX_EXTENT_M / extent).max(size_factor);
-        let scale = needed(speed.cruise_mps * peak)
+        shape.scale = needed(speed.cruise_mps * peak)
             .max(size_factor)
             .min(largest);
-        let allowed_peak =
-            (MAX_YAW_RATE * scale / kappa).min((MAX_LATERAL_ACCEL * scale / kappa).sqrt());
+        let allowed_peak = (MAX_YAW_RATE * shape.scale / kappa)
+            .min((MAX_LATERAL_ACCEL * shape.scale / kappa).sqrt());
         speed.cruise_mps = speed.cruise_mps.min(allowed_peak / peak);
-        let rotation = DVec2::from_angle(design.world_yaw);
-        Self {
-            world_offset: -rotation.rotate(design.origin) * scale,
-            path,
-            scale,
-            world_yaw: design.world_yaw,
-            start_distance: 0.0,
-            feature_centre: design.feature_centre * scale,
-        }
+        shape.centre_drive(speed.distance_between(0.0, duration));
+        shape
+    }
+
+    /// Start a drive of `driven` metres so that it is centred on the shape's feature (the
+    /// middle of the straight, the inflection of the S), as far as the shape allows.
+    fn centre_drive(&mut self, driven: f64) {
+        let centre = self.feature_centre * self.scale;
+        self.start_distance = (centre - 0.5 * driven).clamp(0.0, centre);
+    }
+
+    /// Largest |curvature| (1/m, world) between two path distances, sampled every 25 cm.
+    fn max_curvature_between(&self, start: f64, end: f64) -> f64 {
+        let count = ((end - start) / 0.25).ceil().max(1.0) as usize;
+        (0..=count)
+            .map(|i| {
+                let s = start + (end - start) * i as f64 / count as f64;
+                self.path.curvature(s / self.scale).abs() / self.scale
+            })
+            .fold(0.0, f64::max)
     }
 
     fn lap_length(&self) -> f64 {
@@ -313,7 +350,7 @@ impl Shape {
             .position_heading((self.start_distance + distance) / self.scale);
         let rotation = DVec2::from_angle(self.world_yaw);
         (
-            rotation.rotate(p) * self.scale + self.world_offset,
+            rotation.rotate(p - self.origin) * self.scale,
             heading + self.world_yaw,
         )
     }
@@ -472,7 +509,6 @@ impl Segment {
         }
     }
 
-    #[cfg(test)]
     fn curvature(&self, u: f64) -> f64 {
         let x = if self.length > 0.0 {
             (u / self.length).clamp(0.0, 1.0)
@@ -579,22 +615,39 @@ impl Path {
 
     /// Position and heading at `s` metres along the loop; any `s` wraps round the lap.
     fn position_heading(&self, s: f64) -> (DVec2, f64) {
-        if self.pieces.is_empty() || self.length <= 0.0 {
+        let (Some(piece), du, laps) = self.locate(s) else {
             return (DVec2::ZERO, 0.0);
-        }
-        let laps = (s / self.length).floor();
-        let s = (s - laps * self.length).clamp(0.0, self.length);
-        let index = self.pieces.partition_point(|p| p.s0 <= s).saturating_sub(1);
-        let piece = self.pieces[index];
+        };
         let segment = &self.segments[piece.segment];
         let heading0 = self.segment_heading[piece.segment];
-        let du = (s - piece.s0).clamp(0.0, piece.length);
         let position = piece.position + Self::displacement(segment, heading0, piece.u0, du);
         let heading = heading0 + segment.heading_change(piece.u0 + du);
         (
             position + self.end_position * laps,
             heading + self.end_heading * laps,
         )
+    }
+
+    /// Curvature at `s` metres along the loop; any `s` wraps round the lap.
+    fn curvature(&self, s: f64) -> f64 {
+        match self.locate(s) {
+            (Some(piece), du, _) => self.segments[piece.segment].curvature(piece.u0 + du),
+            _ => 0.0,
+        }
+    }
+
+    /// The piece holding `s` wrapped onto the lap, the offset into it, and the laps wrapped.
+    fn locate(&self, s: f64) -> (Option<Piece>, f64, f64) {
+        if self.length <= 0.0 || !s.is_finite() {
+            return (None, 0.0, 0.0);
+        }
+        let laps = (s / self.length).floor();
+        let s = (s - laps * self.length).clamp(0.0, self.length);
+        let index = self.pieces.partition_point(|p| p.s0 <= s).saturating_sub(1);
+        match self.pieces.get(index) {
+            Some(piece) => (Some(*piece), (s - piece.s0).clamp(0.0, piece.length), laps),
+            None => (None, 0.0, laps),
+        }
     }
 
     fn max_abs_curvature(&self) -> f64 {
@@ -666,7 +719,7 @@ impl SpeedProfile {
 
     /// Distance driven between `t0` and `t1`, by Gauss–Legendre over steps of at most 10 ms.
     fn distance_between(&self, t0: f64, t1: f64) -> f64 {
-        if !(t1 > t0) || self.cruise_mps == 0.0 {
+        if t0.is_nan() || t1.is_nan() || t1 <= t0 || self.cruise_mps == 0.0 {
             return 0.0;
         }
         let steps = ((t1 - t0) / 0.01).ceil().max(1.0) as usize;
@@ -1000,6 +1053,19 @@ mod tests {
     }
 
     #[test]
+    fn short_straight_drives_keep_their_speed() {
+        let cfg = TrajectoryConfig {
+            speed_mps: 25.0,
+            ..config(TrajectoryKind::Straight, 6.0, 1)
+        };
+        let poses = generate(&cfg);
+        let last = &poses[poses.len() - 2..];
+        let v = (last[1].1.translation - last[0].1.translation).length() / 0.01;
+        assert!(v > 22.0, "{v}");
+        assert!(poses.iter().all(|(_, p)| p.translation.y.abs() < 1e-9));
+    }
+
+    #[test]
     fn stationary_stands_still() {
         let cfg = config(TrajectoryKind::Stationary, 5.0, 9);
         let poses = generate(&cfg);
@@ -1071,51 +1137,5 @@ mod tests {
             let turns = path.end_heading / TAU;
             assert!((turns - turns.round()).abs() < 1e-12, "{kind}: {turns}");
         }
-    }
-}
-#[cfg(test)]
-mod scratch_dump {
-    use super::*;
-    #[test]
-    #[ignore]
-    fn dump() {
-        let mut out = String::new();
-        for kind in TrajectoryKind::ALL {
-            for (speed, dur) in [(8.0, 60.0), (8.0, 20.0), (15.0, 60.0)] {
-                let cfg = TrajectoryConfig {
-                    kind,
-                    duration_secs: dur,
-                    speed_mps: speed,
-                    ..Default::default()
-                };
-                let plan = Plan::new(&cfg);
-                if let Some(s) = &plan.shape {
-                    eprintln!(
-                        "{kind} v={speed} d={dur}: scale {:.3} lap {:.1} cruise {:.2} start {:.1} kappa {:.4}",
-                        s.scale,
-                        s.lap_length(),
-                        plan.speed.cruise_mps,
-                        s.start_distance,
-                        s.path.max_abs_curvature() / s.scale
-                    );
-                }
-                for (t, p) in generate(&cfg).iter().step_by(10) {
-                    out += &format!(
-                        "{kind},{speed},{dur},{},{},{},{}\n",
-                        *t as f64 * 1e-9,
-                        p.translation.x,
-                        p.translation.y,
-                        {
-                            let x = p.rotation * DVec3::X;
-                            x.y.atan2(x.x)
-                        }
-                    );
-                }
-                for p in path_polyline(&cfg, 1.0) {
-                    out += &format!("road-{kind},{speed},{dur},0,{},{},0\n", p.x, p.y);
-                }
-            }
-        }
-        std::fs::write("/tmp/traj_dump.csv", out).unwrap();
     }
 }

@@ -567,6 +567,14 @@ impl World {
         let asphalt = Vec3::splat(0.16 + 0.10 * grain) + Vec3::new(0.0, 0.0, 0.01);
         let patch = fbm2(p.x, p.y, 0.05, 3, fp, seed ^ 12);
         let asphalt = asphalt * (0.85 + 0.3 * patch);
+        // Aggregate speckle (4 cm stones) and darker tar-sealed cracks, faded below the footprint.
+        let speck_fade = ((1.0 / 25.0) / (2.0 * fp)).clamp(0.0, 1.0);
+        let speck =
+            ((value2(p.x * 25.0, p.y * 25.0, seed ^ 16) - 0.7) * 8.0).clamp(0.0, 1.0) * speck_fade;
+        let crack_noise = fbm2(p.x, p.y, 0.35, 3, fp, seed ^ 17);
+        let crack = band(crack_noise - 0.5, 0.004, fp * 0.5)
+            * ((value2(p.x * 0.1, p.y * 0.1, seed ^ 18) - 0.55) * 5.0).clamp(0.0, 1.0);
+        let asphalt = (asphalt + Vec3::splat(0.08 * speck)) * (1.0 - 0.6 * crack);
         if self.kind == SceneKind::ParkingLot {
             // Parking bays: lines every 2.6 m across, rows 5.5 m deep.
             let (lx, ly) = (p.x / 2.6, p.y / 11.0);
@@ -658,9 +666,19 @@ fn material_surface(
                 * (1.0
                     - stripe(u / bay + 0.23, 0.49, fp / bay)
                         * stripe((v - 0.82) / floor, 0.45, fp / floor));
+            // Mullions and transoms split each window into panes.
+            let fu = (u / bay + 0.2).rem_euclid(1.0);
+            let fv = ((v - 0.9) / floor).rem_euclid(1.0);
+            let mullion = (band(fu - 0.275, 0.012, fp / bay) + band(fv - 0.33, 0.016, fp / floor))
+                .min(1.0)
+                * wu
+                * wv
+                * (1.0 - ground_floor);
+            let window = window * (1.0 - mullion);
             let sky_reflection = Vec3::new(0.25, 0.32, 0.40)
                 * (0.6 + 0.8 * value2(u * 0.3, v * 0.5, s(23 + fs as u64)));
-            let albedo = base * brick * (1.0 - window)
+            let albedo = Vec3::splat(0.85) * mullion
+                + base * brick * (1.0 - window - mullion).max(0.0)
                 + sky_reflection * window * 0.6
                 + Vec3::splat(0.9) * frame_edge * 0.3;
             Surface {
@@ -738,8 +756,8 @@ fn material_surface(
                 if inside && front {
                     // Box-filtered checker: product of two ±1 square waves.
                     let w = fp / b.square_m;
-                    let sa = 2.0 * stripe(a, 0.5, w) - 1.0;
-                    let sc = 2.0 * stripe(c, 0.5, w) - 1.0;
+                    let sa = 2.0 * stripe(a * 0.5, 0.5, w * 0.5) - 1.0;
+                    let sc = 2.0 * stripe(c * 0.5, 0.5, w * 0.5) - 1.0;
                     let black = 0.5 + 0.5 * sa * sc;
                     Surface {
                         albedo: Vec3::splat(0.9 - 0.85 * black),
@@ -860,7 +878,7 @@ fn add_car(b: &mut Builder, pos: Vec3, yaw: f32, rng: &mut Rng) {
     );
     for (a, c) in [(0.33, 0.5), (0.33, -0.5), (-0.33, 0.5), (-0.33, -0.5)] {
         let wheel = pos + f * (a * len) + l * (c * (wid - 0.1));
-        b.cylinder(wheel, 0.33, 0.45, 10, tire);
+        b.boxed(wheel, yaw, Vec3::new(0.66, 0.24, 0.66), tire);
     }
 }
 
@@ -984,6 +1002,28 @@ fn add_urban(b: &mut Builder, path: &[Vec3], ground: &GroundMap, rng: &mut Rng) 
                 );
             }
         }
+        // Rows behind the street front: taller blocks that fill the skyline.
+        for (setback, step, hmax) in [(26.0f32, 9.0f32, 32.0f32), (48.0, 12.0, 45.0)] {
+            for (p, yaw) in stations(path, step) {
+                let l = Vec3::new(-yaw.sin(), yaw.cos(), 0.0) * side;
+                let (width, depth, height) = (
+                    rng.range(10.0, 24.0),
+                    rng.range(10.0, 18.0),
+                    rng.range(9.0, hmax),
+                );
+                let center = p + l * (setback + rng.range(0.0, 6.0) + depth * 0.5);
+                if !footprint_clear(ground, center, yaw, width, depth, 20.0)
+                    || !b.claim(center, yaw, width, depth)
+                {
+                    continue;
+                }
+                let facade = b.material(Material::Facade {
+                    color: rng.pick(&FACADE_COLORS),
+                    seed: (rng.next() * 1000.0) as u32,
+                });
+                b.boxed(center, yaw, Vec3::new(width, depth, height), facade);
+            }
+        }
         // Street furniture on the sidewalk.
         for (k, (p, yaw)) in stations(path, 12.5).into_iter().enumerate() {
             let l = Vec3::new(-yaw.sin(), yaw.cos(), 0.0) * side;
@@ -1090,9 +1130,11 @@ fn add_featureless(b: &mut Builder, path: &[Vec3], ground: &GroundMap, rng: &mut
 
 /// Stationary scene: boards in front of and beside the vehicle, facing it, in varied poses.
 fn add_checkerboards(b: &mut Builder, path: &[Vec3], rng: &mut Rng) -> Vec<Checkerboard> {
-    let origin = path.first().copied().unwrap_or(Vec3::ZERO);
-    let heading = match path {
-        [a, c, ..] => (c.y - a.y).atan2(c.x - a.x),
+    // The stationary vehicle stands in the middle of its short road.
+    let mid = path.len() / 2;
+    let origin = path.get(mid).copied().unwrap_or(Vec3::ZERO);
+    let heading = match (path.get(mid.saturating_sub(1)), path.get(mid + 1)) {
+        (Some(a), Some(c)) => (c.y - a.y).atan2(c.x - a.x),
         _ => 0.0,
     };
     let metal = b.material(Material::Metal {

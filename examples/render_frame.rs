@@ -1,0 +1,75 @@
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+//! Render one simulated camera image to PNG, for looking at the simulator's pictures.
+//! `cargo run --release --example render_frame -- SCENE CAMERA OUT.png [TIME_S] [SCALE]`
+
+use rigcal::geometry::Trajectory;
+use rigcal::sim::camera_sim::{self, Exposure, RayTable};
+use rigcal::sim::rigs::{RigPreset, SimRig};
+use rigcal::sim::trajectories::{self, TrajectoryConfig, TrajectoryKind};
+use rigcal::sim::world::SceneKind;
+
+fn main() -> anyhow::Result<()> {
+    let args: Vec<String> = std::env::args().collect();
+    let scene: SceneKind = args
+        .get(1)
+        .map_or("urban", |s| s.as_str())
+        .parse()
+        .map_err(anyhow::Error::msg)?;
+    let camera = args
+        .get(2)
+        .cloned()
+        .unwrap_or_else(|| "front_camera".into());
+    let out = args.get(3).cloned().unwrap_or_else(|| "frame.png".into());
+    let time_s: f64 = args.get(4).and_then(|s| s.parse().ok()).unwrap_or(1.0);
+    let scale: f64 = args.get(5).and_then(|s| s.parse().ok()).unwrap_or(1.0);
+    let kind = if scene == SceneKind::Checkerboard {
+        TrajectoryKind::Stationary
+    } else {
+        TrajectoryKind::Figure8
+    };
+    let tcfg = TrajectoryConfig {
+        kind,
+        duration_secs: time_s + 1.0,
+        rate_hz: 100.0,
+        speed_mps: 8.0,
+        seed: 7,
+    };
+    let traj = Trajectory::new(trajectories::generate(&tcfg));
+    let world =
+        rigcal::sim::world::World::build(scene, &trajectories::path_polyline(&tcfg, 1.0), 7);
+    let rig = SimRig::preset(RigPreset::Pandaset).scaled(scale);
+    let cam = rig
+        .cameras
+        .iter()
+        .find(|c| c.name == camera)
+        .ok_or_else(|| anyhow::anyhow!("no camera {camera}"))?;
+    let started = std::time::Instant::now();
+    let pose = traj.world_from_vehicle((time_s * 1e9) as i64)? * cam.vehicle_from_camera;
+    let img = camera_sim::render(
+        &world,
+        &RayTable::new(&cam.intrinsics),
+        &cam.intrinsics,
+        pose,
+        Exposure {
+            gain: 1.0,
+            tint: [1.0; 3],
+            noise_sigma: 2.0,
+            seed: 1,
+        },
+    );
+    eprintln!(
+        "rendered {}x{} in {:.2} s",
+        img.width(),
+        img.height(),
+        started.elapsed().as_secs_f64()
+    );
+    let corners = rigcal::eval::fast::fast9(
+        &rigcal::eval::fast::luma(&img),
+        img.width() as usize,
+        img.height() as usize,
+        20,
+    );
+    eprintln!("{} FAST corners", corners.len());
+    img.save(&out)?;
+    Ok(())
+}
