@@ -25,6 +25,9 @@ use super::error::{LogError, Problem};
 const MAGIC: &[u8; 8] = b"\x89MCAP0\r\n";
 /// Refuse single records larger than this (a corrupt length would otherwise allocate wildly).
 const MAX_RECORD_BYTES: u64 = 4 << 30;
+/// Output reserved up front when decompressing: the declared size, up to this bound (a corrupt
+/// header cannot make us reserve more; larger chunks grow as they really decompress).
+const PREALLOCATE_BYTES: usize = 256 << 20;
 
 #[derive(Clone, Debug, PartialEq)]
 pub struct ChannelInfo {
@@ -569,15 +572,23 @@ fn decompress_chunk(body: &[u8]) -> Result<Vec<u8>, String> {
         "" => data.into_owned(),
         // Streaming decoders bounded by the declared size: a corrupt header cannot make us
         // allocate more than the data actually expands to.
+        // Usual case: one-shot decompression into exactly the declared size.
+        "zstd" if size <= PREALLOCATE_BYTES => {
+            let mut out = Vec::with_capacity(size);
+            zstd::bulk::Decompressor::new()
+                .and_then(|mut d| d.decompress_to_buffer(&data[..], &mut out))
+                .map_err(|e| format!("zstd: {e}"))?;
+            out
+        }
         "zstd" => {
-            let mut out = Vec::new();
+            let mut out = Vec::with_capacity(PREALLOCATE_BYTES);
             zstd::stream::Decoder::new(&data[..])
                 .and_then(|d| d.take(size as u64 + 1).read_to_end(&mut out))
                 .map_err(|e| format!("zstd: {e}"))?;
             out
         }
         "lz4" => {
-            let mut out = Vec::new();
+            let mut out = Vec::with_capacity(size.min(PREALLOCATE_BYTES));
             lz4::Decoder::new(&data[..])
                 .and_then(|d| d.take(size as u64 + 1).read_to_end(&mut out))
                 .map_err(|e| format!("lz4: {e}"))?;
@@ -603,29 +614,9 @@ fn decompress_chunk(body: &[u8]) -> Result<Vec<u8>, String> {
     Ok(out)
 }
 
-/// CRC-32 (IEEE), as MCAP uses for chunk contents.
+/// CRC-32 (IEEE), as MCAP uses for chunk contents (SIMD where the CPU has it).
 fn crc32(data: &[u8]) -> u32 {
-    static TABLE: std::sync::OnceLock<[u32; 256]> = std::sync::OnceLock::new();
-    let table = TABLE.get_or_init(|| {
-        let mut t = [0u32; 256];
-        for (i, e) in t.iter_mut().enumerate() {
-            let mut c = i as u32;
-            for _ in 0..8 {
-                c = if c & 1 != 0 {
-                    0xEDB8_8320 ^ (c >> 1)
-                } else {
-                    c >> 1
-                };
-            }
-            *e = c;
-        }
-        t
-    });
-    let mut crc = !0u32;
-    for &b in data {
-        crc = table[((crc ^ b as u32) & 0xff) as usize] ^ (crc >> 8);
-    }
-    !crc
+    crc32fast::hash(data)
 }
 
 /// Least-recently-used decompressed chunks, bounded by total bytes.

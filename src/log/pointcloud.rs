@@ -122,6 +122,31 @@ pub fn to_sweep(cloud: &RawPointCloud<'_>) -> DecodeResult<LidarSweep> {
     let be = cloud.big_endian;
     let identity_origin = cloud.frame_from_cloud == crate::geometry::Rigid::IDENTITY;
     let data: &[u8] = &cloud.data;
+    // Fast path for the common layout (little-endian float32 x/y/z and intensity, no time).
+    let f32_le = |f: &PointField| f.numeric == Numeric::F32 && !be;
+    if identity_origin
+        && time.is_none()
+        && [fx, fy, fz].into_iter().all(f32_le)
+        && intensity.is_none_or(f32_le)
+    {
+        let at = |base: usize, off: u32| {
+            let o = base + off as usize;
+            f32::from_le_bytes([data[o], data[o + 1], data[o + 2], data[o + 3]])
+        };
+        for row in 0..height {
+            for col in 0..width {
+                let base = row * row_step + col * step;
+                let p = [at(base, fx.offset), at(base, fy.offset), at(base, fz.offset)];
+                if p.iter().all(|v| v.is_finite()) {
+                    sweep.points_in_sensor.push(p);
+                    sweep
+                        .intensity
+                        .push(intensity.map_or(0.0, |f| at(base, f.offset)));
+                }
+            }
+        }
+        return Ok(sweep);
+    }
     for row in 0..height {
         for col in 0..width {
             let base = row * row_step + col * step;
