@@ -19,6 +19,7 @@ pub mod cli;
 pub mod eval;
 pub mod geometry;
 pub mod log;
+pub mod optim;
 pub mod sim;
 pub mod util;
 

@@ -1,0 +1,318 @@
+//! Target-free camera refinement by edge alignment: the studio's small real optimiser, and the
+//! alignment score of the reprojection checks.
+//!
+//! How it works. For a camera and a reference LiDAR, a few frames are prepared once: the image's
+//! edge map becomes an exact distance transform (pixels to the nearest edge), and the sweep's depth
+//! discontinuities (silhouette points, [`crate::eval::edges::depth_discontinuities`]) are moved
+//! into the *vehicle frame at the image's stamp*, through the trajectory at each point's own firing
+//! time: `q = world_from_vehicle(t_img)⁻¹ · world_from_vehicle(t_pt) · vehicle_from_lidar · p`.
+//! The camera extrinsic is then the only unknown: `p_cam = vehicle_from_camera⁻¹ · q`. The cost is
+//! the mean truncated distance `min(DT(π(p_cam)), τ)` (bilinear, so sub-pixel moves change it;
+//! points leaving the image cost τ). A compass (pattern) search over the six right-perturbation
+//! coordinates of `vehicle_from_camera` minimises it: try ±step on each coordinate, keep the best
+//! improvement, halve the steps when none improves.
+
+use glam::DVec3;
+
+use crate::calib::Rig;
+use crate::eval::edges;
+use crate::geometry::camera::CameraIntrinsics;
+use crate::geometry::{Rigid, TrajectoryError};
+use crate::log::{Drive, LidarSweep, LogError};
+
+/// One image with silhouettes ready for scoring.
+#[derive(Clone, Debug)]
+pub struct EdgeFrame {
+    pub width: usize,
+    pub height: usize,
+    /// Distance (px) from each pixel to the nearest image edge.
+    pub distance_px: Vec<f32>,
+    /// Silhouette points in the vehicle frame at the image's stamp.
+    pub points_in_vehicle: Vec<DVec3>,
+}
+
+/// The edge-alignment problem of one camera against one reference LiDAR.
+#[derive(Clone, Debug)]
+pub struct EdgeAlignment {
+    pub camera: String,
+    pub lidar: String,
+    pub intrinsics: CameraIntrinsics,
+    pub frames: Vec<EdgeFrame>,
+    /// Truncation τ of the per-point distance (px).
+    pub truncation_px: f64,
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum AlignError {
+    #[error(transparent)]
+    Log(#[from] LogError),
+    #[error("trajectory: {0}")]
+    Trajectory(#[from] TrajectoryError),
+    #[error("{0}")]
+    Setup(String),
+}
+
+/// Silhouette points of `sweep` moved into the vehicle frame at `image_stamp_nanos`.
+pub fn silhouettes_in_vehicle(
+    sweep: &LidarSweep,
+    drive_trajectory: &crate::geometry::Trajectory,
+    vehicle_from_lidar: Rigid,
+    image_stamp_nanos: i64,
+) -> Result<Vec<DVec3>, TrajectoryError> {
+    let vehicle_from_world = drive_trajectory
+        .world_from_vehicle(image_stamp_nanos)?
+        .inverse();
+    let mut out = Vec::new();
+    // Poses cached per millisecond of firing time: a sweep spans ~100 ms.
+    let mut cache: Vec<(i64, Rigid)> = Vec::new();
+    for i in edges::depth_discontinuities(&sweep.points_in_sensor, 0.05) {
+        let t = sweep.stamp_nanos
+            + sweep
+                .time_offset_secs
+                .as_ref()
+                .and_then(|t| t.get(i))
+                .map_or(0, |s| (*s as f64 * 1e9) as i64);
+        let key = t / 1_000_000;
+        let vehicle_now_from_vehicle_then = match cache.iter().find(|(k, _)| *k == key) {
+            Some((_, r)) => *r,
+            None => {
+                let r = vehicle_from_world * drive_trajectory.world_from_vehicle(key * 1_000_000)?;
+                cache.push((key, r));
+                r
+            }
+        };
+        let p = sweep.points_in_sensor[i];
+        out.push(
+            (vehicle_now_from_vehicle_then * vehicle_from_lidar)
+                .transform_point(DVec3::new(p[0] as f64, p[1] as f64, p[2] as f64)),
+        );
+    }
+    Ok(out)
+}
+
+impl EdgeFrame {
+    pub fn new(
+        image: &image::RgbImage,
+        points_in_vehicle: Vec<DVec3>,
+    ) -> Self {
+        let (w, h) = (image.width() as usize, image.height() as usize);
+        Self {
+            width: w,
+            height: h,
+            distance_px: edges::distance_transform(&edges::image_edges(image), w, h),
+            points_in_vehicle,
+        }
+    }
+
+    /// Bilinear distance at a pixel centre coordinate; `None` outside the image.
+    fn distance_at(&self, x: f64, y: f64) -> Option<f64> {
+        if !(x >= 0.0 && y >= 0.0 && x <= (self.width - 1) as f64 && y <= (self.height - 1) as f64)
+        {
+            return None;
+        }
+        let (x0, y0) = (x.floor() as usize, y.floor() as usize);
+        let (x1, y1) = ((x0 + 1).min(self.width - 1), (y0 + 1).min(self.height - 1));
+        let (fx, fy) = (x - x0 as f64, y - y0 as f64);
+        let d = |x: usize, y: usize| self.distance_px[y * self.width + x] as f64;
+        Some(
+            (d(x0, y0) * (1.0 - fx) + d(x1, y0) * fx) * (1.0 - fy)
+                + (d(x0, y1) * (1.0 - fx) + d(x1, y1) * fx) * fy,
+        )
+    }
+}
+
+impl EdgeAlignment {
+    /// Prepare `frames` evenly spaced frames of `camera` against `lidar` from a drive, using the
+    /// extrinsics of `rig` for the LiDAR. `segment_nanos` limits the frames to a time range.
+    pub fn from_drive(
+        drive: &Drive,
+        rig: &Rig,
+        camera: &str,
+        lidar: &str,
+        frames: usize,
+        segment_nanos: Option<(i64, i64)>,
+    ) -> Result<Self, AlignError> {
+        let cam = rig
+            .sensor(camera)
+            .ok_or_else(|| AlignError::Setup(format!("no sensor '{camera}' in the rig")))?;
+        let intrinsics = cam
+            .camera
+            .clone()
+            .ok_or_else(|| AlignError::Setup(format!("'{camera}' has no camera intrinsics")))?;
+        let vehicle_from_lidar = rig
+            .sensor(lidar)
+            .ok_or_else(|| AlignError::Setup(format!("no sensor '{lidar}' in the rig")))?
+            .vehicle_from_sensor;
+        let cam_stream = drive
+            .stream(camera)
+            .ok_or_else(|| AlignError::Setup(format!("no images for '{camera}' in the log")))?;
+        let lidar_stream = drive
+            .stream(lidar)
+            .ok_or_else(|| AlignError::Setup(format!("no sweeps for '{lidar}' in the log")))?;
+        let in_segment =
+            |t: i64| segment_nanos.is_none_or(|(a, b)| t >= a && t <= b);
+        let usable: Vec<usize> = (0..lidar_stream.frames.len())
+            .filter(|&i| {
+                let t = lidar_stream.frames[i].stamp_nanos;
+                in_segment(t) && drive.trajectory.world_from_vehicle(t).is_ok()
+            })
+            .collect();
+        if usable.is_empty() {
+            return Err(AlignError::Setup(format!(
+                "no sweep of '{lidar}' inside the trajectory and the segment"
+            )));
+        }
+        let wanted = frames.clamp(1, usable.len());
+        let mut out = Vec::with_capacity(wanted);
+        for k in 0..wanted {
+            let sweep_index = usable[(k * usable.len()) / wanted + usable.len() / (2 * wanted)];
+            let sweep = drive.load_sweep(lidar, sweep_index.min(lidar_stream.frames.len() - 1))?;
+            // The image nearest in time to the sweep.
+            let Some(image_index) = (0..cam_stream.frames.len())
+                .min_by_key(|&j| (cam_stream.frames[j].stamp_nanos - sweep.stamp_nanos).abs())
+            else {
+                continue;
+            };
+            let image_stamp = cam_stream.frames[image_index].stamp_nanos;
+            if (image_stamp - sweep.stamp_nanos).abs() > 200_000_000
+                || drive.trajectory.world_from_vehicle(image_stamp).is_err()
+            {
+                continue;
+            }
+            let image = drive.load_image(camera, image_index)?;
+            let points =
+                silhouettes_in_vehicle(&sweep, &drive.trajectory, vehicle_from_lidar, image_stamp)?;
+            out.push(EdgeFrame::new(&image, points));
+        }
+        if out.is_empty() {
+            return Err(AlignError::Setup(format!(
+                "no image of '{camera}' within 200 ms of a sweep of '{lidar}'"
+            )));
+        }
+        let mut problem = Self {
+            camera: camera.into(),
+            lidar: lidar.into(),
+            intrinsics,
+            frames: out,
+            truncation_px: 40.0,
+        };
+        problem.keep_visible(cam.vehicle_from_sensor);
+        Ok(problem)
+    }
+
+    /// Keep only the silhouette points that `vehicle_from_camera` puts inside the image (with a
+    /// 5 % margin), so the cost is a mean over a fixed set: a point that later leaves the image
+    /// costs τ instead of silently dropping out.
+    pub fn keep_visible(&mut self, vehicle_from_camera: Rigid) {
+        let camera_from_vehicle = vehicle_from_camera.inverse();
+        let intr = &self.intrinsics;
+        let (mx, my) = (0.05 * intr.width as f64, 0.05 * intr.height as f64);
+        for f in &mut self.frames {
+            f.points_in_vehicle.retain(|q| {
+                let p = camera_from_vehicle.transform_point(*q);
+                p.z > 0.5
+                    && intr.project(p).is_some_and(|px| {
+                        px.x >= mx
+                            && px.y >= my
+                            && px.x <= intr.width as f64 - mx
+                            && px.y <= intr.height as f64 - my
+                    })
+            });
+        }
+    }
+
+    /// Number of silhouette points over all frames.
+    pub fn point_count(&self) -> usize {
+        self.frames.iter().map(|f| f.points_in_vehicle.len()).sum()
+    }
+
+    /// Mean truncated edge distance (px) of the silhouettes seen through `vehicle_from_camera`.
+    pub fn cost(&self, vehicle_from_camera: Rigid) -> f64 {
+        let camera_from_vehicle = vehicle_from_camera.inverse();
+        let tau = self.truncation_px;
+        let mut sum = 0.0;
+        let mut n = 0usize;
+        for f in &self.frames {
+            for q in &f.points_in_vehicle {
+                let p = camera_from_vehicle.transform_point(*q);
+                n += 1;
+                if p.z <= 0.1 {
+                    sum += tau;
+                    continue;
+                }
+                sum += self
+                    .intrinsics
+                    .project(p)
+                    .and_then(|px| f.distance_at(px.x, px.y))
+                    .map_or(tau, |d| d.min(tau));
+            }
+        }
+        if n == 0 { tau } else { sum / n as f64 }
+    }
+}
+
+/// Compass search state for one camera.
+#[derive(Clone, Debug)]
+pub struct CompassSearch {
+    pub best: Rigid,
+    pub best_cost: f64,
+    pub step_rad: f64,
+    pub step_m: f64,
+    pub min_step_rad: f64,
+    pub min_step_m: f64,
+    /// Also search translation. Off by default: at street distances a few centimetres move a
+    /// silhouette by well under a pixel, so edges constrain rotation, not translation.
+    pub translate: bool,
+}
+
+impl CompassSearch {
+    pub fn new(problem: &EdgeAlignment, start: Rigid) -> Self {
+        Self {
+            best: start,
+            best_cost: problem.cost(start),
+            step_rad: 0.5f64.to_radians(),
+            step_m: 0.05,
+            min_step_rad: 0.005f64.to_radians(),
+            min_step_m: 0.0005,
+            translate: false,
+        }
+    }
+
+    pub fn converged(&self) -> bool {
+        self.step_rad < self.min_step_rad && (!self.translate || self.step_m < self.min_step_m)
+    }
+
+    /// One round of probes (±step on each searched axis); returns whether the pose improved.
+    pub fn step(&mut self, problem: &EdgeAlignment) -> bool {
+        let mut best = None;
+        let axes = if self.translate { 6 } else { 3 };
+        for axis in 0..axes {
+            for sign in [-1.0, 1.0] {
+                let mut omega = DVec3::ZERO;
+                let mut v = DVec3::ZERO;
+                if axis < 3 {
+                    omega[axis] = sign * self.step_rad;
+                } else {
+                    v[axis - 3] = sign * self.step_m;
+                }
+                let candidate = self.best.perturbed_right(omega, v);
+                let c = problem.cost(candidate);
+                if c < best.map_or(self.best_cost, |(bc, _)| bc) {
+                    best = Some((c, candidate));
+                }
+            }
+        }
+        match best {
+            Some((c, pose)) => {
+                self.best = pose;
+                self.best_cost = c;
+                true
+            }
+            None => {
+                self.step_rad *= 0.5;
+                self.step_m *= 0.5;
+                false
+            }
+        }
+    }
+}

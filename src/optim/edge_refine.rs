@@ -1,0 +1,96 @@
+//! The edge-alignment refinement as a [`Calibrator`]: every selected camera is refined against
+//! one reference LiDAR by its own compass search ([`super::edge_align`]); the LiDAR stays fixed.
+
+use crate::calib::Rig;
+use crate::log::Drive;
+
+use super::edge_align::{AlignError, CompassSearch, EdgeAlignment};
+use super::runner::{Calibrator, StepReport};
+
+pub struct EdgeRefiner {
+    rig: Rig,
+    problems: Vec<(EdgeAlignment, CompassSearch)>,
+    max_steps: usize,
+}
+
+impl EdgeRefiner {
+    /// Prepare `cameras` against `lidar` on `frames` frames of the drive (optionally a segment).
+    pub fn new(
+        drive: &Drive,
+        rig: &Rig,
+        lidar: &str,
+        cameras: &[String],
+        frames: usize,
+        segment_nanos: Option<(i64, i64)>,
+    ) -> Result<Self, AlignError> {
+        let mut problems = Vec::new();
+        for cam in cameras {
+            let p = EdgeAlignment::from_drive(drive, rig, cam, lidar, frames, segment_nanos)?;
+            let start = rig
+                .sensor(cam)
+                .map(|s| s.vehicle_from_sensor)
+                .ok_or_else(|| AlignError::Setup(format!("no sensor '{cam}'")))?;
+            let search = CompassSearch::new(&p, start);
+            problems.push((p, search));
+        }
+        if problems.is_empty() {
+            return Err(AlignError::Setup("no camera selected".into()));
+        }
+        Ok(Self::from_problems(rig.clone(), problems))
+    }
+
+    pub fn from_problems(rig: Rig, problems: Vec<(EdgeAlignment, CompassSearch)>) -> Self {
+        Self {
+            rig,
+            problems,
+            max_steps: 300,
+        }
+    }
+
+    fn losses(&self) -> Vec<(String, f64)> {
+        let mut out: Vec<(String, f64)> = self
+            .problems
+            .iter()
+            .map(|(p, s)| (format!("edge_px/{}", p.camera), s.best_cost))
+            .collect();
+        let mean = out.iter().map(|(_, v)| v).sum::<f64>() / out.len().max(1) as f64;
+        out.insert(0, ("edge_px (mean)".into(), mean));
+        out
+    }
+}
+
+impl Calibrator for EdgeRefiner {
+    fn name(&self) -> &str {
+        "edge-align"
+    }
+
+    fn max_steps(&self) -> usize {
+        self.max_steps
+    }
+
+    fn step(&mut self) -> StepReport {
+        for (p, s) in &mut self.problems {
+            if !s.converged() {
+                s.step(p);
+            }
+        }
+        for (p, s) in &self.problems {
+            if let Some(sensor) = self.rig.sensor_mut(&p.camera) {
+                sensor.vehicle_from_sensor = s.best;
+            }
+        }
+        StepReport {
+            losses: self.losses(),
+            done: self.problems.iter().all(|(_, s)| s.converged()),
+        }
+    }
+
+    fn current(&self) -> Rig {
+        self.rig.clone()
+    }
+
+    fn best(&self) -> Rig {
+        // The compass search only ever accepts improvements: current is the best.
+        self.rig.clone()
+    }
+}

@@ -1,0 +1,11 @@
+//! Optimisers and the machinery that runs them in the background.
+//!
+//! - [`runner`]: the [`runner::Calibrator`] trait and [`runner::Run`], a worker thread that
+//!   publishes extrinsics and losses on a channel, with pause / resume / stop.
+//! - [`edge_align`]: the target-free edge-alignment cost (LiDAR depth discontinuities against
+//!   image edges) and a compass search over one camera's extrinsic.
+//! - [`edge_refine`]: that search as a calibrator over several cameras.
+
+pub mod edge_align;
+pub mod edge_refine;
+pub mod runner;

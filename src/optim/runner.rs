@@ -1,0 +1,168 @@
+//! Background optimisation runs: a worker thread steps a [`Calibrator`] and publishes
+//! [`Packet`]s on a channel; the caller (CLI or studio) polls them and never waits.
+//!
+//! Control is a shared atomic (run / pause / stop). Packets are sent at most every 100 ms while
+//! running (so ≥ 2 Hz whenever steps are faster than 0.5 s) and always for the last step. A
+//! stopped run ends with a final packet carrying the best rig found so far.
+
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU8, Ordering};
+use std::sync::mpsc::{Receiver, Sender, channel};
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+
+use crate::calib::Rig;
+
+/// What one step of a calibrator reports.
+#[derive(Clone, Debug, PartialEq)]
+pub struct StepReport {
+    /// Named loss terms of the current state (e.g. "edge_px/front_camera").
+    pub losses: Vec<(String, f64)>,
+    /// The optimiser has converged; the run ends.
+    pub done: bool,
+}
+
+/// A calibration method that can be stepped.
+pub trait Calibrator: Send {
+    fn name(&self) -> &str;
+    /// Upper bound on the number of steps (for progress and ETA).
+    fn max_steps(&self) -> usize;
+    fn step(&mut self) -> StepReport;
+    /// The rig at the current state.
+    fn current(&self) -> Rig;
+    /// The best rig seen (lowest total loss).
+    fn best(&self) -> Rig;
+}
+
+/// A message from the worker.
+#[derive(Clone, Debug)]
+pub struct Packet {
+    pub step: usize,
+    pub max_steps: usize,
+    pub steps_per_sec: f64,
+    pub losses: Vec<(String, f64)>,
+    pub current: Rig,
+    pub best: Rig,
+    pub finished: bool,
+}
+
+const RUN: u8 = 0;
+const PAUSE: u8 = 1;
+const STOP: u8 = 2;
+
+/// Handle of a running optimisation.
+pub struct Run {
+    control: Arc<AtomicU8>,
+    pub packets: Receiver<Packet>,
+    thread: Option<JoinHandle<()>>,
+}
+
+impl Run {
+    /// Start stepping `calibrator` on a new thread.
+    pub fn spawn(mut calibrator: Box<dyn Calibrator>) -> Self {
+        let control = Arc::new(AtomicU8::new(RUN));
+        let (tx, rx) = channel();
+        let ctl = control.clone();
+        let thread = std::thread::Builder::new()
+            .name(format!("rigcal-{}", calibrator.name()))
+            .spawn(move || worker(calibrator.as_mut(), &ctl, &tx))
+            .ok();
+        Self {
+            control,
+            packets: rx,
+            thread,
+        }
+    }
+
+    pub fn pause(&self) {
+        let _ = self
+            .control
+            .compare_exchange(RUN, PAUSE, Ordering::SeqCst, Ordering::SeqCst);
+    }
+
+    pub fn resume(&self) {
+        let _ = self
+            .control
+            .compare_exchange(PAUSE, RUN, Ordering::SeqCst, Ordering::SeqCst);
+    }
+
+    pub fn stop(&self) {
+        self.control.store(STOP, Ordering::SeqCst);
+    }
+
+    pub fn is_paused(&self) -> bool {
+        self.control.load(Ordering::SeqCst) == PAUSE
+    }
+
+    /// Whether the worker thread has ended.
+    pub fn is_finished(&self) -> bool {
+        self.thread.as_ref().is_none_or(|t| t.is_finished())
+    }
+
+    /// Wait for the worker to end and return every packet not yet received.
+    pub fn join(mut self) -> Vec<Packet> {
+        if let Some(t) = self.thread.take() {
+            let _ = t.join();
+        }
+        self.packets.try_iter().collect()
+    }
+}
+
+impl Drop for Run {
+    fn drop(&mut self) {
+        self.stop();
+    }
+}
+
+fn worker(c: &mut dyn Calibrator, control: &AtomicU8, tx: &Sender<Packet>) {
+    let started = Instant::now();
+    let mut last_sent = Instant::now() - Duration::from_secs(1);
+    let max_steps = c.max_steps();
+    let mut step = 0;
+    let mut paused_for = Duration::ZERO;
+    loop {
+        match control.load(Ordering::SeqCst) {
+            STOP => break,
+            PAUSE => {
+                let t = Instant::now();
+                std::thread::sleep(Duration::from_millis(20));
+                paused_for += t.elapsed();
+                continue;
+            }
+            _ => {}
+        }
+        let report = c.step();
+        step += 1;
+        let done = report.done || step >= max_steps;
+        if done || last_sent.elapsed() >= Duration::from_millis(100) {
+            let active = started.elapsed().saturating_sub(paused_for);
+            let p = Packet {
+                step,
+                max_steps,
+                steps_per_sec: step as f64 / active.as_secs_f64().max(1e-9),
+                losses: report.losses,
+                current: c.current(),
+                best: c.best(),
+                finished: done,
+            };
+            if tx.send(p).is_err() {
+                return; // nobody listens any more
+            }
+            last_sent = Instant::now();
+        }
+        if done {
+            return;
+        }
+    }
+    // Stopped: a final packet with the best result.
+    let active = started.elapsed().saturating_sub(paused_for);
+    let _ = tx.send(Packet {
+        step,
+        max_steps,
+        steps_per_sec: step as f64 / active.as_secs_f64().max(1e-9),
+        losses: Vec::new(),
+        current: c.current(),
+        best: c.best(),
+        finished: true,
+    });
+}
