@@ -68,7 +68,11 @@ fn full(path: &Path) -> Work {
         .rig
         .sensors
         .iter()
-        .filter_map(|s| drive.stream(&s.name).map(|st| (s.name.clone(), st.kind, st.frames.len())))
+        .filter_map(|s| {
+            drive
+                .stream(&s.name)
+                .map(|st| (s.name.clone(), st.kind, st.frames.len()))
+        })
         .flat_map(|(name, kind, n)| (0..n).map(move |i| (name.clone(), kind, i)))
         .collect();
     jobs.par_iter()
@@ -112,7 +116,12 @@ fn best_of<F: Fn() -> Work + Sync>(threads: usize, reps: usize, f: F) -> (f64, W
 fn python(path: &Path) -> Option<serde_json::Value> {
     let exe = std::env::var("RIGCAL_PYTHON").unwrap_or_else(|_| "python3".into());
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("benches/ingest_reference.py");
-    let out = Command::new(&exe).arg(&script).arg(path).arg("3").output().ok()?;
+    let out = Command::new(&exe)
+        .arg(&script)
+        .arg(path)
+        .arg("3")
+        .output()
+        .ok()?;
     if !out.status.success() {
         eprintln!(
             "python reference failed ({exe}): {}\n(pip install mcap mcap-ros2-support numpy pillow; set RIGCAL_PYTHON)",
@@ -136,12 +145,12 @@ fn main() {
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
     println!("file: {} ({mb:.1} MB), {cores} cores", path.display());
     let py = python(&path);
-    println!("| level | reader | threads | time (s) | MB/s | messages | points | pixels | vs Python |");
+    println!(
+        "| level | reader | threads | time (s) | MB/s | messages | points | pixels | vs Python |"
+    );
     println!("|---|---|---|---|---|---|---|---|---|");
     for level in ["messages", "full"] {
-        let py_secs = py
-            .as_ref()
-            .and_then(|v| v[level]["secs"].as_f64());
+        let py_secs = py.as_ref().and_then(|v| v[level]["secs"].as_f64());
         if let (Some(secs), Some(v)) = (py_secs, py.as_ref()) {
             let r = &v[level];
             println!(

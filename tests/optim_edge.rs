@@ -15,7 +15,7 @@ use rigcal::sim::rigs::{RigPreset, SimRig};
 use rigcal::sim::trajectories::{self, TrajectoryConfig, TrajectoryKind};
 use rigcal::sim::world::{SceneKind, World};
 
-/// Front camera (half size) against the spinning LiDAR on three frames of an urban drive.
+/// Front camera (half size) against the spinning LiDAR on six frames of an urban drive.
 fn problem() -> (EdgeAlignment, Rig) {
     let rig = SimRig::preset(RigPreset::Pandaset).scaled(0.5);
     let tcfg = TrajectoryConfig {
@@ -38,33 +38,39 @@ fn problem() -> (EdgeAlignment, Rig) {
         .find(|c| c.name == "front_camera")
         .unwrap();
     let rays = RayTable::new(&cam.intrinsics);
-    let frames = [800_000_000i64, 1_500_000_000, 2_200_000_000]
-        .iter()
-        .map(|&t| {
-            let image = camera_sim::render(
-                &world,
-                &rays,
-                &cam.intrinsics,
-                traj.world_from_vehicle(t).unwrap() * cam.vehicle_from_camera,
-                Exposure {
-                    gain: 1.0,
-                    tint: [1.0; 3],
-                    noise_sigma: 2.0,
-                    seed: t as u64,
-                },
-            );
-            let sweep = lidar_sim::simulate_sweep(&world, lidar, &traj, t, 5).unwrap();
-            let points =
-                silhouettes_in_vehicle(&sweep, &traj, lidar.vehicle_from_lidar, t).unwrap();
-            EdgeFrame::new(&image, points)
-        })
-        .collect();
+    let frames = [
+        500_000_000i64,
+        900_000_000,
+        1_300_000_000,
+        1_700_000_000,
+        2_100_000_000,
+        2_500_000_000,
+    ]
+    .iter()
+    .map(|&t| {
+        let image = camera_sim::render(
+            &world,
+            &rays,
+            &cam.intrinsics,
+            traj.world_from_vehicle(t).unwrap() * cam.vehicle_from_camera,
+            Exposure {
+                gain: 1.0,
+                tint: [1.0; 3],
+                noise_sigma: 2.0,
+                seed: t as u64,
+            },
+        );
+        let sweep = lidar_sim::simulate_sweep(&world, lidar, &traj, t, 5).unwrap();
+        let points = silhouettes_in_vehicle(&sweep, &traj, lidar.vehicle_from_lidar, t).unwrap();
+        EdgeFrame::new(&image, points)
+    })
+    .collect();
     let problem = EdgeAlignment {
         camera: cam.name.clone(),
         lidar: lidar.name.clone(),
         intrinsics: cam.intrinsics.clone(),
         frames,
-        truncation_px: 40.0,
+        truncation_px: 20.0,
     };
     (problem, rig.to_rig())
 }
@@ -94,14 +100,26 @@ fn compass_search_recovers_perturbed_camera_both_directions() {
             search.step(&problem);
         }
         let (rot_deg, trans_m) = truth.difference(search.best);
+        let axis_deg = so3::log((truth.inverse() * search.best).rotation) * 1f64.to_degrees();
+        eprintln!("error about camera x, y, z: {axis_deg:.3?}°");
         eprintln!(
-            "start {omega_deg:?}°: cost {start_cost:.2} -> {:.2} px (truth {gt_cost:.2}); error {rot_deg:.3}°, {:.1} cm",
+            "start {omega_deg:?}°: cost {start_cost:.2} -> {:.2} px (truth {gt_cost:.2}); error {:.3}°, {:.1} cm",
             search.best_cost,
+            rot_deg.to_degrees(),
             trans_m * 100.0
         );
-        assert!(gt_cost < start_cost, "truth must score better than the perturbation");
+        assert!(
+            gt_cost < start_cost,
+            "truth must score better than the perturbation"
+        );
         assert!(search.best_cost < start_cost - 1.0);
-        assert!(rot_deg < 0.2, "rotation error {rot_deg}° after refinement");
+        // Pan and tilt are what edges pin down; roll about the optical axis is weakly
+        // observed from one forward camera and only kept inside the trust region.
+        assert!(
+            axis_deg.x.abs() < 0.25 && axis_deg.y.abs() < 0.25,
+            "pan/tilt error {axis_deg:?}° after refinement"
+        );
+        assert!(rot_deg.to_degrees() < 2.0 + omega_deg.length());
         // Translation is not searched by default: it keeps its initial error.
         assert!((trans_m - (v_cm * 0.01).length()).abs() < 1e-9);
     }
@@ -117,7 +135,10 @@ fn runner_publishes_pauses_and_stops_with_the_best_result() {
     let search = CompassSearch::new(&problem, start);
     let start_cost = search.best_cost;
     let mut initial = rig.clone();
-    initial.sensor_mut("front_camera").unwrap().vehicle_from_sensor = start;
+    initial
+        .sensor_mut("front_camera")
+        .unwrap()
+        .vehicle_from_sensor = start;
     let run = Run::spawn(Box::new(EdgeRefiner::from_problems(
         initial,
         vec![(problem, search)],
@@ -132,7 +153,12 @@ fn runner_publishes_pauses_and_stops_with_the_best_result() {
     assert!(last.finished);
     let end_cost = last.losses.first().map_or(f64::MAX, |l| l.1);
     assert!(end_cost < start_cost, "{end_cost} vs {start_cost}");
-    let (rot_deg, _) = truth.difference(last.best.sensor("front_camera").unwrap().vehicle_from_sensor);
-    assert!(rot_deg < 0.2, "{rot_deg}°");
+    let (rot_deg, _) = truth.difference(
+        last.best
+            .sensor("front_camera")
+            .unwrap()
+            .vehicle_from_sensor,
+    );
+    assert!(rot_deg.to_degrees() < 0.25, "{}°", rot_deg.to_degrees());
     let _ = so3::exp(DVec3::ZERO);
 }

@@ -31,12 +31,12 @@ pub fn image_edges(img: &RgbImage) -> Vec<bool> {
             dir_horizontal[y * w + x] = gx.abs() >= gy.abs();
         }
     }
-    // Threshold: the 90th percentile of non-zero gradients, at least 40 (of 255·4).
+    // Threshold: the 95th percentile of non-zero gradients, at least 40 (of 255·4).
     let mut sorted: Vec<f32> = mag.iter().copied().filter(|m| *m > 1.0).collect();
     let threshold = if sorted.is_empty() {
         f32::MAX
     } else {
-        let k = (sorted.len() * 9 / 10).min(sorted.len() - 1);
+        let k = (sorted.len() * 19 / 20).min(sorted.len() - 1);
         let (_, kth, _) = sorted.select_nth_unstable_by(k, f32::total_cmp);
         kth.max(40.0)
     };

@@ -136,7 +136,11 @@ pub fn to_sweep(cloud: &RawPointCloud<'_>) -> DecodeResult<LidarSweep> {
         for row in 0..height {
             for col in 0..width {
                 let base = row * row_step + col * step;
-                let p = [at(base, fx.offset), at(base, fy.offset), at(base, fz.offset)];
+                let p = [
+                    at(base, fx.offset),
+                    at(base, fy.offset),
+                    at(base, fz.offset),
+                ];
                 if p.iter().all(|v| v.is_finite()) {
                     sweep.points_in_sensor.push(p);
                     sweep

@@ -76,25 +76,26 @@ pub fn silhouettes_in_vehicle(
         let vehicle_now_from_vehicle_then = match cache.iter().find(|(k, _)| *k == key) {
             Some((_, r)) => *r,
             None => {
-                let r = vehicle_from_world * drive_trajectory.world_from_vehicle(key * 1_000_000)?;
+                let r =
+                    vehicle_from_world * drive_trajectory.world_from_vehicle(key * 1_000_000)?;
                 cache.push((key, r));
                 r
             }
         };
         let p = sweep.points_in_sensor[i];
         out.push(
-            (vehicle_now_from_vehicle_then * vehicle_from_lidar)
-                .transform_point(DVec3::new(p[0] as f64, p[1] as f64, p[2] as f64)),
+            (vehicle_now_from_vehicle_then * vehicle_from_lidar).transform_point(DVec3::new(
+                p[0] as f64,
+                p[1] as f64,
+                p[2] as f64,
+            )),
         );
     }
     Ok(out)
 }
 
 impl EdgeFrame {
-    pub fn new(
-        image: &image::RgbImage,
-        points_in_vehicle: Vec<DVec3>,
-    ) -> Self {
+    pub fn new(image: &image::RgbImage, points_in_vehicle: Vec<DVec3>) -> Self {
         let (w, h) = (image.width() as usize, image.height() as usize);
         Self {
             width: w,
@@ -149,8 +150,7 @@ impl EdgeAlignment {
         let lidar_stream = drive
             .stream(lidar)
             .ok_or_else(|| AlignError::Setup(format!("no sweeps for '{lidar}' in the log")))?;
-        let in_segment =
-            |t: i64| segment_nanos.is_none_or(|(a, b)| t >= a && t <= b);
+        let in_segment = |t: i64| segment_nanos.is_none_or(|(a, b)| t >= a && t <= b);
         let usable: Vec<usize> = (0..lidar_stream.frames.len())
             .filter(|&i| {
                 let t = lidar_stream.frames[i].stamp_nanos;
@@ -194,7 +194,7 @@ impl EdgeAlignment {
             lidar: lidar.into(),
             intrinsics,
             frames: out,
-            truncation_px: 40.0,
+            truncation_px: 20.0,
         };
         problem.keep_visible(cam.vehicle_from_sensor);
         Ok(problem)
@@ -263,6 +263,11 @@ pub struct CompassSearch {
     /// Also search translation. Off by default: at street distances a few centimetres move a
     /// silhouette by well under a pixel, so edges constrain rotation, not translation.
     pub translate: bool,
+    /// Trust region: the search never moves the rotation further than this from the start.
+    /// Edges constrain pan and tilt sharply but roll about the optical axis only weakly, and a
+    /// textured scene has distant spurious minima; this refiner is a local polish.
+    pub max_rotation_rad: f64,
+    start: Rigid,
 }
 
 impl CompassSearch {
@@ -275,6 +280,8 @@ impl CompassSearch {
             min_step_rad: 0.005f64.to_radians(),
             min_step_m: 0.0005,
             translate: false,
+            max_rotation_rad: 2f64.to_radians(),
+            start,
         }
     }
 
@@ -296,6 +303,9 @@ impl CompassSearch {
                     v[axis - 3] = sign * self.step_m;
                 }
                 let candidate = self.best.perturbed_right(omega, v);
+                if self.start.difference(candidate).0 > self.max_rotation_rad {
+                    continue;
+                }
                 let c = problem.cost(candidate);
                 if c < best.map_or(self.best_cost, |(bc, _)| bc) {
                     best = Some((c, candidate));
