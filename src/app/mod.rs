@@ -4,6 +4,8 @@
 //! ([`crate::log::Drive`], [`crate::geometry::projection`]). `run` opens a window; the state
 //! lives in [`state::Studio`], panels are `*_ui` functions in their own files.
 
+pub mod demo;
+pub mod optimiser;
 mod overlay;
 mod sensors;
 pub mod state;
@@ -25,8 +27,9 @@ pub fn run(log: Option<PathBuf>, calibration: Option<PathBuf>) -> anyhow::Result
         options,
         Box::new(move |_cc| {
             let mut studio = Studio::default();
-            if let Some(path) = log {
-                studio.open_log(&path);
+            match log {
+                Some(path) => studio.open_log(&path),
+                None => demo::start(&mut studio),
             }
             if let Some(path) = calibration {
                 studio.load_calibration(&path);

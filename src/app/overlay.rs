@@ -51,6 +51,10 @@ fn camera_names(studio: &Studio) -> Vec<String> {
 }
 
 pub(crate) fn viewport_ui(studio: &mut Studio, ui: &mut egui::Ui) {
+    if let Some(job) = &studio.demo {
+        super::demo::progress_ui(job, ui);
+        return;
+    }
     let Some(drive) = studio.drive.as_ref() else {
         ui.centered_and_justified(|ui| {
             ui.heading("Open a drive (File ▸ Open log…, or drop an .mcap here)")
@@ -79,6 +83,13 @@ pub(crate) fn viewport_ui(studio: &mut Studio, ui: &mut egui::Ui) {
         ui.separator();
         ui.selectable_value(&mut studio.view, ExtrinsicsView::Initial, "initial");
         ui.selectable_value(&mut studio.view, ExtrinsicsView::Current, "current");
+        if studio.ground_truth.is_some() {
+            ui.selectable_value(
+                &mut studio.view,
+                ExtrinsicsView::GroundTruth,
+                "ground truth",
+            );
+        }
         ui.separator();
         ui.selectable_value(&mut studio.color_by, ColorBy::Range, "range");
         ui.selectable_value(&mut studio.color_by, ColorBy::Intensity, "intensity");

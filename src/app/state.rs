@@ -1,6 +1,7 @@
 //! Studio state: the open drive, the extrinsics being edited (with undo/redo), the selection.
 
 use std::path::Path;
+use std::sync::Arc;
 
 use crate::calib::{CalibrationFile, Rig};
 use crate::geometry::Rigid;
@@ -11,6 +12,7 @@ use crate::log::Drive;
 pub enum ExtrinsicsView {
     Initial,
     Current,
+    GroundTruth,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -20,7 +22,7 @@ pub enum ColorBy {
 }
 
 pub struct Studio {
-    pub drive: Option<Drive>,
+    pub drive: Option<Arc<Drive>>,
     /// The rig as loaded (initial guess).
     pub initial: Rig,
     /// The rig being edited.
@@ -40,6 +42,10 @@ pub struct Studio {
     /// Messages for the user; errors are shown, never fatal.
     pub status: Vec<String>,
     pub(crate) overlay_cache: super::overlay::OverlayCache,
+    pub optimiser: super::optimiser::OptimiserPanel,
+    /// Known ground truth (the simulator's demo), for the overlay and pose errors.
+    pub ground_truth: Option<Rig>,
+    pub demo: Option<super::demo::DemoJob>,
 }
 
 impl Default for Studio {
@@ -62,6 +68,9 @@ impl Default for Studio {
             nudge_step_deg: 0.1,
             status: Vec::new(),
             overlay_cache: Default::default(),
+            optimiser: Default::default(),
+            ground_truth: None,
+            demo: None,
         }
     }
 }
@@ -82,7 +91,9 @@ impl Studio {
                     drive.rig.sensors.len(),
                     drive.problems.len()
                 ));
-                self.drive = Some(drive);
+                self.drive = Some(Arc::new(drive));
+                self.ground_truth = None;
+                self.optimiser = Default::default();
                 self.overlay_cache = Default::default();
             }
             Err(e) => self.status.push(format!("error: {e}")),
@@ -148,6 +159,7 @@ impl Studio {
         match self.view {
             ExtrinsicsView::Initial => &self.initial,
             ExtrinsicsView::Current => &self.current,
+            ExtrinsicsView::GroundTruth => self.ground_truth.as_ref().unwrap_or(&self.current),
         }
     }
 }
@@ -155,11 +167,16 @@ impl Studio {
 impl eframe::App for Studio {
     fn ui(&mut self, ui: &mut egui::Ui, _frame: &mut eframe::Frame) {
         self.handle_dropped_files(ui.ctx());
+        super::optimiser::poll(self, ui.ctx());
+        super::demo::poll(self, ui.ctx());
         egui::Panel::top("menu").show(ui, |ui| self.menu_ui(ui));
         egui::Panel::bottom("status").show(ui, |ui| self.status_ui(ui));
         egui::Panel::left("sensors")
             .default_size(340.0)
             .show(ui, |ui| super::sensors::sensors_ui(self, ui));
+        egui::Panel::right("optimiser")
+            .default_size(380.0)
+            .show(ui, |ui| super::optimiser::optimiser_ui(self, ui));
         egui::CentralPanel::default().show(ui, |ui| super::overlay::viewport_ui(self, ui));
     }
 }

@@ -44,6 +44,8 @@ pub struct Packet {
     pub current: Rig,
     pub best: Rig,
     pub finished: bool,
+    /// Set when the run could not start (preparation failed); nothing else is meaningful then.
+    pub error: Option<String>,
 }
 
 const RUN: u8 = 0;
@@ -59,13 +61,37 @@ pub struct Run {
 
 impl Run {
     /// Start stepping `calibrator` on a new thread.
-    pub fn spawn(mut calibrator: Box<dyn Calibrator>) -> Self {
+    pub fn spawn(calibrator: Box<dyn Calibrator>) -> Self {
+        Self::spawn_with(move || Ok(calibrator))
+    }
+
+    /// Prepare a calibrator on the worker thread (loading images, building problems: slow work
+    /// the UI must not wait on), then step it. A failed preparation sends one packet with
+    /// `error` set.
+    pub fn spawn_with<F>(prepare: F) -> Self
+    where
+        F: FnOnce() -> Result<Box<dyn Calibrator>, String> + Send + 'static,
+    {
         let control = Arc::new(AtomicU8::new(RUN));
         let (tx, rx) = channel();
         let ctl = control.clone();
         let thread = std::thread::Builder::new()
-            .name(format!("rigcal-{}", calibrator.name()))
-            .spawn(move || worker(calibrator.as_mut(), &ctl, &tx))
+            .name("rigcal-optimiser".into())
+            .spawn(move || match prepare() {
+                Ok(mut c) => worker(c.as_mut(), &ctl, &tx),
+                Err(e) => {
+                    let _ = tx.send(Packet {
+                        step: 0,
+                        max_steps: 0,
+                        steps_per_sec: 0.0,
+                        losses: Vec::new(),
+                        current: Rig::default(),
+                        best: Rig::default(),
+                        finished: true,
+                        error: Some(e),
+                    });
+                }
+            })
             .ok();
         Self {
             control,
@@ -144,6 +170,7 @@ fn worker(c: &mut dyn Calibrator, control: &AtomicU8, tx: &Sender<Packet>) {
                 current: c.current(),
                 best: c.best(),
                 finished: done,
+                error: None,
             };
             if tx.send(p).is_err() {
                 return; // nobody listens any more
@@ -164,5 +191,6 @@ fn worker(c: &mut dyn Calibrator, control: &AtomicU8, tx: &Sender<Packet>) {
         current: c.current(),
         best: c.best(),
         finished: true,
+        error: None,
     });
 }

@@ -3,6 +3,7 @@
 
 pub mod bvh;
 pub mod camera_sim;
+pub mod demo;
 pub mod lidar_sim;
 pub mod noise;
 pub mod rigs;

@@ -1,0 +1,356 @@
+//! Optimiser panel: choose the method, the reference LiDAR and the cameras, start / pause /
+//! resume / stop a background run, watch progress, loss curves and per-camera alignment scores.
+//!
+//! The run lives in [`crate::optim::runner::Run`]; every frame [`poll`] drains its packets
+//! (never blocking), shows the live extrinsics in the overlay and records the loss history.
+//! When a run ends, its best rig becomes the current one as a single undoable edit.
+
+use egui_plot::{Legend, Line, Plot, PlotPoints};
+
+use crate::calib::{Rig, SensorKind};
+use crate::optim::edge_refine::EdgeRefiner;
+use crate::optim::runner::{Calibrator, Run};
+
+use super::Studio;
+
+/// Methods the panel offers. UniCal and the classical calibrators join as they land.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum Method {
+    #[default]
+    EdgeAlign,
+}
+
+impl Method {
+    fn label(self) -> &'static str {
+        match self {
+            Method::EdgeAlign => "Edge alignment (cameras vs LiDAR, rotation)",
+        }
+    }
+}
+
+#[derive(Default)]
+pub struct OptimiserPanel {
+    pub method: Method,
+    pub reference_lidar: Option<String>,
+    /// Cameras to optimise (empty = all).
+    pub cameras: Vec<String>,
+    pub frames: usize,
+    pub run: Option<Run>,
+    /// The rig when the run started (restored by undo).
+    pub started_from: Option<Rig>,
+    /// (step, losses) of the current or last run.
+    pub history: Vec<(usize, Vec<(String, f64)>)>,
+    /// (step, sensor, rotation change deg) against the start.
+    pub pose_change: Vec<(usize, String, f64)>,
+    pub progress: (usize, usize, f64),
+    pub message: Option<String>,
+}
+
+/// Drain packets from a running optimiser (non-blocking).
+pub fn poll(studio: &mut Studio, ctx: &egui::Context) {
+    let Some(run) = studio.optimiser.run.as_ref() else {
+        return;
+    };
+    let packets: Vec<_> = run.packets.try_iter().collect();
+    let mut finished = false;
+    for p in packets {
+        if let Some(e) = p.error {
+            studio.optimiser.message = Some(format!("error: {e}"));
+            studio.status.push(format!("error: optimiser: {e}"));
+            finished = true;
+            continue;
+        }
+        studio.optimiser.progress = (p.step, p.max_steps, p.steps_per_sec);
+        studio.optimiser.history.push((p.step, p.losses.clone()));
+        if let Some(start) = &studio.optimiser.started_from {
+            for s in p.current.sensors.iter() {
+                if let Some(s0) = start.sensor(&s.name) {
+                    let (rot, _) = s0.vehicle_from_sensor.difference(s.vehicle_from_sensor);
+                    if rot > 0.0 {
+                        studio.optimiser.pose_change.push((
+                            p.step,
+                            s.name.clone(),
+                            rot.to_degrees(),
+                        ));
+                    }
+                }
+            }
+        }
+        // Live extrinsics in the overlay (not an undo step each time).
+        studio.current = p.current.clone();
+        if p.finished {
+            studio.current = p.best.clone();
+            finished = true;
+        }
+    }
+    if finished {
+        studio.optimiser.run = None;
+        if let Some(start) = studio.optimiser.started_from.take()
+            && start != studio.current
+        {
+            studio.undo.push(start);
+            studio.redo.clear();
+            studio
+                .status
+                .push("optimiser finished (Undo restores the start)".into());
+        }
+    }
+    if studio.optimiser.run.is_some() {
+        ctx.request_repaint_after(std::time::Duration::from_millis(100));
+    }
+}
+
+/// Start a run with the panel's settings.
+pub fn start(studio: &mut Studio) {
+    let Some(drive) = studio.drive.clone() else {
+        studio.optimiser.message = Some("open a drive first".into());
+        return;
+    };
+    let rig = studio.current.clone();
+    let Some(lidar) = studio
+        .optimiser
+        .reference_lidar
+        .clone()
+        .or_else(|| rig.lidars().next().map(|l| l.name.clone()))
+    else {
+        studio.optimiser.message = Some("this drive has no LiDAR".into());
+        return;
+    };
+    let cameras: Vec<String> = if studio.optimiser.cameras.is_empty() {
+        rig.cameras().map(|c| c.name.clone()).collect()
+    } else {
+        studio.optimiser.cameras.clone()
+    };
+    let frames = studio.optimiser.frames.max(1);
+    let prepare_rig = rig.clone();
+    studio.optimiser.history.clear();
+    studio.optimiser.pose_change.clear();
+    studio.optimiser.progress = (0, 0, 0.0);
+    studio.optimiser.message = Some(format!(
+        "preparing {} camera(s) on {frames} frame(s)…",
+        cameras.len()
+    ));
+    studio.optimiser.started_from = Some(rig);
+    studio.optimiser.run = Some(Run::spawn_with(move || {
+        EdgeRefiner::new(&drive, &prepare_rig, &lidar, &cameras, frames, None)
+            .map(|r| Box::new(r) as Box<dyn Calibrator>)
+            .map_err(|e| e.to_string())
+    }));
+}
+
+pub fn optimiser_ui(studio: &mut Studio, ui: &mut egui::Ui) {
+    ui.heading("Optimiser");
+    if studio.optimiser.frames == 0 {
+        studio.optimiser.frames = 4;
+    }
+    let running = studio.optimiser.run.is_some();
+    ui.add_enabled_ui(!running, |ui| {
+        egui::ComboBox::from_label("method")
+            .selected_text(studio.optimiser.method.label())
+            .show_ui(ui, |ui| {
+                ui.selectable_value(
+                    &mut studio.optimiser.method,
+                    Method::EdgeAlign,
+                    Method::EdgeAlign.label(),
+                );
+            });
+        let lidars: Vec<String> = studio
+            .current
+            .sensors
+            .iter()
+            .filter(|s| s.kind == SensorKind::Lidar)
+            .map(|s| s.name.clone())
+            .collect();
+        let shown = studio
+            .optimiser
+            .reference_lidar
+            .clone()
+            .or_else(|| lidars.first().cloned())
+            .unwrap_or_default();
+        egui::ComboBox::from_label("reference LiDAR (fixed)")
+            .selected_text(shown)
+            .show_ui(ui, |ui| {
+                for l in &lidars {
+                    ui.selectable_value(&mut studio.optimiser.reference_lidar, Some(l.clone()), l);
+                }
+            });
+        ui.label("cameras to optimise (none ticked = all):");
+        let cams: Vec<String> = studio.current.cameras().map(|c| c.name.clone()).collect();
+        ui.horizontal_wrapped(|ui| {
+            for c in cams {
+                let mut on = studio.optimiser.cameras.contains(&c);
+                if ui.checkbox(&mut on, &c).changed() {
+                    if on {
+                        studio.optimiser.cameras.push(c.clone());
+                    } else {
+                        studio.optimiser.cameras.retain(|x| *x != c);
+                    }
+                }
+            }
+        });
+        ui.add(egui::Slider::new(&mut studio.optimiser.frames, 1..=12).text("frames"));
+    });
+    ui.horizontal(|ui| {
+        if !running {
+            if ui
+                .add_enabled(studio.drive.is_some(), egui::Button::new("▶ Start"))
+                .clicked()
+            {
+                start(studio);
+            }
+        } else if let Some(run) = &studio.optimiser.run {
+            if run.is_paused() {
+                if ui.button("▶ Resume").clicked() {
+                    run.resume();
+                }
+            } else if ui.button("⏸ Pause").clicked() {
+                run.pause();
+            }
+            if ui.button("⏹ Stop").clicked() {
+                run.stop();
+            }
+        }
+    });
+    let (step, max, rate) = studio.optimiser.progress;
+    if running || step > 0 {
+        let frac = if max > 0 {
+            step as f32 / max as f32
+        } else {
+            0.0
+        };
+        let eta = if rate > 0.0 && max > step {
+            format!("≤ {:.0} s left", (max - step) as f64 / rate)
+        } else {
+            String::new()
+        };
+        ui.add(
+            egui::ProgressBar::new(frac).text(format!("step {step}/{max} · {rate:.1} it/s {eta}")),
+        );
+    }
+    if let Some(m) = &studio.optimiser.message {
+        if m.starts_with("error") {
+            ui.colored_label(egui::Color32::LIGHT_RED, m);
+        } else if running && step == 0 {
+            ui.label(m);
+        }
+    }
+    ui.separator();
+    losses_ui(studio, ui);
+    ui.separator();
+    alignment_table_ui(studio, ui);
+    if let Some(gt) = &studio.ground_truth {
+        ui.separator();
+        pose_errors_ui(&studio.current, gt, ui);
+    }
+}
+
+/// Per sensor: rotation (deg) and translation (cm) error of the current rig against the known
+/// ground truth (the simulator's demo; the vehicle frame is shared, so no root alignment).
+fn pose_errors_ui(current: &Rig, gt: &Rig, ui: &mut egui::Ui) {
+    ui.label("Error against the ground truth (current rig)");
+    egui::Grid::new("gt_errors").striped(true).show(ui, |ui| {
+        ui.strong("sensor");
+        ui.strong("rotation °");
+        ui.strong("translation cm");
+        ui.end_row();
+        for s in &current.sensors {
+            if let Some(g) = gt.sensor(&s.name) {
+                let (r, t) = g.vehicle_from_sensor.difference(s.vehicle_from_sensor);
+                ui.label(&s.name);
+                ui.label(format!("{:.3}", r.to_degrees()));
+                ui.label(format!("{:.1}", t * 100.0));
+                ui.end_row();
+            }
+        }
+    });
+}
+
+/// Loss curves (log10 scale) and per-sensor rotation change against the step.
+fn losses_ui(studio: &Studio, ui: &mut egui::Ui) {
+    ui.label("Loss (log₁₀ px) against step");
+    let mut names: Vec<String> = Vec::new();
+    for (_, l) in &studio.optimiser.history {
+        for (n, _) in l {
+            if !names.contains(n) {
+                names.push(n.clone());
+            }
+        }
+    }
+    Plot::new("losses")
+        .height(180.0)
+        .legend(Legend::default())
+        .x_axis_label("step")
+        .y_axis_label("log₁₀ loss")
+        .show(ui, |plot| {
+            for n in &names {
+                let pts: Vec<[f64; 2]> = studio
+                    .optimiser
+                    .history
+                    .iter()
+                    .filter_map(|(s, l)| {
+                        l.iter()
+                            .find(|(k, _)| k == n)
+                            .filter(|(_, v)| *v > 0.0)
+                            .map(|(_, v)| [*s as f64, v.log10()])
+                    })
+                    .collect();
+                plot.line(Line::new(n.clone(), PlotPoints::from(pts)));
+            }
+        });
+    ui.label("Rotation change from the start (deg)");
+    let mut sensors: Vec<String> = Vec::new();
+    for (_, s, _) in &studio.optimiser.pose_change {
+        if !sensors.contains(s) {
+            sensors.push(s.clone());
+        }
+    }
+    Plot::new("pose_change")
+        .height(140.0)
+        .legend(Legend::default())
+        .x_axis_label("step")
+        .show(ui, |plot| {
+            for s in &sensors {
+                let pts: Vec<[f64; 2]> = studio
+                    .optimiser
+                    .pose_change
+                    .iter()
+                    .filter(|(_, n, _)| n == s)
+                    .map(|(k, _, v)| [*k as f64, *v])
+                    .collect();
+                plot.line(Line::new(s.clone(), PlotPoints::from(pts)));
+            }
+        });
+}
+
+/// Per camera: the edge-alignment score at the start and now, worst first.
+fn alignment_table_ui(studio: &Studio, ui: &mut egui::Ui) {
+    ui.label("Alignment score: mean px from LiDAR silhouettes to image edges");
+    let (Some((_, first)), Some((_, last))) = (
+        studio.optimiser.history.first(),
+        studio.optimiser.history.last(),
+    ) else {
+        ui.weak("(run the optimiser to score each camera)");
+        return;
+    };
+    let mut rows: Vec<(String, f64, f64)> = last
+        .iter()
+        .filter_map(|(n, now)| {
+            let cam = n.strip_prefix("edge_px/")?;
+            let before = first.iter().find(|(k, _)| k == n).map_or(*now, |x| x.1);
+            Some((cam.to_string(), before, *now))
+        })
+        .collect();
+    rows.sort_by(|a, b| b.2.total_cmp(&a.2));
+    egui::Grid::new("scores").striped(true).show(ui, |ui| {
+        ui.strong("camera");
+        ui.strong("start");
+        ui.strong("now");
+        ui.end_row();
+        for (cam, before, now) in rows {
+            ui.label(cam);
+            ui.label(format!("{before:.2}"));
+            ui.label(format!("{now:.2}"));
+            ui.end_row();
+        }
+    });
+}
