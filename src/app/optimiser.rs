@@ -8,6 +8,7 @@
 use egui_plot::{Legend, Line, Plot, PlotPoints};
 
 use crate::calib::{Rig, SensorKind};
+use crate::geometry::rig_errors;
 use crate::optim::edge_refine::EdgeRefiner;
 use crate::optim::runner::{Calibrator, Run};
 
@@ -193,20 +194,20 @@ pub fn optimiser_ui(studio: &mut Studio, ui: &mut egui::Ui) {
     ui.horizontal(|ui| {
         if !running {
             if ui
-                .add_enabled(studio.drive.is_some(), egui::Button::new("▶ Start"))
+                .add_enabled(studio.drive.is_some(), egui::Button::new("Start"))
                 .clicked()
             {
                 start(studio);
             }
         } else if let Some(run) = &studio.optimiser.run {
             if run.is_paused() {
-                if ui.button("▶ Resume").clicked() {
+                if ui.button("Resume").clicked() {
                     run.resume();
                 }
-            } else if ui.button("⏸ Pause").clicked() {
+            } else if ui.button("Pause").clicked() {
                 run.pause();
             }
-            if ui.button("⏹ Stop").clicked() {
+            if ui.button("Stop").clicked() {
                 run.stop();
             }
         }
@@ -240,29 +241,14 @@ pub fn optimiser_ui(studio: &mut Studio, ui: &mut egui::Ui) {
     alignment_table_ui(studio, ui);
     if let Some(gt) = &studio.ground_truth {
         ui.separator();
-        pose_errors_ui(&studio.current, gt, ui);
+        let root = studio
+            .optimiser
+            .reference_lidar
+            .clone()
+            .or_else(|| studio.current.lidars().next().map(|l| l.name.clone()))
+            .unwrap_or_default();
+        pose_errors_ui(&studio.current, gt, &root, ui);
     }
-}
-
-/// Per sensor: rotation (deg) and translation (cm) error of the current rig against the known
-/// ground truth (the simulator's demo; the vehicle frame is shared, so no root alignment).
-fn pose_errors_ui(current: &Rig, gt: &Rig, ui: &mut egui::Ui) {
-    ui.label("Error against the ground truth (current rig)");
-    egui::Grid::new("gt_errors").striped(true).show(ui, |ui| {
-        ui.strong("sensor");
-        ui.strong("rotation °");
-        ui.strong("translation cm");
-        ui.end_row();
-        for s in &current.sensors {
-            if let Some(g) = gt.sensor(&s.name) {
-                let (r, t) = g.vehicle_from_sensor.difference(s.vehicle_from_sensor);
-                ui.label(&s.name);
-                ui.label(format!("{:.3}", r.to_degrees()));
-                ui.label(format!("{:.1}", t * 100.0));
-                ui.end_row();
-            }
-        }
-    });
 }
 
 /// Loss curves (log10 scale) and per-sensor rotation change against the step.
@@ -350,6 +336,30 @@ fn alignment_table_ui(studio: &Studio, ui: &mut egui::Ui) {
             ui.label(cam);
             ui.label(format!("{before:.2}"));
             ui.label(format!("{now:.2}"));
+            ui.end_row();
+        }
+    });
+}
+
+/// Per sensor: rotation (deg) and translation (cm) error of the current rig against the known
+/// ground truth after aligning the root sensor (method.md §13), the reference LiDAR here.
+fn pose_errors_ui(current: &Rig, gt: &Rig, root: &str, ui: &mut egui::Ui) {
+    ui.label(format!(
+        "Error against the ground truth (current rig, root {root} aligned)"
+    ));
+    let Some(errors) = rig_errors(&gt.extrinsics(), &current.extrinsics(), root) else {
+        ui.weak("(the root sensor is missing from the ground truth)");
+        return;
+    };
+    egui::Grid::new("gt_errors").striped(true).show(ui, |ui| {
+        ui.strong("sensor");
+        ui.strong("rotation °");
+        ui.strong("translation cm");
+        ui.end_row();
+        for e in errors {
+            ui.label(&e.sensor);
+            ui.label(format!("{:.3}", e.rotation_deg));
+            ui.label(format!("{:.1}", e.translation_m * 100.0));
             ui.end_row();
         }
     });
