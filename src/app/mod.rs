@@ -5,6 +5,7 @@
 //! lives in [`state::Studio`], panels are `*_ui` functions in their own files.
 
 pub mod demo;
+pub mod gpu_overlay;
 pub mod optimiser;
 mod overlay;
 mod sensors;
@@ -25,8 +26,11 @@ pub fn run(log: Option<PathBuf>, calibration: Option<PathBuf>) -> anyhow::Result
     eframe::run_native(
         "rigcal studio",
         options,
-        Box::new(move |_cc| {
-            let mut studio = Studio::default();
+        Box::new(move |cc| {
+            let mut studio = Studio {
+                gpu: gpu_overlay::install(cc.wgpu_render_state.as_ref()),
+                ..Studio::default()
+            };
             match log {
                 Some(path) => studio.open_log(&path),
                 None => demo::start(&mut studio),

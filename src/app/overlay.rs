@@ -1,6 +1,7 @@
 //! The camera viewport: the image with LiDAR sweeps projected through the current extrinsics.
 //!
-//! Projection runs in the library ([`crate::geometry::projection`]) and is cached until the
+//! With a wgpu renderer the points are projected on the GPU ([`super::gpu_overlay`]). Otherwise
+//! projection runs in the library ([`crate::geometry::projection`]) and is cached until the
 //! camera, the frame or the extrinsics change; drawing is egui mesh quads, nearest points drawn
 //! last so they cover farther ones.
 
@@ -8,9 +9,13 @@ use std::sync::Arc;
 
 use egui::{Color32, Pos2, Rect, Vec2};
 
+use super::gpu_overlay::{GpuPoint, OverlayCallback, Uniforms, paint_callback, transforms_f32};
 use super::state::{ColorBy, ExtrinsicsView, Studio};
 use crate::calib::{Rig, SensorKind};
-use crate::geometry::projection::{ProjectedPoint, SweepView, project_sweep};
+use crate::geometry::Rigid;
+use crate::geometry::projection::{
+    ProjectedPoint, SweepView, camera_from_lidar_buckets, point_buckets, project_sweep,
+};
 use crate::log::LidarSweep;
 
 #[derive(Default)]
@@ -20,6 +25,11 @@ pub(crate) struct OverlayCache {
     points: Vec<ProjectedPoint>,
     texture: Option<(usize, usize, egui::TextureHandle)>,
     sweeps: Vec<(String, usize, Arc<LidarSweep>)>,
+    /// GPU path: points (far to near) with global bucket indices, and the bucket transforms.
+    gpu_points: Arc<Vec<GpuPoint>>,
+    gpu_points_key: u64,
+    gpu_transforms: Vec<[[f32; 4]; 4]>,
+    gpu_intensity_max: f32,
 }
 
 /// A perceptual rainbow (turbo-like) for t in [0, 1].
@@ -129,6 +139,31 @@ pub(crate) fn viewport_ui(studio: &mut Studio, ui: &mut egui::Ui) {
         Rect::from_min_max(Pos2::ZERO, Pos2::new(1.0, 1.0)),
         Color32::WHITE,
     );
+    if studio.gpu {
+        let ppp = ui.ctx().pixels_per_point();
+        let mut uniforms = Uniforms::camera(&intr);
+        uniforms.viewport_size_px = [rect.width() * ppp, rect.height() * ppp];
+        uniforms.color_mode = match studio.color_by {
+            ColorBy::Range => 0,
+            ColorBy::Intensity => 1,
+        };
+        // Splat radius in physical pixels (the CPU path draws squares of side `point_size`).
+        uniforms.point_size_px = (studio.point_size * 0.6).max(0.75) * ppp;
+        uniforms.opacity = 1.0;
+        uniforms.range_min_m = 0.0;
+        uniforms.range_max_m = studio.max_range_m;
+        uniforms.intensity_max = cache.gpu_intensity_max;
+        painter.add(paint_callback(
+            rect,
+            OverlayCallback {
+                points_key: cache.gpu_points_key,
+                points: cache.gpu_points.clone(),
+                transforms: cache.gpu_transforms.clone(),
+                uniforms,
+            },
+        ));
+        return;
+    }
     let scale = rect.width() / intr.width as f32;
     let half = studio.point_size * 0.5;
     let mut mesh = egui::Mesh::default();
@@ -165,6 +200,7 @@ fn refresh(studio: &mut Studio, camera: &str, ctx: &egui::Context) -> Result<(),
     };
     let key = (studio.camera, studio.frame, studio.view, studio.stride);
     let rig = studio.shown_rig().clone();
+    let gpu = studio.gpu;
     let cache = &mut studio.overlay_cache;
     if cache.key == Some(key) && cache.rig.as_ref() == Some(&rig) {
         return Ok(());
@@ -187,6 +223,8 @@ fn refresh(studio: &mut Studio, camera: &str, ctx: &egui::Context) -> Result<(),
     let cam = rig.sensor(camera).ok_or("no such camera")?;
     let intr = cam.camera.clone().ok_or("camera has no intrinsics")?;
     let mut points = Vec::new();
+    // GPU path: which sweeps are drawn (their points are uploaded once), and bucket transforms.
+    let mut gpu_sweeps: Vec<(Arc<LidarSweep>, Vec<Rigid>)> = Vec::new();
     for lidar in rig.lidars() {
         let Some(ls) = drive.stream(&lidar.name) else {
             continue;
@@ -225,6 +263,18 @@ fn refresh(studio: &mut Studio, camera: &str, ctx: &egui::Context) -> Result<(),
             time_offset_secs: sweep.time_offset_secs.as_deref(),
             stamp_nanos: sweep.stamp_nanos,
         };
+        if gpu {
+            let t = camera_from_lidar_buckets(
+                &view,
+                &drive.trajectory,
+                lidar.vehicle_from_sensor,
+                cam.vehicle_from_sensor,
+                image_stamp,
+            )
+            .map_err(|e| format!("{camera} frame {}: {e}", studio.frame))?;
+            gpu_sweeps.push((sweep.clone(), t));
+            continue;
+        }
         match project_sweep(
             &view,
             &drive.trajectory,
@@ -238,8 +288,66 @@ fn refresh(studio: &mut Studio, camera: &str, ctx: &egui::Context) -> Result<(),
             Err(e) => return Err(format!("{camera} frame {}: {e}", studio.frame)),
         }
     }
+    if gpu {
+        upload_gpu_points(cache, &gpu_sweeps, studio.stride);
+    }
     cache.points = points;
     cache.key = Some(key);
     cache.rig = Some(rig);
     Ok(())
+}
+
+/// Rebuild the GPU point list when the set of sweeps changed; always refresh the transforms.
+fn upload_gpu_points(
+    cache: &mut OverlayCache,
+    sweeps: &[(Arc<LidarSweep>, Vec<Rigid>)],
+    stride: usize,
+) {
+    use std::hash::{Hash, Hasher};
+    let mut h = std::collections::hash_map::DefaultHasher::new();
+    for (s, t) in sweeps {
+        (Arc::as_ptr(s) as usize, s.stamp_nanos, t.len()).hash(&mut h);
+    }
+    stride.hash(&mut h);
+    let key = h.finish();
+    if key != cache.gpu_points_key || cache.gpu_points.is_empty() {
+        let mut pts: Vec<(f32, GpuPoint)> = Vec::new();
+        let mut base = 0u32;
+        for (s, t) in sweeps {
+            let view = SweepView {
+                points_in_lidar: &s.points_in_sensor,
+                intensity: &s.intensity,
+                time_offset_secs: s.time_offset_secs.as_deref(),
+                stamp_nanos: s.stamp_nanos,
+            };
+            let buckets = point_buckets(&view);
+            for i in (0..s.points_in_sensor.len()).step_by(stride.max(1)) {
+                let p = s.points_in_sensor[i];
+                let range = (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt();
+                pts.push((
+                    range,
+                    GpuPoint {
+                        position_intensity: [
+                            p[0],
+                            p[1],
+                            p[2],
+                            s.intensity.get(i).copied().unwrap_or(0.0),
+                        ],
+                        bucket: base + buckets[i],
+                    },
+                ));
+            }
+            base += t.len() as u32;
+        }
+        // Far to near: nearer splats are drawn over farther ones.
+        pts.sort_by(|a, b| b.0.total_cmp(&a.0));
+        cache.gpu_intensity_max = pts
+            .iter()
+            .map(|p| p.1.position_intensity[3])
+            .fold(1.0, f32::max);
+        cache.gpu_points = Arc::new(pts.into_iter().map(|p| p.1).collect());
+        cache.gpu_points_key = key;
+    }
+    let all: Vec<Rigid> = sweeps.iter().flat_map(|(_, t)| t.iter().copied()).collect();
+    cache.gpu_transforms = transforms_f32(&all);
 }

@@ -46,6 +46,8 @@ pub struct Studio {
     /// Known ground truth (the simulator's demo), for the overlay and pose errors.
     pub ground_truth: Option<Rig>,
     pub demo: Option<super::demo::DemoJob>,
+    /// The overlay is drawn by the wgpu paint callback (false: CPU-projected egui mesh).
+    pub gpu: bool,
 }
 
 impl Default for Studio {
@@ -71,6 +73,7 @@ impl Default for Studio {
             optimiser: Default::default(),
             ground_truth: None,
             demo: None,
+            gpu: false,
         }
     }
 }

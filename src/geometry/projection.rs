@@ -33,29 +33,31 @@ pub struct SweepView<'a> {
 
 const BUCKET_NANOS: i64 = 1_000_000;
 
+/// First and last 1 ms firing-time bucket of a sweep (relative to its stamp); `None` when the
+/// sweep has no per-point time (one bucket).
+fn bucket_range(sweep: &SweepView<'_>) -> Option<(i64, i64)> {
+    let offsets = sweep.time_offset_secs?;
+    let (lo, hi) = offsets
+        .iter()
+        .fold((f32::MAX, f32::MIN), |(lo, hi), &t| (lo.min(t), hi.max(t)));
+    (lo <= hi).then_some((
+        (lo as f64 * 1e9) as i64 / BUCKET_NANOS,
+        (hi as f64 * 1e9) as i64 / BUCKET_NANOS,
+    ))
+}
+
 /// `world_from_lidar` at every 1 ms bucket the sweep's points fall in.
 fn world_from_lidar_buckets(
     sweep: &SweepView<'_>,
     trajectory: &Trajectory,
     vehicle_from_lidar: Rigid,
 ) -> Result<(i64, Vec<Rigid>), TrajectoryError> {
-    let Some(offsets) = sweep.time_offset_secs else {
+    let Some((first, last)) = bucket_range(sweep) else {
         return Ok((
             0,
             vec![trajectory.world_from_vehicle(sweep.stamp_nanos)? * vehicle_from_lidar],
         ));
     };
-    let (lo, hi) = offsets
-        .iter()
-        .fold((f32::MAX, f32::MIN), |(lo, hi), &t| (lo.min(t), hi.max(t)));
-    if lo > hi {
-        return Ok((
-            0,
-            vec![trajectory.world_from_vehicle(sweep.stamp_nanos)? * vehicle_from_lidar],
-        ));
-    }
-    let first = (lo as f64 * 1e9) as i64 / BUCKET_NANOS;
-    let last = (hi as f64 * 1e9) as i64 / BUCKET_NANOS;
     let poses = (first..=last)
         .map(|b| {
             Ok(
@@ -65,6 +67,38 @@ fn world_from_lidar_buckets(
         })
         .collect::<Result<Vec<_>, _>>()?;
     Ok((first, poses))
+}
+
+/// Index of each point's firing-time bucket into [`camera_from_lidar_buckets`]. It depends only
+/// on the sweep, so a GPU can keep it while extrinsics change.
+pub fn point_buckets(sweep: &SweepView<'_>) -> Vec<u32> {
+    let n = sweep.points_in_lidar.len();
+    match (bucket_range(sweep), sweep.time_offset_secs) {
+        (Some((first, last)), Some(t)) => t
+            .iter()
+            .map(|&s| {
+                ((s as f64 * 1e9) as i64 / BUCKET_NANOS - first).clamp(0, last - first) as u32
+            })
+            .collect(),
+        _ => vec![0; n],
+    }
+}
+
+/// `camera_from_lidar` at each firing-time bucket of a sweep, for an image taken at
+/// `image_stamp_nanos`: `(world_from_vehicle(t_img) · vehicle_from_camera)⁻¹ ·
+/// world_from_vehicle(t_bucket) · vehicle_from_lidar`. Small numbers even far from the world
+/// origin, so they survive conversion to f32 for shaders.
+pub fn camera_from_lidar_buckets(
+    sweep: &SweepView<'_>,
+    trajectory: &Trajectory,
+    vehicle_from_lidar: Rigid,
+    vehicle_from_camera: Rigid,
+    image_stamp_nanos: i64,
+) -> Result<Vec<Rigid>, TrajectoryError> {
+    let camera_from_world =
+        (trajectory.world_from_vehicle(image_stamp_nanos)? * vehicle_from_camera).inverse();
+    let (_, buckets) = world_from_lidar_buckets(sweep, trajectory, vehicle_from_lidar)?;
+    Ok(buckets.iter().map(|w| camera_from_world * *w).collect())
 }
 
 /// Project a sweep into an image taken at `image_stamp_nanos`. Points behind the camera or
@@ -172,5 +206,71 @@ mod tests {
         )
         .unwrap();
         assert!((out[0].depth_m - 19.0).abs() < 1e-3, "{}", out[0].depth_m);
+    }
+
+    #[test]
+    fn bucket_transforms_reproduce_project_sweep() {
+        let traj = Trajectory::new(vec![
+            (0, Rigid::IDENTITY),
+            (
+                1_000_000_000,
+                Rigid::new(DQuat::from_rotation_z(0.3), DVec3::new(10.0, 2.0, 0.0)),
+            ),
+        ]);
+        let vehicle_from_camera = Rigid::new(DQuat::from_xyzw(-0.5, 0.5, -0.5, 0.5), DVec3::ZERO);
+        let vehicle_from_lidar = Rigid::new(DQuat::from_rotation_z(0.1), DVec3::new(0.5, 0.0, 1.8));
+        let mut k = CameraIntrinsics::pinhole(640, 480, 500.0, 500.0, 320.0, 240.0);
+        k.model = crate::geometry::camera::CameraModel::PlumbBob;
+        k.distortion = vec![-0.2, 0.05, 0.001, -0.001, 0.0];
+        let pts: Vec<[f32; 3]> = (0..50)
+            .map(|i| {
+                [
+                    15.0 + i as f32 * 0.3,
+                    -4.0 + i as f32 * 0.17,
+                    -1.0 + i as f32 * 0.05,
+                ]
+            })
+            .collect();
+        let times: Vec<f32> = (0..50).map(|i| -0.05 + i as f32 * 0.002).collect();
+        let sweep = SweepView {
+            points_in_lidar: &pts,
+            intensity: &[0.0; 50],
+            time_offset_secs: Some(&times),
+            stamp_nanos: 400_000_000,
+        };
+        let reference = project_sweep(
+            &sweep,
+            &traj,
+            vehicle_from_lidar,
+            vehicle_from_camera,
+            &k,
+            420_000_000,
+            1,
+        )
+        .unwrap();
+        let buckets = point_buckets(&sweep);
+        let transforms = camera_from_lidar_buckets(
+            &sweep,
+            &traj,
+            vehicle_from_lidar,
+            vehicle_from_camera,
+            420_000_000,
+        )
+        .unwrap();
+        assert!(transforms.len() > 50 && buckets.iter().all(|&b| (b as usize) < transforms.len()));
+        assert!(!reference.is_empty());
+        for r in &reference {
+            let i = r.index as usize;
+            let p = pts[i];
+            let p_cam = transforms[buckets[i] as usize].transform_point(DVec3::new(
+                p[0] as f64,
+                p[1] as f64,
+                p[2] as f64,
+            ));
+            let px = k.project(p_cam).unwrap();
+            assert!(
+                (px.x as f32 - r.pixel[0]).abs() < 1e-3 && (px.y as f32 - r.pixel[1]).abs() < 1e-3
+            );
+        }
     }
 }
