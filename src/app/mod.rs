@@ -26,20 +26,28 @@ pub fn run(log: Option<PathBuf>, calibration: Option<PathBuf>) -> anyhow::Result
     eframe::run_native(
         "rigcal studio",
         options,
-        Box::new(move |cc| {
-            let mut studio = Studio {
-                gpu: gpu_overlay::install(cc.wgpu_render_state.as_ref()),
-                ..Studio::default()
-            };
-            match log {
-                Some(path) => studio.open_log(&path),
-                None => demo::start(&mut studio),
-            }
-            if let Some(path) = calibration {
-                studio.load_calibration(&path);
-            }
-            Ok(Box::new(studio))
-        }),
+        Box::new(move |cc| Ok(Box::new(new_studio(cc, log, calibration)))),
     )
     .map_err(|e| anyhow::anyhow!("cannot open the studio window: {e} (is there a display? set DISPLAY or WAYLAND_DISPLAY, or use the CLI subcommands)"))
+}
+
+/// The studio as the window creates it: GPU overlay installed when there is a wgpu renderer,
+/// then the log (or the demo drive) and an optional calibration. Tests build it the same way.
+pub fn new_studio(
+    cc: &eframe::CreationContext<'_>,
+    log: Option<PathBuf>,
+    calibration: Option<PathBuf>,
+) -> Studio {
+    let mut studio = Studio {
+        gpu: gpu_overlay::install(cc.wgpu_render_state.as_ref()),
+        ..Studio::default()
+    };
+    match log {
+        Some(path) => studio.open_log(&path),
+        None => demo::start(&mut studio),
+    }
+    if let Some(path) = calibration {
+        studio.load_calibration(&path);
+    }
+    studio
 }

@@ -32,6 +32,15 @@ pub(crate) struct OverlayCache {
     gpu_intensity_max: f32,
 }
 
+impl OverlayCache {
+    pub(crate) fn state(&self) -> (&[[[f32; 4]; 4]], Vec<[f32; 2]>) {
+        (
+            &self.gpu_transforms,
+            self.points.iter().map(|p| p.pixel).collect(),
+        )
+    }
+}
+
 /// A perceptual rainbow (turbo-like) for t in [0, 1].
 pub fn colormap(t: f32) -> Color32 {
     let t = f64::from(t.clamp(0.0, 1.0));

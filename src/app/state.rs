@@ -157,6 +157,12 @@ impl Studio {
         }
     }
 
+    /// The overlay's current `camera_from_lidar` table (GPU path) and CPU-projected pixels
+    /// (fallback path): what the viewport draws, for tests and diagnostics.
+    pub fn overlay_state(&self) -> (&[[[f32; 4]; 4]], Vec<[f32; 2]>) {
+        self.overlay_cache.state()
+    }
+
     /// The rig the overlay draws with.
     pub fn shown_rig(&self) -> &Rig {
         match self.view {
