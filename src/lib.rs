@@ -21,6 +21,7 @@ pub mod geometry;
 pub mod log;
 pub mod optim;
 pub mod sim;
+pub mod unical;
 pub mod util;
 
 #[cfg(feature = "app")]

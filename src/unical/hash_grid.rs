@@ -1,0 +1,369 @@
+//! Multiresolution hash encoding (Instant-NGP, method.md §15.1), on the CPU, with its backward
+//! pass and its spatial gradient.
+//!
+//! How it works. Level `l` has `scale_l = 2^(l·log2 b)·N_min − 1` and `res_l = ⌈scale_l⌉ + 1`
+//! cells per axis (b spaces the levels geometrically from N_min to N_max). A point x ∈ [0,1]³ sits
+//! at `pos = x·scale_l + 0.5` (the half-cell offset staggers levels); its 8 surrounding lattice
+//! corners are looked up — directly (x fastest) when the level's lattice fits in its table, else by
+//! the spatial hash `(x·1 ⊕ y·2654435761 ⊕ z·805459861) mod T` — and trilinearly blended. Levels
+//! are concatenated: `L·F` features. The layout (one flat f32 array, level offsets in entries,
+//! F features per entry) is the one a GPU would take unchanged.
+//!
+//! Backward: d(loss)/d(entry) = Σ weight·d(loss)/d(feature), collected as a sparse list of
+//! touched entries (a step touches a tiny fraction of the table; method.md §18). Spatial gradient:
+//! the derivative of the trilinear weights times `scale_l`, used for pose gradients and Eikonal.
+
+/// Features per entry.
+pub const F: usize = 2;
+
+const PRIMES: [u32; 3] = [1, 2_654_435_761, 805_459_861];
+
+#[derive(Clone, Debug, PartialEq)]
+pub struct HashGridConfig {
+    pub levels: usize,
+    pub log2_table_size: u32,
+    pub base_resolution: f32,
+    pub max_resolution: f32,
+}
+
+impl Default for HashGridConfig {
+    /// The CPU preset of method.md §18: L = 16, F = 2, T = 2^19, N_min = 16, N_max = 4096.
+    fn default() -> Self {
+        Self {
+            levels: 16,
+            log2_table_size: 19,
+            base_resolution: 16.0,
+            max_resolution: 4096.0,
+        }
+    }
+}
+
+#[derive(Clone, Debug)]
+struct Level {
+    scale: f32,
+    resolution: u32,
+    /// First entry of the level in the flat table.
+    offset: usize,
+    /// Entries in the level.
+    size: usize,
+    dense: bool,
+}
+
+/// The encoding's trainable table and its level layout.
+#[derive(Clone, Debug)]
+pub struct HashGrid {
+    pub config: HashGridConfig,
+    levels: Vec<Level>,
+    /// `entries · F` features, f32.
+    pub params: Vec<f32>,
+}
+
+/// Gradients of a batch with respect to table entries: (entry, dL/d features), unsorted, with
+/// repeats. [`SparseGrad::merge`] sums repeats.
+#[derive(Clone, Debug, Default)]
+pub struct SparseGrad {
+    pub entries: Vec<(u32, [f32; F])>,
+}
+
+impl SparseGrad {
+    /// Sum repeated entries (sorted by entry).
+    pub fn merge(&mut self) {
+        self.entries.sort_unstable_by_key(|e| e.0);
+        let mut out: Vec<(u32, [f32; F])> = Vec::with_capacity(self.entries.len());
+        for &(i, g) in &self.entries {
+            match out.last_mut() {
+                Some(last) if last.0 == i => {
+                    for f in 0..F {
+                        last.1[f] += g[f];
+                    }
+                }
+                _ => out.push((i, g)),
+            }
+        }
+        self.entries = out;
+    }
+
+    pub fn append(&mut self, other: &mut SparseGrad) {
+        self.entries.append(&mut other.entries);
+    }
+}
+
+/// The 8 corners of one level: entry indices and trilinear weights, plus what the spatial
+/// gradient needs.
+struct Corners {
+    entry: [u32; 8],
+    weight: [f32; 8],
+    frac: [f32; 3],
+}
+
+impl HashGrid {
+    /// A grid with entries drawn uniformly from ±1e-4 (deterministic for a seed).
+    pub fn new(config: HashGridConfig, seed: u64) -> Self {
+        let table = 1usize << config.log2_table_size;
+        let l_count = config.levels.max(1);
+        let b = if l_count > 1 {
+            ((config.max_resolution.ln() - config.base_resolution.ln()) / (l_count - 1) as f32)
+                .exp()
+        } else {
+            1.0
+        };
+        let mut levels = Vec::with_capacity(l_count);
+        let mut offset = 0usize;
+        for l in 0..l_count {
+            let scale = (l as f32 * b.log2()).exp2() * config.base_resolution - 1.0;
+            let resolution = scale.ceil() as u32 + 1;
+            let dense_size = (resolution as usize).pow(3);
+            let size = dense_size.next_multiple_of(8).min(table);
+            levels.push(Level {
+                scale,
+                resolution,
+                offset,
+                size,
+                dense: dense_size <= size,
+            });
+            offset += size;
+        }
+        let mut state = seed ^ 0x9E37_79B9_7F4A_7C15;
+        let params = (0..offset * F)
+            .map(|_| {
+                // splitmix64 → U(−1e-4, 1e-4)
+                state = state.wrapping_add(0x9E37_79B9_7F4A_7C15);
+                let mut z = state;
+                z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+                z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+                z ^= z >> 31;
+                ((z >> 40) as f32 / (1u64 << 24) as f32 * 2.0 - 1.0) * 1e-4
+            })
+            .collect();
+        Self {
+            config,
+            levels,
+            params,
+        }
+    }
+
+    /// Output width `L·F`.
+    pub fn output_dim(&self) -> usize {
+        self.levels.len() * F
+    }
+
+    pub fn entry_count(&self) -> usize {
+        self.params.len() / F
+    }
+
+    fn corners(&self, level: &Level, x: [f32; 3]) -> Corners {
+        let mut cell = [0u32; 3];
+        let mut frac = [0f32; 3];
+        for d in 0..3 {
+            let pos = x[d].clamp(0.0, 1.0) * level.scale + 0.5;
+            let c = pos.floor();
+            cell[d] = c as u32;
+            frac[d] = pos - c;
+        }
+        let mut entry = [0u32; 8];
+        let mut weight = [0f32; 8];
+        for k in 0..8 {
+            let mut w = 1.0;
+            let mut c = [0u32; 3];
+            for d in 0..3 {
+                let bit = (k >> d) & 1;
+                c[d] = cell[d] + bit as u32;
+                w *= if bit == 1 { frac[d] } else { 1.0 - frac[d] };
+            }
+            let index = if level.dense {
+                let r = level.resolution;
+                c[0].wrapping_add(c[1].wrapping_mul(r))
+                    .wrapping_add(c[2].wrapping_mul(r).wrapping_mul(r))
+            } else {
+                c[0].wrapping_mul(PRIMES[0])
+                    ^ c[1].wrapping_mul(PRIMES[1])
+                    ^ c[2].wrapping_mul(PRIMES[2])
+            };
+            entry[k] = (level.offset + index as usize % level.size) as u32;
+            weight[k] = w;
+        }
+        Corners {
+            entry,
+            weight,
+            frac,
+        }
+    }
+
+    /// Encode `x` ∈ [0,1]³ into `out` (length `L·F`).
+    pub fn encode(&self, x: [f32; 3], out: &mut [f32]) {
+        for (l, level) in self.levels.iter().enumerate() {
+            let c = self.corners(level, x);
+            let mut acc = [0f32; F];
+            for k in 0..8 {
+                let base = c.entry[k] as usize * F;
+                for f in 0..F {
+                    acc[f] += c.weight[k] * self.params[base + f];
+                }
+            }
+            out[l * F..(l + 1) * F].copy_from_slice(&acc);
+        }
+    }
+
+    /// Accumulate d(loss)/d(entries) for one point given d(loss)/d(encoding).
+    pub fn backward(&self, x: [f32; 3], d_out: &[f32], grad: &mut SparseGrad) {
+        for (l, level) in self.levels.iter().enumerate() {
+            let g = &d_out[l * F..(l + 1) * F];
+            if g.iter().all(|v| *v == 0.0) {
+                continue;
+            }
+            let c = self.corners(level, x);
+            for k in 0..8 {
+                let mut e = [0f32; F];
+                for f in 0..F {
+                    e[f] = c.weight[k] * g[f];
+                }
+                grad.entries.push((c.entry[k], e));
+            }
+        }
+    }
+
+    /// d(loss)/dx for one point given d(loss)/d(encoding): the spatial gradient through the
+    /// trilinear weights (zero across cell boundaries' kinks, as for any trilinear field).
+    pub fn grad_x(&self, x: [f32; 3], d_out: &[f32]) -> [f32; 3] {
+        let mut gx = [0f32; 3];
+        for (l, level) in self.levels.iter().enumerate() {
+            let g = &d_out[l * F..(l + 1) * F];
+            let c = self.corners(level, x);
+            for k in 0..8 {
+                let base = c.entry[k] as usize * F;
+                let mut dot = 0.0;
+                for f in 0..F {
+                    dot += g[f] * self.params[base + f];
+                }
+                for d in 0..3 {
+                    // ∂w/∂x_d = ±(product of the other two factors)·scale
+                    let mut dw = level.scale;
+                    for e in 0..3 {
+                        let bit = (k >> e) & 1;
+                        if e == d {
+                            dw *= if bit == 1 { 1.0 } else { -1.0 };
+                        } else {
+                            dw *= if bit == 1 { c.frac[e] } else { 1.0 - c.frac[e] };
+                        }
+                    }
+                    gx[d] += dw * dot;
+                }
+            }
+        }
+        gx
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn small() -> HashGrid {
+        let mut g = HashGrid::new(
+            HashGridConfig {
+                levels: 4,
+                log2_table_size: 10,
+                base_resolution: 4.0,
+                max_resolution: 64.0,
+            },
+            3,
+        );
+        // Larger values than the init so finite differences are well above f32 noise.
+        for (i, p) in g.params.iter_mut().enumerate() {
+            *p = ((i as f32 * 0.618).fract() - 0.5) * 2.0;
+        }
+        g
+    }
+
+    #[test]
+    fn levels_follow_the_tcnn_layout() {
+        let g = HashGrid::new(HashGridConfig::default(), 0);
+        assert_eq!(g.levels.len(), 16);
+        assert_eq!(g.levels[0].resolution, 16);
+        assert!(g.levels[0].dense && !g.levels[15].dense);
+        assert!(
+            g.levels
+                .iter()
+                .all(|l| l.size <= 1 << 19 && l.size % 8 == 0)
+        );
+        assert!((g.levels[15].scale - 4095.0).abs() < 1.0);
+        assert!(g.params.iter().all(|p| p.abs() <= 1e-4));
+    }
+
+    #[test]
+    fn interpolation_reproduces_corner_values_and_is_linear_between() {
+        let g = small();
+        let mut a = vec![0.0; g.output_dim()];
+        g.encode([0.3, 0.6, 0.2], &mut a);
+        // Along one axis within a cell of the coarsest level the output is affine in x.
+        let level = &g.levels[0];
+        let h = 0.1 / level.scale;
+        let (mut l, mut m, mut r) = (vec![0.0; 8], vec![0.0; 8], vec![0.0; 8]);
+        g.encode([0.30 - h, 0.6, 0.2], &mut l);
+        g.encode([0.30, 0.6, 0.2], &mut m);
+        g.encode([0.30 + h, 0.6, 0.2], &mut r);
+        assert!((l[0] + r[0] - 2.0 * m[0]).abs() < 1e-4);
+    }
+
+    #[test]
+    fn backward_matches_finite_differences() {
+        let mut g = small();
+        let x = [0.37, 0.52, 0.81];
+        let w: Vec<f32> = (0..g.output_dim()).map(|i| 0.3 + 0.1 * i as f32).collect();
+        let loss = |g: &HashGrid| {
+            let mut out = vec![0.0; g.output_dim()];
+            g.encode(x, &mut out);
+            out.iter().zip(&w).map(|(a, b)| a * b).sum::<f32>()
+        };
+        let mut grad = SparseGrad::default();
+        g.backward(x, &w, &mut grad);
+        grad.merge();
+        assert!(!grad.entries.is_empty());
+        for &(entry, ge) in grad.entries.iter().step_by(3) {
+            for f in 0..F {
+                let i = entry as usize * F + f;
+                let p0 = g.params[i];
+                let eps = 1e-2;
+                g.params[i] = p0 + eps;
+                let up = loss(&g);
+                g.params[i] = p0 - eps;
+                let down = loss(&g);
+                g.params[i] = p0;
+                let fd = (up - down) / (2.0 * eps);
+                assert!(
+                    (fd - ge[f]).abs() < 1e-3 * (1.0 + fd.abs()),
+                    "entry {entry}: {fd} vs {}",
+                    ge[f]
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn spatial_gradient_matches_finite_differences() {
+        let g = small();
+        let w: Vec<f32> = (0..g.output_dim()).map(|i| 1.0 - 0.07 * i as f32).collect();
+        let f = |x: [f32; 3]| {
+            let mut out = vec![0.0; g.output_dim()];
+            g.encode(x, &mut out);
+            out.iter().zip(&w).map(|(a, b)| a * b).sum::<f32>()
+        };
+        for x in [[0.31, 0.47, 0.73], [0.62, 0.18, 0.44]] {
+            let gx = g.grad_x(x, &w);
+            for d in 0..3 {
+                // A step far smaller than the finest cell (1/64) stays inside one cell.
+                let eps = 2e-4;
+                let mut up = x;
+                up[d] += eps;
+                let mut down = x;
+                down[d] -= eps;
+                let fd = (f(up) - f(down)) / (2.0 * eps);
+                assert!(
+                    (fd - gx[d]).abs() < 2e-2 * (1.0 + fd.abs()),
+                    "d{d}: {fd} vs {}",
+                    gx[d]
+                );
+            }
+        }
+    }
+}

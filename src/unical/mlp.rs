@@ -1,0 +1,232 @@
+//! Small fully connected networks: ReLU hidden layers, a linear output layer (the caller applies
+//! output activations: sigmoid for colour, none for the SDF). Forward keeps the activations a
+//! backward pass needs; backward accumulates parameter gradients (per thread, merged per step)
+//! and returns d(loss)/d(input). f32 throughout: these are the hot arrays (method.md §18).
+
+/// One layer: `y = W x + b`, W row-major `out × in`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Layer {
+    pub inputs: usize,
+    pub outputs: usize,
+    pub weights: Vec<f32>,
+    pub bias: Vec<f32>,
+}
+
+#[derive(Clone, Debug, PartialEq)]
+pub struct Mlp {
+    pub layers: Vec<Layer>,
+}
+
+/// Gradients with the same shapes as the network's parameters.
+#[derive(Clone, Debug, PartialEq)]
+pub struct MlpGrad {
+    pub weights: Vec<Vec<f32>>,
+    pub bias: Vec<Vec<f32>>,
+}
+
+/// Activations of one forward pass: `acts[0]` is the input, `acts[k]` the output of layer k-1
+/// (after ReLU for hidden layers).
+#[derive(Clone, Debug, Default)]
+pub struct Trace {
+    pub acts: Vec<Vec<f32>>,
+}
+
+impl Trace {
+    pub fn output(&self) -> &[f32] {
+        self.acts.last().map_or(&[], |a| a.as_slice())
+    }
+}
+
+impl Mlp {
+    /// Layer widths `[in, hidden…, out]`, He-uniform weights from a seed, zero biases.
+    pub fn new(widths: &[usize], seed: u64) -> Self {
+        let mut state = seed ^ 0xD1B5_4A32_D192_ED03;
+        let mut uniform = move || {
+            state = state.wrapping_add(0x9E37_79B9_7F4A_7C15);
+            let mut z = state;
+            z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+            z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+            z ^= z >> 31;
+            (z >> 40) as f32 / (1u64 << 24) as f32 * 2.0 - 1.0
+        };
+        let layers = widths
+            .windows(2)
+            .map(|w| {
+                let bound = (6.0 / w[0] as f32).sqrt();
+                Layer {
+                    inputs: w[0],
+                    outputs: w[1],
+                    weights: (0..w[0] * w[1]).map(|_| uniform() * bound).collect(),
+                    bias: vec![0.0; w[1]],
+                }
+            })
+            .collect();
+        Self { layers }
+    }
+
+    pub fn input_dim(&self) -> usize {
+        self.layers.first().map_or(0, |l| l.inputs)
+    }
+
+    pub fn output_dim(&self) -> usize {
+        self.layers.last().map_or(0, |l| l.outputs)
+    }
+
+    pub fn zero_grad(&self) -> MlpGrad {
+        MlpGrad {
+            weights: self
+                .layers
+                .iter()
+                .map(|l| vec![0.0; l.weights.len()])
+                .collect(),
+            bias: self
+                .layers
+                .iter()
+                .map(|l| vec![0.0; l.bias.len()])
+                .collect(),
+        }
+    }
+
+    /// Forward pass keeping the activations.
+    pub fn forward(&self, input: &[f32]) -> Trace {
+        let mut acts = Vec::with_capacity(self.layers.len() + 1);
+        acts.push(input.to_vec());
+        let last = self.layers.len().saturating_sub(1);
+        for (k, layer) in self.layers.iter().enumerate() {
+            let x = &acts[k];
+            let mut y = layer.bias.clone();
+            for (o, yo) in y.iter_mut().enumerate() {
+                let row = &layer.weights[o * layer.inputs..(o + 1) * layer.inputs];
+                *yo += row.iter().zip(x).map(|(w, v)| w * v).sum::<f32>();
+                if k < last {
+                    *yo = yo.max(0.0);
+                }
+            }
+            acts.push(y);
+        }
+        Trace { acts }
+    }
+
+    /// Backward pass: accumulate parameter gradients into `grad`, return d(loss)/d(input).
+    pub fn backward(&self, trace: &Trace, d_output: &[f32], grad: &mut MlpGrad) -> Vec<f32> {
+        let mut delta = d_output.to_vec();
+        let last = self.layers.len().saturating_sub(1);
+        for k in (0..self.layers.len()).rev() {
+            let layer = &self.layers[k];
+            if k < last {
+                // ReLU: no gradient where the unit was off.
+                for (d, a) in delta.iter_mut().zip(&trace.acts[k + 1]) {
+                    if *a <= 0.0 {
+                        *d = 0.0;
+                    }
+                }
+            }
+            let x = &trace.acts[k];
+            let mut d_in = vec![0.0; layer.inputs];
+            for (o, &d) in delta.iter().enumerate() {
+                if d == 0.0 {
+                    continue;
+                }
+                grad.bias[k][o] += d;
+                let row = o * layer.inputs;
+                for i in 0..layer.inputs {
+                    grad.weights[k][row + i] += d * x[i];
+                    d_in[i] += d * layer.weights[row + i];
+                }
+            }
+            delta = d_in;
+        }
+        delta
+    }
+}
+
+impl MlpGrad {
+    pub fn add(&mut self, other: &MlpGrad) {
+        for (a, b) in self.weights.iter_mut().zip(&other.weights) {
+            a.iter_mut().zip(b).for_each(|(x, y)| *x += y);
+        }
+        for (a, b) in self.bias.iter_mut().zip(&other.bias) {
+            a.iter_mut().zip(b).for_each(|(x, y)| *x += y);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn loss(m: &Mlp, x: &[f32], w: &[f32]) -> f32 {
+        m.forward(x)
+            .output()
+            .iter()
+            .zip(w)
+            .map(|(a, b)| a * b)
+            .sum()
+    }
+
+    #[test]
+    fn backward_matches_finite_differences() {
+        let mut m = Mlp::new(&[5, 8, 8, 3], 1);
+        for l in &mut m.layers {
+            for (i, b) in l.bias.iter_mut().enumerate() {
+                *b = 0.1 * (i as f32 % 3.0) - 0.05;
+            }
+        }
+        let x = [0.3, -0.7, 0.5, 0.9, -0.2];
+        let w = [0.7, -1.1, 0.4];
+        let trace = m.forward(&x);
+        let mut grad = m.zero_grad();
+        let d_in = m.backward(&trace, &w, &mut grad);
+        let eps = 1e-3;
+        for k in 0..m.layers.len() {
+            for i in (0..m.layers[k].weights.len()).step_by(5) {
+                let p0 = m.layers[k].weights[i];
+                m.layers[k].weights[i] = p0 + eps;
+                let up = loss(&m, &x, &w);
+                m.layers[k].weights[i] = p0 - eps;
+                let down = loss(&m, &x, &w);
+                m.layers[k].weights[i] = p0;
+                let fd = (up - down) / (2.0 * eps);
+                assert!(
+                    (fd - grad.weights[k][i]).abs() < 2e-3 * (1.0 + fd.abs()),
+                    "W{k}[{i}] {fd} vs {}",
+                    grad.weights[k][i]
+                );
+            }
+            for i in 0..m.layers[k].bias.len() {
+                let p0 = m.layers[k].bias[i];
+                m.layers[k].bias[i] = p0 + eps;
+                let up = loss(&m, &x, &w);
+                m.layers[k].bias[i] = p0 - eps;
+                let down = loss(&m, &x, &w);
+                m.layers[k].bias[i] = p0;
+                let fd = (up - down) / (2.0 * eps);
+                assert!(
+                    (fd - grad.bias[k][i]).abs() < 2e-3 * (1.0 + fd.abs()),
+                    "b{k}[{i}]"
+                );
+            }
+        }
+        for i in 0..x.len() {
+            let mut up = x;
+            up[i] += eps;
+            let mut down = x;
+            down[i] -= eps;
+            let fd = (loss(&m, &up, &w) - loss(&m, &down, &w)) / (2.0 * eps);
+            assert!(
+                (fd - d_in[i]).abs() < 2e-3 * (1.0 + fd.abs()),
+                "x[{i}] {fd} vs {}",
+                d_in[i]
+            );
+        }
+    }
+
+    #[test]
+    fn shapes_and_determinism() {
+        let a = Mlp::new(&[32, 64, 64, 16], 9);
+        let b = Mlp::new(&[32, 64, 64, 16], 9);
+        assert_eq!(a, b);
+        assert_eq!((a.input_dim(), a.output_dim()), (32, 16));
+        assert_eq!(a.forward(&[0.1; 32]).output().len(), 16);
+    }
+}

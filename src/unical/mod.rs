@@ -1,0 +1,10 @@
+//! UniCal (Yang et al., ECCV 2024) on the CPU: one neural scene learned jointly with every sensor
+//! pose (docs: `../shared/docs/method.md`). Built bottom-up; each piece has a hand-written
+//! backward pass checked against finite differences.
+//!
+//! - [`hash_grid`]: the multiresolution hash encoding (§15.1) with sparse gradients and the
+//!   spatial gradient.
+//! - [`mlp`]: small fully connected networks (ReLU hidden layers) with fused backward.
+
+pub mod hash_grid;
+pub mod mlp;
