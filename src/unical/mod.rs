@@ -5,6 +5,9 @@
 //! - [`hash_grid`]: the multiresolution hash encoding (§15.1) with sparse gradients and the
 //!   spatial gradient.
 //! - [`mlp`]: small fully connected networks (ReLU hidden layers) with fused backward.
+//! - [`composite`]: SDF → opacity and front-to-back compositing of depth, opacity and features
+//!   (Eq. 2), with a division-free backward pass.
 
+pub mod composite;
 pub mod hash_grid;
 pub mod mlp;
