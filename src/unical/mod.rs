@@ -5,9 +5,13 @@
 //! - [`hash_grid`]: the multiresolution hash encoding (§15.1) with sparse gradients and the
 //!   spatial gradient.
 //! - [`mlp`]: small fully connected networks (ReLU hidden layers) with fused backward.
+//! - [`adam`]: dense and sparse Adam, learning-rate decay (§12).
+//! - [`field`]: the scene field (Eq. 1): hash encoding + geometry MLP → SDF and feature.
 //! - [`composite`]: SDF → opacity and front-to-back compositing of depth, opacity and features
 //!   (Eq. 2), with a division-free backward pass.
 
+pub mod adam;
 pub mod composite;
+pub mod field;
 pub mod hash_grid;
 pub mod mlp;
