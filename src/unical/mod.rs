@@ -7,6 +7,7 @@
 //! - [`mlp`]: small fully connected networks (ReLU hidden layers) with fused backward.
 //! - [`adam`]: dense and sparse Adam, learning-rate decay (§12).
 //! - [`field`]: the scene field (Eq. 1): hash encoding + geometry MLP → SDF and feature.
+//! - [`pose`]: extrinsics as 6D rotation + translation (§11) and the ray → pose backward pass.
 //! - [`composite`]: SDF → opacity and front-to-back compositing of depth, opacity and features
 //!   (Eq. 2), with a division-free backward pass.
 
@@ -15,3 +16,4 @@ pub mod composite;
 pub mod field;
 pub mod hash_grid;
 pub mod mlp;
+pub mod pose;
