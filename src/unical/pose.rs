@@ -137,7 +137,7 @@ mod tests {
         // Perturb the 6D vector off the exact-rotation manifold, as optimisation does.
         pose.r6[0] *= 1.3;
         pose.r6[4] += 0.2;
-        let u = DVec3::new(0.3, -0.8, 0.2).normalize();
+        let u = DVec3::new(0.3, -0.8, 0.2).normalize_or_zero();
         let (co, cd) = (DVec3::new(0.4, -1.1, 0.7), DVec3::new(-2.0, 0.5, 1.3));
         let loss = |p: &PoseParams| {
             let (o, d) = p.ray(world_from_vehicle, u);
