@@ -10,6 +10,9 @@ use std::collections::BTreeMap;
 use super::types::TransformMsg;
 use crate::geometry::{Rigid, Trajectory};
 
+/// Names of world-fixed frames (REP 105 and common variants).
+const FIXED_FRAMES: [&str; 4] = ["world", "map", "odom", "earth"];
+
 pub fn normalize_frame(frame: &str) -> String {
     frame.trim_start_matches('/').to_string()
 }
@@ -38,11 +41,18 @@ impl TfTree {
     }
 
     /// Dynamic edges whose value never changes (or that were sent once) are moved to the static
-    /// set: some recorders publish mounts on /tf.
+    /// set: some recorders publish mounts on /tf. Edges from a fixed frame (world, map, odom,
+    /// earth) to a non-fixed frame sent more than once stay dynamic: that is a stationary
+    /// vehicle's trajectory.
     pub fn promote_constant_dynamic_edges(&mut self) {
         let constant: Vec<(String, String)> = self
             .dynamic_edges
             .iter()
+            .filter(|((parent, child), series)| {
+                !(series.len() > 1
+                    && FIXED_FRAMES.contains(&parent.as_str())
+                    && !FIXED_FRAMES.contains(&child.as_str()))
+            })
             .filter(|(_, series)| {
                 series.windows(2).all(|w| {
                     let (r, t) = w[0].1.difference(w[1].1);
@@ -200,6 +210,28 @@ mod tests {
             lidar_from_cam.difference(base_from_lidar.inverse() * base_from_mount * mount_from_cam);
         assert!(r < 1e-12 && t < 1e-12);
         assert!(tf.static_transform("base_link", "elsewhere").is_none());
+    }
+
+    #[test]
+    fn a_stationary_vehicle_still_has_a_trajectory() {
+        let mut tf = TfTree::default();
+        for i in 0..5 {
+            let mut m = edge("odom", "base_link", Rigid::from_translation(DVec3::X));
+            m.stamp_nanos = i * 10;
+            tf.add_dynamic(&m);
+        }
+        // A mount published on /tf is a constant edge from a non-fixed frame: static.
+        let mut m = edge("base_link", "lidar", Rigid::from_translation(DVec3::Z));
+        tf.add_dynamic(&m);
+        m.stamp_nanos = 40;
+        tf.add_dynamic(&m);
+        tf.promote_constant_dynamic_edges();
+        assert_eq!(
+            tf.default_trajectory_frames(),
+            Some(("odom".into(), "base_link".into()))
+        );
+        assert_eq!(tf.trajectory("odom", "base_link").unwrap().len(), 5);
+        assert!(tf.static_transform("base_link", "lidar").is_some());
     }
 
     #[test]
