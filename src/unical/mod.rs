@@ -9,6 +9,7 @@
 //! - [`field`]: the scene field (Eq. 1): hash encoding + geometry MLP → SDF and feature.
 //! - [`pose`]: extrinsics as 6D rotation + translation (§11) and the ray → pose backward pass.
 //! - [`occupancy`]: the 0.5 m occupancy grid from aggregated LiDAR and 10 cm ray sampling (§7).
+//! - [`lidar_depth`]: the LiDAR depth loss for a batch of rays with scene, β and pose gradients.
 //! - [`composite`]: SDF → opacity and front-to-back compositing of depth, opacity and features
 //!   (Eq. 2), with a division-free backward pass.
 
@@ -16,6 +17,7 @@ pub mod adam;
 pub mod composite;
 pub mod field;
 pub mod hash_grid;
+pub mod lidar_depth;
 pub mod mlp;
 pub mod occupancy;
 pub mod pose;
