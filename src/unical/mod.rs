@@ -10,11 +10,13 @@
 //! - [`pose`]: extrinsics as 6D rotation + translation (§11) and the ray → pose backward pass.
 //! - [`occupancy`]: the 0.5 m occupancy grid from aggregated LiDAR and 10 cm ray sampling (§7).
 //! - [`lidar_depth`]: the LiDAR depth loss for a batch of rays with scene, β and pose gradients.
+//! - [`depth_calib`]: the LiDAR stage: scene + every LiDAR extrinsic from depth (a full step).
 //! - [`composite`]: SDF → opacity and front-to-back compositing of depth, opacity and features
 //!   (Eq. 2), with a division-free backward pass.
 
 pub mod adam;
 pub mod composite;
+pub mod depth_calib;
 pub mod field;
 pub mod hash_grid;
 pub mod lidar_depth;
