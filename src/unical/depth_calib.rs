@@ -14,7 +14,7 @@ use rayon::prelude::*;
 
 use super::adam::{AdamConfig, DenseAdam, SparseAdam, decayed_lr};
 use super::field::{FieldConfig, SceneField};
-use super::hash_grid::SparseGrad;
+use super::hash_grid::GradAccumulator;
 use super::lidar_depth::{DepthRay, depth_step};
 use super::occupancy::OccupancyGrid;
 use super::pose::PoseParams;
@@ -69,6 +69,7 @@ pub struct DepthCalibration {
     pub poses: Vec<PoseParams>,
     ln_beta: f32,
     grid_opt: SparseAdam,
+    grid_acc: GradAccumulator,
     mlp_opt: DenseAdam,
     mlp_params: Vec<f32>,
     pose_opt: Vec<DenseAdam>,
@@ -143,6 +144,7 @@ impl DepthCalibration {
             .collect();
         Self {
             grid_opt: SparseAdam::new(field.grid.params.len(), AdamConfig::NGP),
+            grid_acc: GradAccumulator::new(field.grid.entry_count()),
             mlp_opt: DenseAdam::new(mlp_params.len(), AdamConfig::NGP),
             pose_opt: poses
                 .iter()
@@ -237,7 +239,6 @@ impl DepthCalibration {
         let total = self.config.iterations;
         let lr_field = decayed_lr(self.config.lr_field, 0.1, self.iteration, total);
         let lr_pose = decayed_lr(self.config.lr_pose, 0.01, self.iteration, total);
-        let mut grid = SparseGrad::default();
         let mut mlp = self.field.geo.zero_grad();
         let mut beta_grad = 0.0;
         let (mut loss, mut mae) = (0.0, 0.0);
@@ -257,16 +258,13 @@ impl DepthCalibration {
                 .map(|c| (c.len(), depth_step(field, beta, pose, c)))
                 .collect();
             let mut pose_grad = [0.0f32; 9];
-            for (n, mut part) in parts {
+            for (n, part) in parts {
                 // depth_step averages over its chunk: weight chunks by size, sensors equally.
                 let w = n as f64 / rays.len() as f64 / sensors;
                 loss += part.loss * w;
                 mae += part.mean_abs_error_m * w * sensors;
                 beta_grad += part.beta_grad * w;
-                for e in &mut part.grid.entries {
-                    e.1.iter_mut().for_each(|g| *g *= w as f32);
-                }
-                grid.append(&mut part.grid);
+                self.grid_acc.add(&part.grid, w as f32);
                 for (a, b) in mlp.weights.iter_mut().zip(&part.mlp.weights) {
                     a.iter_mut().zip(b).for_each(|(x, y)| *x += y * w as f32);
                 }
@@ -296,7 +294,7 @@ impl DepthCalibration {
                 p.translation_m[k] += (flat[6 + k] - before[6 + k]) as f64;
             }
         }
-        grid.merge();
+        let grid = self.grid_acc.drain();
         self.grid_opt
             .step(&mut self.field.grid.params, &grid, lr_field);
         let mlp_grad: Vec<f32> = mlp

@@ -88,6 +88,62 @@ impl SparseGrad {
     }
 }
 
+/// Sums sparse gradients by scattering into a dense buffer (O(n), where sorting the millions of
+/// (entry, gradient) pairs of a step was the step's largest cost), remembering which entries
+/// were touched so only they are read back and cleared. Allocated once per optimisation.
+#[derive(Clone, Debug)]
+pub struct GradAccumulator {
+    grad: Vec<f32>,
+    touched: Vec<u32>,
+    is_touched: Vec<bool>,
+}
+
+impl GradAccumulator {
+    pub fn new(entries: usize) -> Self {
+        Self {
+            grad: vec![0.0; entries * F],
+            touched: Vec::new(),
+            is_touched: vec![false; entries],
+        }
+    }
+
+    /// Add `scale · g`.
+    pub fn add(&mut self, g: &SparseGrad, scale: f32) {
+        for &(entry, v) in &g.entries {
+            let e = entry as usize;
+            if e >= self.is_touched.len() {
+                continue;
+            }
+            if !self.is_touched[e] {
+                self.is_touched[e] = true;
+                self.touched.push(entry);
+            }
+            for f in 0..F {
+                self.grad[e * F + f] += scale * v[f];
+            }
+        }
+    }
+
+    /// The summed gradient (one item per touched entry, in first-touch order); the
+    /// accumulator is empty afterwards.
+    pub fn drain(&mut self) -> SparseGrad {
+        let mut out = SparseGrad {
+            entries: Vec::with_capacity(self.touched.len()),
+        };
+        for &entry in &self.touched {
+            let e = entry as usize;
+            let mut v = [0f32; F];
+            for f in 0..F {
+                v[f] = std::mem::take(&mut self.grad[e * F + f]);
+            }
+            self.is_touched[e] = false;
+            out.entries.push((entry, v));
+        }
+        self.touched.clear();
+        out
+    }
+}
+
 /// The 8 corners of one level: entry indices and trilinear weights, plus what the spatial
 /// gradient needs.
 struct Corners {
@@ -273,6 +329,25 @@ mod tests {
             *p = ((i as f32 * 0.618).fract() - 0.5) * 2.0;
         }
         g
+    }
+
+    #[test]
+    fn accumulator_sums_like_merge() {
+        let mut g = SparseGrad::default();
+        for k in 0..200u32 {
+            g.entries.push((k * 7 % 31, [k as f32, 1.0]));
+        }
+        let mut acc = GradAccumulator::new(40);
+        acc.add(&g, 0.5);
+        let mut a = acc.drain();
+        a.entries.sort_unstable_by_key(|e| e.0);
+        g.merge();
+        assert_eq!(a.entries.len(), g.entries.len());
+        for (x, y) in a.entries.iter().zip(&g.entries) {
+            assert_eq!(x.0, y.0);
+            assert!((x.1[0] - 0.5 * y.1[0]).abs() < 1e-3 && (x.1[1] - 0.5 * y.1[1]).abs() < 1e-6);
+        }
+        assert!(acc.drain().entries.is_empty());
     }
 
     #[test]

@@ -34,6 +34,7 @@ pub struct DepthRay {
 pub struct DepthStep {
     pub loss: f64,
     pub mean_abs_error_m: f64,
+    /// Unmerged: repeated entries are summed by the caller (see `GradAccumulator`).
     pub grid: SparseGrad,
     pub mlp: MlpGrad,
     pub beta_grad: f64,
@@ -96,7 +97,6 @@ pub fn depth_step(
         out.pose
             .add(&pose.ray_backward(ray.world_from_vehicle, ray.dir_in_sensor, d_o, d_d));
     }
-    out.grid.merge();
     out
 }
 
