@@ -1,12 +1,20 @@
-// LiDAR points splatted over a camera image, projected on the GPU through the full camera model.
+// LiDAR points splatted over a camera image, projected on the GPU through the full camera model,
+// with occlusion by depth-tested splats.
 //
-// Each instance is one LiDAR point in its sensor frame with its intensity and the index of its
-// firing-time bucket. `camera_from_lidar[bucket]` (computed on the CPU from the trajectory at
-// the bucket's time, the LiDAR and camera extrinsics and the image stamp) moves it into the
-// camera's optical frame; the camera model (pinhole, plumb_bob / rational_polynomial
-// radial-tangential, or equidistant fisheye, as in src/geometry/camera.rs) gives the pixel.
-// Six vertices per instance make a round splat of radius `point_size_px` screen pixels. The viewport is
-// the image rectangle, so pixel (0,0)-(w,h) maps to NDC (-1,1)-(1,-1).
+// Each instance is one LiDAR point in its sensor frame with its intensity and a packed index:
+// bits 0..24 the firing-time bucket, bits 24..32 the LiDAR. `camera_from_lidar[bucket]`
+// (computed on the CPU from the trajectory at the bucket's time, the LiDAR and camera
+// extrinsics and the image stamp) moves the point into the camera's optical frame; the camera
+// model (pinhole, plumb_bob / rational_polynomial radial-tangential, or equidistant fisheye, as
+// in src/geometry/camera.rs) gives the pixel. Six vertices per instance make a round splat.
+//
+// Two passes into an offscreen target with a depth buffer (depth = range / range_max):
+//   1. `vs_depth`/`fs_depth` write the depth of every point as a large splat of radius
+//      `occlusion_px` and no colour, so near surfaces cover the points behind them;
+//   2. `vs_color`/`fs_color` draw each point as a splat of radius `point_size_px`, its depth
+//      pulled forward by `depth_tolerance` (relative), with the depth test LessEqual: a point
+//      survives only where nothing clearly nearer was splatted.
+// The viewport shows image pixels `view_min .. view_min + view_size` (zoom and pan).
 
 struct Uniforms {
     focal: vec2<f32>,
@@ -18,14 +26,22 @@ struct Uniforms {
     radtan1: vec4<f32>,
     // 0 pinhole / radial-tangential, 1 equidistant fisheye.
     model: u32,
-    // 0 range, 1 intensity.
+    // 0 range, 1 intensity, 2 height in the vehicle frame, 3 LiDAR.
     color_mode: u32,
     point_size_px: f32,
     opacity: f32,
     range_min_m: f32,
     range_max_m: f32,
     intensity_max: f32,
+    occlusion_px: f32,
+    view_min: vec2<f32>,
+    view_size: vec2<f32>,
+    height_min_m: f32,
+    height_max_m: f32,
+    depth_tolerance: f32,
     _pad: f32,
+    // Per LiDAR: the z row of vehicle_from_lidar (r20, r21, r22, t_z).
+    height_rows: array<vec4<f32>, 8>,
 };
 
 @group(0) @binding(0) var<uniform> u: Uniforms;
@@ -33,7 +49,7 @@ struct Uniforms {
 
 struct PointIn {
     @location(0) position_intensity: vec4<f32>,
-    @location(1) bucket: u32,
+    @location(1) packed: u32,
 };
 
 struct VertexOut {
@@ -76,25 +92,37 @@ fn colormap(t_in: f32) -> vec3<f32> {
     return clamp(vec3<f32>(r, g, b), vec3<f32>(0.0), vec3<f32>(1.0));
 }
 
+// One colour per LiDAR.
+const PALETTE = array<vec3<f32>, 8>(
+    vec3<f32>(1.0, 0.35, 0.2), vec3<f32>(0.2, 0.8, 1.0), vec3<f32>(0.45, 1.0, 0.3),
+    vec3<f32>(1.0, 0.85, 0.15), vec3<f32>(0.85, 0.4, 1.0), vec3<f32>(1.0, 1.0, 1.0),
+    vec3<f32>(1.0, 0.5, 0.7), vec3<f32>(0.5, 0.6, 1.0),
+);
+
 const CORNERS = array<vec2<f32>, 6>(
     vec2<f32>(-1.0, -1.0), vec2<f32>(1.0, -1.0), vec2<f32>(1.0, 1.0),
     vec2<f32>(-1.0, -1.0), vec2<f32>(1.0, 1.0), vec2<f32>(-1.0, 1.0),
 );
 
-@vertex
-fn vs_main(@builtin(vertex_index) vi: u32, point: PointIn) -> VertexOut {
-    var out: VertexOut;
-    let corner = CORNERS[vi % 6u];
-    out.corner = corner;
-    // Culled points go outside the clip volume.
-    out.clip = vec4<f32>(0.0, 0.0, 2.0, 1.0);
-    out.color = vec4<f32>(0.0);
-    let n = arrayLength(&camera_from_lidar);
-    if (point.bucket >= n) {
+// A projected point: clip-space centre (w = 0 when culled) and its range.
+struct Projected {
+    ndc: vec2<f32>,
+    range: f32,
+    visible: bool,
+    p_lidar: vec3<f32>,
+};
+
+fn project(point: PointIn) -> Projected {
+    var out: Projected;
+    out.visible = false;
+    out.p_lidar = point.position_intensity.xyz;
+    let bucket = point.packed & 0xFFFFFFu;
+    if (bucket >= arrayLength(&camera_from_lidar)) {
         return out;
     }
-    let p = (camera_from_lidar[point.bucket] * vec4<f32>(point.position_intensity.xyz, 1.0)).xyz;
+    let p = (camera_from_lidar[bucket] * vec4<f32>(point.position_intensity.xyz, 1.0)).xyz;
     let range = length(p);
+    out.range = range;
     if (p.z <= 0.05 || range < u.range_min_m || range > u.range_max_m) {
         return out;
     }
@@ -106,25 +134,79 @@ fn vs_main(@builtin(vertex_index) vi: u32, point: PointIn) -> VertexOut {
     if (pixel.x < -0.5 || pixel.y < -0.5 || pixel.x > u.image_size.x - 0.5 || pixel.y > u.image_size.y - 0.5) {
         return out;
     }
-    let ndc = vec2<f32>(
-        2.0 * (pixel.x + 0.5) / u.image_size.x - 1.0,
-        1.0 - 2.0 * (pixel.y + 0.5) / u.image_size.y,
+    out.ndc = vec2<f32>(
+        2.0 * (pixel.x + 0.5 - u.view_min.x) / u.view_size.x - 1.0,
+        1.0 - 2.0 * (pixel.y + 0.5 - u.view_min.y) / u.view_size.y,
     );
+    out.visible = true;
+    return out;
+}
+
+fn splat(pr: Projected, corner: vec2<f32>, radius_px: f32, depth: f32) -> vec4<f32> {
     // NDC spans 2 across the viewport: a radius of r pixels is 2r / size in NDC.
-    let offset = corner * 2.0 * u.point_size_px / u.viewport_size_px;
-    out.clip = vec4<f32>(ndc + offset, 0.5, 1.0);
-    var t: f32;
-    if (u.color_mode == 1u) {
-        t = point.position_intensity.w / max(u.intensity_max, 1e-6);
-    } else {
-        t = (range - u.range_min_m) / max(u.range_max_m - u.range_min_m, 1e-6);
+    let offset = corner * 2.0 * radius_px / u.viewport_size_px;
+    return vec4<f32>(pr.ndc + offset, clamp(depth, 0.0, 1.0), 1.0);
+}
+
+fn culled() -> VertexOut {
+    var out: VertexOut;
+    out.clip = vec4<f32>(0.0, 0.0, 2.0, 1.0);
+    out.corner = vec2<f32>(0.0);
+    out.color = vec4<f32>(0.0);
+    return out;
+}
+
+@vertex
+fn vs_depth(@builtin(vertex_index) vi: u32, point: PointIn) -> VertexOut {
+    let pr = project(point);
+    if (!pr.visible) {
+        return culled();
     }
-    out.color = vec4<f32>(colormap(t), u.opacity);
+    var out: VertexOut;
+    out.corner = CORNERS[vi % 6u];
+    out.clip = splat(pr, out.corner, u.occlusion_px, pr.range / (u.range_max_m * 1.001));
+    out.color = vec4<f32>(0.0);
+    return out;
+}
+
+// Depth only: the pipeline's colour write mask is empty.
+@fragment
+fn fs_depth(in: VertexOut) -> @location(0) vec4<f32> {
+    if (dot(in.corner, in.corner) > 1.0) {
+        discard;
+    }
+    return vec4<f32>(0.0);
+}
+
+@vertex
+fn vs_color(@builtin(vertex_index) vi: u32, point: PointIn) -> VertexOut {
+    let pr = project(point);
+    if (!pr.visible) {
+        return culled();
+    }
+    var out: VertexOut;
+    out.corner = CORNERS[vi % 6u];
+    let depth = pr.range * (1.0 - u.depth_tolerance) / (u.range_max_m * 1.001);
+    out.clip = splat(pr, out.corner, u.point_size_px, depth);
+    let lidar = min(point.packed >> 24u, 7u);
+    var rgb: vec3<f32>;
+    if (u.color_mode == 1u) {
+        rgb = colormap(point.position_intensity.w / max(u.intensity_max, 1e-6));
+    } else if (u.color_mode == 2u) {
+        let row = u.height_rows[lidar];
+        let height = dot(row.xyz, pr.p_lidar) + row.w;
+        rgb = colormap((height - u.height_min_m) / max(u.height_max_m - u.height_min_m, 1e-6));
+    } else if (u.color_mode == 3u) {
+        rgb = PALETTE[lidar];
+    } else {
+        rgb = colormap((pr.range - u.range_min_m) / max(u.range_max_m - u.range_min_m, 1e-6));
+    }
+    out.color = vec4<f32>(rgb, u.opacity);
     return out;
 }
 
 @fragment
-fn fs_main(in: VertexOut) -> @location(0) vec4<f32> {
+fn fs_color(in: VertexOut) -> @location(0) vec4<f32> {
     if (dot(in.corner, in.corner) > 1.0) {
         discard;
     }

@@ -20,6 +20,7 @@ pub mod eval;
 pub mod geometry;
 pub mod log;
 pub mod optim;
+pub mod session;
 pub mod sim;
 pub mod unical;
 pub mod util;

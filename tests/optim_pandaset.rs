@@ -26,7 +26,7 @@ fn refines_a_rotated_camera_on_the_real_drive() {
         rig.sensor_mut(camera).unwrap().vehicle_from_sensor =
             gt.perturbed_right(omega_deg * 1f64.to_radians(), DVec3::ZERO);
         let mut refiner =
-            EdgeRefiner::new(&drive, &rig, "pandar64", &[camera.to_string()], 4, None).unwrap();
+            EdgeRefiner::new(&drive, &rig, "pandar64", &[camera.to_string()], 4, &[]).unwrap();
         let mut losses = Vec::new();
         for _ in 0..refiner.max_steps() {
             let r = refiner.step();

@@ -4,12 +4,16 @@
 //! ([`crate::log::Drive`], [`crate::geometry::projection`]). `run` opens a window; the state
 //! lives in [`state::Studio`], panels are `*_ui` functions in their own files.
 
+pub mod checks;
 pub mod demo;
+pub mod export;
 pub mod gpu_overlay;
 pub mod optimiser;
 mod overlay;
 mod sensors;
 pub mod state;
+pub mod trajectory;
+mod window;
 
 use std::path::PathBuf;
 
@@ -26,7 +30,11 @@ pub fn run(log: Option<PathBuf>, calibration: Option<PathBuf>) -> anyhow::Result
     eframe::run_native(
         "rigcal studio",
         options,
-        Box::new(move |cc| Ok(Box::new(new_studio(cc, log, calibration)))),
+        Box::new(move |cc| {
+            let mut studio = new_studio(cc, log, calibration);
+            studio.enable_persistence();
+            Ok(Box::new(studio))
+        }),
     )
     .map_err(|e| anyhow::anyhow!("cannot open the studio window: {e} (is there a display? set DISPLAY or WAYLAND_DISPLAY, or use the CLI subcommands)"))
 }

@@ -45,6 +45,14 @@ pub struct OptimiserPanel {
     pub pose_change: Vec<(usize, String, f64)>,
     pub progress: (usize, usize, f64),
     pub message: Option<String>,
+    /// The best rig of the current or last run (shown as "best" in the viewport).
+    pub best: Option<Rig>,
+}
+
+impl OptimiserPanel {
+    pub fn method_label(&self) -> &'static str {
+        self.method.label()
+    }
 }
 
 /// Drain packets from a running optimiser (non-blocking).
@@ -77,10 +85,16 @@ pub fn poll(studio: &mut Studio, ctx: &egui::Context) {
                 }
             }
         }
-        // Live extrinsics in the overlay (not an undo step each time).
-        studio.current = p.current.clone();
+        // Live extrinsics in the overlay (not an undo step each time); locked axes stay put.
+        let start = studio
+            .optimiser
+            .started_from
+            .clone()
+            .unwrap_or_else(|| studio.current.clone());
+        studio.current = studio.respect_locks(&start, &p.current);
+        studio.optimiser.best = Some(studio.respect_locks(&start, &p.best));
         if p.finished {
-            studio.current = p.best.clone();
+            studio.current = studio.respect_locks(&start, &p.best);
             finished = true;
         }
     }
@@ -124,16 +138,22 @@ pub fn start(studio: &mut Studio) {
     };
     let frames = studio.optimiser.frames.max(1);
     let prepare_rig = rig.clone();
+    let segments = studio.segments.clone();
     studio.optimiser.history.clear();
     studio.optimiser.pose_change.clear();
     studio.optimiser.progress = (0, 0, 0.0);
     studio.optimiser.message = Some(format!(
-        "preparing {} camera(s) on {frames} frame(s)…",
-        cameras.len()
+        "preparing {} camera(s) on {frames} frame(s){}…",
+        cameras.len(),
+        if segments.is_empty() {
+            ""
+        } else {
+            " of the selected segments"
+        }
     ));
     studio.optimiser.started_from = Some(rig);
     studio.optimiser.run = Some(Run::spawn_with(move || {
-        EdgeRefiner::new(&drive, &prepare_rig, &lidar, &cameras, frames, None)
+        EdgeRefiner::new(&drive, &prepare_rig, &lidar, &cameras, frames, &segments)
             .map(|r| Box::new(r) as Box<dyn Calibrator>)
             .map_err(|e| e.to_string())
     }));
@@ -343,7 +363,7 @@ fn alignment_table_ui(studio: &Studio, ui: &mut egui::Ui) {
 
 /// Per sensor: rotation (deg) and translation (cm) error of the current rig against the known
 /// ground truth after aligning the root sensor (method.md §13), the reference LiDAR here.
-fn pose_errors_ui(current: &Rig, gt: &Rig, root: &str, ui: &mut egui::Ui) {
+pub(crate) fn pose_errors_ui(current: &Rig, gt: &Rig, root: &str, ui: &mut egui::Ui) {
     ui.label(format!(
         "Error against the ground truth (current rig, root {root} aligned)"
     ));

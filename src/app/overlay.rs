@@ -1,42 +1,89 @@
-//! The camera viewport: the image with LiDAR sweeps projected through the current extrinsics.
+//! The camera viewport: images with LiDAR sweeps projected through the shown extrinsics.
 //!
-//! With a wgpu renderer the points are projected on the GPU ([`super::gpu_overlay`]). Otherwise
-//! projection runs in the library ([`crate::geometry::projection`]) and is cached until the
-//! camera, the frame or the extrinsics change; drawing is egui mesh quads, nearest points drawn
-//! last so they cover farther ones.
+//! One camera (zoom with the wheel, pan by dragging, double-click to reset; u, v and the depth
+//! of the point under the cursor are read out) or a grid of every camera, each at its frame
+//! nearest in time to the scrubber. With a wgpu renderer the points are projected and
+//! occlusion-tested on the GPU ([`super::gpu_overlay`]), one offscreen target per camera tile.
+//! Otherwise, and for the hover readout, projection and occlusion run in the library
+//! ([`crate::geometry::projection`]) and are cached until the frame or the extrinsics change.
 
 use std::sync::Arc;
 
 use egui::{Color32, Pos2, Rect, Vec2};
 
-use super::gpu_overlay::{GpuPoint, OverlayCallback, Uniforms, paint_callback, transforms_f32};
-use super::state::{ColorBy, ExtrinsicsView, Studio};
+use super::gpu_overlay::{
+    GpuPoint, OverlayCallback, Uniforms, pack_bucket, paint_callback, transforms_f32,
+};
+use super::state::{ColorBy, ExtrinsicsView, HoverReadout, Studio};
 use crate::calib::{Rig, SensorKind};
 use crate::geometry::Rigid;
 use crate::geometry::projection::{
     ProjectedPoint, SweepView, camera_from_lidar_buckets, point_buckets, project_sweep,
+    visible_points,
 };
-use crate::log::LidarSweep;
+use crate::log::{Drive, LidarSweep};
 
+/// Sweeps decoded for the overlay, shared by every camera.
+#[derive(Default)]
+pub(crate) struct SweepCache {
+    sweeps: Vec<(String, usize, Arc<LidarSweep>)>,
+}
+
+const SWEEP_CACHE: usize = 128;
+
+impl SweepCache {
+    fn get(&mut self, drive: &Drive, lidar: &str, index: usize) -> Result<Arc<LidarSweep>, String> {
+        if let Some(i) = self
+            .sweeps
+            .iter()
+            .position(|(n, k, _)| n == lidar && *k == index)
+        {
+            let entry = self.sweeps.remove(i);
+            let s = entry.2.clone();
+            self.sweeps.push(entry);
+            return Ok(s);
+        }
+        let s = Arc::new(drive.load_sweep(lidar, index).map_err(|e| e.to_string())?);
+        self.sweeps.push((lidar.to_string(), index, s.clone()));
+        if self.sweeps.len() > SWEEP_CACHE {
+            self.sweeps.remove(0);
+        }
+        Ok(s)
+    }
+}
+
+/// A LiDAR point projected on the CPU, with what colouring needs.
+#[derive(Clone, Copy, Debug)]
+struct CpuPoint {
+    p: ProjectedPoint,
+    lidar: u8,
+    height_m: f32,
+    visible: bool,
+}
+
+/// Per camera: its texture, the sweeps drawn over it and their projections.
 #[derive(Default)]
 pub(crate) struct OverlayCache {
-    key: Option<(usize, usize, ExtrinsicsView, usize)>,
+    key: Option<(usize, usize, usize)>,
     rig: Option<Rig>,
-    points: Vec<ProjectedPoint>,
-    texture: Option<(usize, usize, egui::TextureHandle)>,
-    sweeps: Vec<(String, usize, Arc<LidarSweep>)>,
-    /// GPU path: points (far to near) with global bucket indices, and the bucket transforms.
+    texture: Option<(usize, egui::TextureHandle)>,
+    sweeps: Vec<(usize, Arc<LidarSweep>)>,
+    /// GPU path: points (far to near) with packed bucket/LiDAR indices, and the bucket
+    /// transforms.
     gpu_points: Arc<Vec<GpuPoint>>,
     gpu_points_key: u64,
     gpu_transforms: Vec<[[f32; 4]; 4]>,
-    gpu_intensity_max: f32,
+    intensity_max: f32,
+    /// CPU projection (fallback path, hover readout), far to near; valid for `cpu_key`.
+    cpu: Vec<CpuPoint>,
+    cpu_key: Option<(bool, u32)>,
 }
 
 impl OverlayCache {
     pub(crate) fn state(&self) -> (&[[[f32; 4]; 4]], Vec<[f32; 2]>) {
         (
             &self.gpu_transforms,
-            self.points.iter().map(|p| p.pixel).collect(),
+            self.cpu.iter().map(|p| p.p.pixel).collect(),
         )
     }
 }
@@ -59,14 +106,34 @@ pub fn colormap(t: f32) -> Color32 {
     Color32::from_rgb((r * 255.0) as u8, (g * 255.0) as u8, (b * 255.0) as u8)
 }
 
-fn camera_names(studio: &Studio) -> Vec<String> {
-    studio
-        .current
-        .sensors
+/// The same palette as the shader's colour-by-LiDAR.
+const LIDAR_COLORS: [[u8; 3]; 8] = [
+    [255, 89, 51],
+    [51, 204, 255],
+    [115, 255, 77],
+    [255, 217, 38],
+    [217, 102, 255],
+    [255, 255, 255],
+    [255, 128, 179],
+    [128, 153, 255],
+];
+
+pub(crate) fn camera_names(rig: &Rig) -> Vec<String> {
+    rig.sensors
         .iter()
         .filter(|s| s.kind == SensorKind::Camera && s.camera.is_some())
         .map(|s| s.name.clone())
         .collect()
+}
+
+/// The frame of `camera` nearest in time to `stamp`.
+fn nearest_frame(drive: &Drive, camera: &str, stamp: i64) -> Option<usize> {
+    let frames = &drive.stream(camera)?.frames;
+    frames
+        .iter()
+        .enumerate()
+        .min_by_key(|(_, f)| (f.stamp_nanos - stamp).abs())
+        .map(|(i, _)| i)
 }
 
 pub(crate) fn viewport_ui(studio: &mut Studio, ui: &mut egui::Ui) {
@@ -74,262 +141,544 @@ pub(crate) fn viewport_ui(studio: &mut Studio, ui: &mut egui::Ui) {
         super::demo::progress_ui(job, ui);
         return;
     }
-    let Some(drive) = studio.drive.as_ref() else {
+    let Some(drive) = studio.drive.clone() else {
         ui.centered_and_justified(|ui| {
-            ui.heading("Open a drive (File ▸ Open log…, or drop an .mcap here)")
+            ui.heading("Open a drive (File > Open log…, or drop an .mcap here)")
         });
         return;
     };
-    let cameras = camera_names(studio);
+    let cameras = camera_names(&studio.current);
     if cameras.is_empty() {
         ui.label("This drive has no camera with intrinsics.");
         return;
     }
     studio.camera = studio.camera.min(cameras.len() - 1);
+    if studio.overlays.len() < cameras.len() {
+        studio.overlays.resize_with(cameras.len(), Default::default);
+    }
     let camera = cameras[studio.camera].clone();
     let n_frames = drive.stream(&camera).map_or(0, |s| s.frames.len());
-    ui.horizontal(|ui| {
+    toolbar_ui(studio, ui, &cameras, &drive, n_frames);
+    studio.frame = studio.frame.min(n_frames.saturating_sub(1));
+    if n_frames == 0 {
+        ui.label(format!("{camera} has no images in this log."));
+        return;
+    }
+    if studio.blink {
+        studio.blink_phase = (ui.input(|i| i.time) * 2.0) as i64 % 2 == 1;
+        ui.ctx()
+            .request_repaint_after(std::time::Duration::from_millis(100));
+    }
+    if studio.grid {
+        grid_ui(studio, ui, &cameras, &drive);
+    } else {
+        single_ui(studio, ui, &camera, &drive);
+    }
+}
+
+fn toolbar_ui(
+    studio: &mut Studio,
+    ui: &mut egui::Ui,
+    cameras: &[String],
+    drive: &Drive,
+    n_frames: usize,
+) {
+    ui.horizontal_wrapped(|ui| {
         egui::ComboBox::from_label("camera")
-            .selected_text(&camera)
+            .selected_text(&cameras[studio.camera])
             .show_ui(ui, |ui| {
                 for (i, c) in cameras.iter().enumerate() {
                     ui.selectable_value(&mut studio.camera, i, c);
                 }
             });
+        ui.checkbox(&mut studio.grid, "all cameras");
         if n_frames > 0 {
-            ui.add(egui::Slider::new(&mut studio.frame, 0..=n_frames - 1).text("frame"));
-        }
-        ui.separator();
-        ui.selectable_value(&mut studio.view, ExtrinsicsView::Initial, "initial");
-        ui.selectable_value(&mut studio.view, ExtrinsicsView::Current, "current");
-        if studio.ground_truth.is_some() {
-            ui.selectable_value(
-                &mut studio.view,
-                ExtrinsicsView::GroundTruth,
-                "ground truth",
+            let t0 = drive.time_range_nanos().map_or(0, |r| r.0);
+            let stamps: Vec<i64> = drive
+                .stream(&cameras[studio.camera])
+                .map(|s| s.frames.iter().map(|f| f.stamp_nanos).collect())
+                .unwrap_or_default();
+            ui.add(
+                egui::Slider::new(&mut studio.frame, 0..=n_frames - 1)
+                    .text("frame")
+                    .custom_formatter(|v, _| {
+                        let i = (v as usize).min(stamps.len().saturating_sub(1));
+                        let t = stamps.get(i).map_or(0.0, |s| (s - t0) as f64 * 1e-9);
+                        format!("{i} · t = {t:.2} s")
+                    }),
             );
         }
         ui.separator();
-        ui.selectable_value(&mut studio.color_by, ColorBy::Range, "range");
-        ui.selectable_value(&mut studio.color_by, ColorBy::Intensity, "intensity");
-        ui.add(egui::Slider::new(&mut studio.point_size, 0.5..=6.0).text("size"));
-        ui.add(egui::Slider::new(&mut studio.max_range_m, 5.0..=200.0).text("max range m"));
+        let mut views = vec![ExtrinsicsView::Initial, ExtrinsicsView::Current];
+        if studio.optimiser.best.is_some() {
+            views.push(ExtrinsicsView::Best);
+        }
+        if studio.ground_truth.is_some() {
+            views.push(ExtrinsicsView::GroundTruth);
+        }
+        for v in &views {
+            ui.selectable_value(&mut studio.view, *v, v.label());
+        }
+        ui.checkbox(&mut studio.blink, "blink")
+            .on_hover_text("alternate the shown extrinsics twice a second");
+        egui::ComboBox::from_label("with")
+            .selected_text(studio.blink_with.label())
+            .show_ui(ui, |ui| {
+                for v in &views {
+                    ui.selectable_value(&mut studio.blink_with, *v, v.label());
+                }
+            });
     });
-    studio.frame = studio.frame.min(n_frames.saturating_sub(1));
-    if n_frames == 0 {
-        return;
-    }
-    if let Err(e) = refresh(studio, &camera, ui.ctx()) {
-        studio.status.push(format!("error: {e}"));
-    }
-    let cache = &studio.overlay_cache;
-    let Some((_, _, texture)) = &cache.texture else {
-        return;
-    };
-    let Some(intr) = studio
-        .current
-        .sensor(&camera)
-        .and_then(|s| s.camera.clone())
+    ui.horizontal_wrapped(|ui| {
+        let o = &mut studio.overlay;
+        egui::ComboBox::from_label("colour")
+            .selected_text(match o.color_by {
+                ColorBy::Range => "range",
+                ColorBy::Intensity => "intensity",
+                ColorBy::Height => "height",
+                ColorBy::Lidar => "LiDAR",
+            })
+            .show_ui(ui, |ui| {
+                ui.selectable_value(&mut o.color_by, ColorBy::Range, "range");
+                ui.selectable_value(&mut o.color_by, ColorBy::Intensity, "intensity");
+                ui.selectable_value(&mut o.color_by, ColorBy::Height, "height");
+                ui.selectable_value(&mut o.color_by, ColorBy::Lidar, "LiDAR");
+            });
+        ui.add(egui::Slider::new(&mut o.point_size, 0.5..=6.0).text("size"));
+        ui.add(egui::Slider::new(&mut o.opacity, 0.1..=1.0).text("opacity"));
+        ui.add(
+            egui::DragValue::new(&mut o.min_range_m)
+                .range(0.0..=o.max_range_m)
+                .prefix("range ")
+                .suffix(" m"),
+        );
+        ui.add(
+            egui::DragValue::new(&mut o.max_range_m)
+                .range(o.min_range_m.max(1.0)..=300.0)
+                .prefix("– ")
+                .suffix(" m"),
+        );
+        ui.add(
+            egui::DragValue::new(&mut o.stride)
+                .range(1..=64)
+                .prefix("every ")
+                .suffix(" pts"),
+        );
+        ui.add(
+            egui::DragValue::new(&mut o.accumulate)
+                .range(0..=30)
+                .prefix("± ")
+                .suffix(" sweeps"),
+        )
+        .on_hover_text("draw neighbouring sweeps too, each through the trajectory");
+        ui.checkbox(&mut o.occlusion, "occlusion")
+            .on_hover_text("depth-tested splats: hide points behind nearer surfaces");
+        if o.occlusion {
+            ui.add(
+                egui::DragValue::new(&mut o.occlusion_px)
+                    .range(1.0..=12.0)
+                    .suffix(" px"),
+            );
+        }
+    });
+}
+
+fn grid_ui(studio: &mut Studio, ui: &mut egui::Ui, cameras: &[String], drive: &Drive) {
+    let Some(stamp) = drive
+        .stream(&cameras[studio.camera])
+        .and_then(|s| s.frames.get(studio.frame))
+        .map(|f| f.stamp_nanos)
     else {
         return;
     };
-    let available = ui.available_size();
-    let aspect = intr.width as f32 / intr.height as f32;
-    let size = if available.x / available.y > aspect {
-        Vec2::new(available.y * aspect, available.y)
+    let n = cameras.len();
+    let cols = (n as f32).sqrt().ceil().max(1.0) as usize;
+    let rows = n.div_ceil(cols);
+    let area = ui.available_rect_before_wrap();
+    let cell = Vec2::new(area.width() / cols as f32, area.height() / rows as f32);
+    ui.allocate_rect(area, egui::Sense::hover());
+    for (i, cam) in cameras.iter().enumerate() {
+        let Some(frame) = nearest_frame(drive, cam, stamp) else {
+            continue;
+        };
+        let Some(intr) = studio.current.sensor(cam).and_then(|s| s.camera.clone()) else {
+            continue;
+        };
+        let origin = area.min + Vec2::new((i % cols) as f32 * cell.x, (i / cols) as f32 * cell.y);
+        let tile = Rect::from_min_size(origin, cell).shrink(2.0);
+        let rect = fit(tile, intr.width as f32 / intr.height as f32);
+        let image_rect =
+            Rect::from_min_max(Pos2::ZERO, Pos2::new(intr.width as f32, intr.height as f32));
+        let response = ui.interact(
+            rect,
+            ui.scope_id().with(("camera tile", i)),
+            egui::Sense::click(),
+        );
+        draw_camera(studio, ui, i, cam, frame, rect, image_rect);
+        let painter = ui.painter_at(tile);
+        painter.text(
+            rect.min + Vec2::splat(4.0),
+            egui::Align2::LEFT_TOP,
+            cam,
+            egui::FontId::proportional(13.0),
+            if i == studio.camera {
+                Color32::YELLOW
+            } else {
+                Color32::WHITE
+            },
+        );
+        if response.double_clicked() {
+            studio.camera = i;
+            studio.frame = frame;
+            studio.grid = false;
+        } else if response.clicked() {
+            studio.camera = i;
+            studio.frame = frame;
+        }
+    }
+}
+
+/// The largest rectangle of `aspect` centred in `area`.
+fn fit(area: Rect, aspect: f32) -> Rect {
+    let size = if area.width() / area.height().max(1.0) > aspect {
+        Vec2::new(area.height() * aspect, area.height())
     } else {
-        Vec2::new(available.x, available.x / aspect)
+        Vec2::new(area.width(), area.width() / aspect)
     };
-    let (rect, _response) = ui.allocate_exact_size(size, egui::Sense::hover());
+    Rect::from_center_size(area.center(), size)
+}
+
+fn single_ui(studio: &mut Studio, ui: &mut egui::Ui, camera: &str, drive: &Drive) {
+    let Some(intr) = studio.current.sensor(camera).and_then(|s| s.camera.clone()) else {
+        return;
+    };
+    let (w, h) = (intr.width as f32, intr.height as f32);
+    let readout_height = 18.0;
+    let mut area = ui.available_rect_before_wrap();
+    area.max.y -= readout_height;
+    let rect = fit(area, w / h);
+    let response = ui.allocate_rect(rect, egui::Sense::click_and_drag());
+    // Zoom about the cursor with the wheel, pan by dragging, double-click resets.
+    let z = &mut studio.zoom;
+    if z.center_px[0].is_nan() || response.double_clicked() {
+        *z = super::state::ViewZoom {
+            center_px: [w / 2.0, h / 2.0],
+            zoom: 1.0,
+        };
+    }
+    let to_image = |zoom: &super::state::ViewZoom, pos: Pos2| -> [f32; 2] {
+        let view = Vec2::new(w, h) / zoom.zoom;
+        let rel = (pos - rect.min) / rect.size();
+        [
+            zoom.center_px[0] - view.x / 2.0 + rel.x * view.x,
+            zoom.center_px[1] - view.y / 2.0 + rel.y * view.y,
+        ]
+    };
+    if let Some(pos) = response.hover_pos() {
+        let scroll = ui.input(|i| i.smooth_scroll_delta.y);
+        if scroll != 0.0 {
+            let before = to_image(z, pos);
+            z.zoom = (z.zoom * (scroll * 0.004).exp()).clamp(1.0, 40.0);
+            let after = to_image(z, pos);
+            z.center_px[0] += before[0] - after[0];
+            z.center_px[1] += before[1] - after[1];
+        }
+    }
+    if response.dragged() {
+        let d = response.drag_delta() / rect.size() * Vec2::new(w, h) / z.zoom;
+        z.center_px[0] -= d.x;
+        z.center_px[1] -= d.y;
+    }
+    let half = Vec2::new(w, h) / z.zoom / 2.0;
+    z.center_px[0] = z.center_px[0].clamp(half.x, w - half.x);
+    z.center_px[1] = z.center_px[1].clamp(half.y, h - half.y);
+    let view = Rect::from_center_size(Pos2::from(z.center_px), half * 2.0);
+    let zoom = *z;
+    draw_camera(studio, ui, studio.camera, camera, studio.frame, rect, view);
+    studio.hover = response.hover_pos().map(|pos| {
+        let [u, v] = to_image(&zoom, pos);
+        let radius_px = 4.0 * w / rect.width() / zoom.zoom;
+        let point = hover_point(studio, camera, drive, [u, v], radius_px.max(1.5));
+        HoverReadout { u, v, point }
+    });
+    let text = match &studio.hover {
+        Some(hv) => match &hv.point {
+            Some((d, lidar)) => format!(
+                "u {:.1}  v {:.1}  ·  depth {d:.2} m ({lidar})  ·  zoom {:.1}×",
+                hv.u, hv.v, zoom.zoom
+            ),
+            None => format!("u {:.1}  v {:.1}  ·  zoom {:.1}×", hv.u, hv.v, zoom.zoom),
+        },
+        None => format!(
+            "zoom {:.1}× · wheel zooms, drag pans, double-click resets",
+            zoom.zoom
+        ),
+    };
+    ui.label(text);
+}
+
+/// Depth and LiDAR of the nearest visible point within `radius_px` of `uv` (CPU projection,
+/// computed on demand and cached with the overlay).
+fn hover_point(
+    studio: &mut Studio,
+    camera: &str,
+    drive: &Drive,
+    uv: [f32; 2],
+    radius_px: f32,
+) -> Option<(f32, String)> {
+    let lidars: Vec<String> = studio
+        .shown_rig()
+        .lidars()
+        .map(|l| l.name.clone())
+        .collect();
+    ensure_cpu(studio, studio.camera, camera, drive).ok()?;
+    let cache = studio.overlays.get(studio.camera)?;
+    let r2 = radius_px * radius_px;
+    cache
+        .cpu
+        .iter()
+        .filter(|p| p.visible && p.p.depth_m <= studio.overlay.max_range_m)
+        .map(|p| {
+            let (dx, dy) = (p.p.pixel[0] - uv[0], p.p.pixel[1] - uv[1]);
+            (dx * dx + dy * dy, p)
+        })
+        .filter(|(d2, _)| *d2 <= r2)
+        .min_by(|a, b| a.0.total_cmp(&b.0))
+        .map(|(_, p)| {
+            (
+                p.p.depth_m,
+                lidars.get(p.lidar as usize).cloned().unwrap_or_default(),
+            )
+        })
+}
+
+/// Draw one camera's image (the `view` part of it, in image pixels) with its overlay in `rect`.
+fn draw_camera(
+    studio: &mut Studio,
+    ui: &mut egui::Ui,
+    index: usize,
+    camera: &str,
+    frame: usize,
+    rect: Rect,
+    view: Rect,
+) {
+    let Some(drive) = studio.drive.clone() else {
+        return;
+    };
+    if let Err(e) = refresh(studio, index, camera, frame, &drive, ui.ctx()) {
+        let msg = format!("error: {e}");
+        if studio.status.last() != Some(&msg) {
+            studio.status.push(msg);
+        }
+    }
+    let rig = studio.shown_rig().clone();
+    let Some(intr) = rig.sensor(camera).and_then(|s| s.camera.clone()) else {
+        return;
+    };
+    let (w, h) = (intr.width as f32, intr.height as f32);
     let painter = ui.painter_at(rect);
-    painter.image(
-        texture.id(),
-        rect,
-        Rect::from_min_max(Pos2::ZERO, Pos2::new(1.0, 1.0)),
-        Color32::WHITE,
-    );
+    let Some(cache) = studio.overlays.get(index) else {
+        return;
+    };
+    if let Some((_, texture)) = &cache.texture {
+        let uv = Rect::from_min_max(
+            Pos2::new(view.min.x / w, view.min.y / h),
+            Pos2::new(view.max.x / w, view.max.y / h),
+        );
+        painter.image(texture.id(), rect, uv, Color32::WHITE);
+    }
+    let o = studio.overlay.clone();
     if studio.gpu {
         let ppp = ui.ctx().pixels_per_point();
-        let mut uniforms = Uniforms::camera(&intr);
-        uniforms.viewport_size_px = [rect.width() * ppp, rect.height() * ppp];
-        uniforms.color_mode = match studio.color_by {
+        let mut u = Uniforms::camera(&intr);
+        u.viewport_size_px = [rect.width() * ppp, rect.height() * ppp];
+        u.view_min = [view.min.x, view.min.y];
+        u.view_size = [view.width(), view.height()];
+        u.color_mode = match o.color_by {
             ColorBy::Range => 0,
             ColorBy::Intensity => 1,
+            ColorBy::Height => 2,
+            ColorBy::Lidar => 3,
         };
         // Splat radius in physical pixels (the CPU path draws squares of side `point_size`).
-        uniforms.point_size_px = (studio.point_size * 0.6).max(0.75) * ppp;
-        uniforms.opacity = 1.0;
-        uniforms.range_min_m = 0.0;
-        uniforms.range_max_m = studio.max_range_m;
-        uniforms.intensity_max = cache.gpu_intensity_max;
+        u.point_size_px = (o.point_size * 0.6).max(0.75) * ppp;
+        u.occlusion_px = if o.occlusion {
+            o.occlusion_px * ppp
+        } else {
+            0.0
+        };
+        u.opacity = o.opacity;
+        u.range_min_m = o.min_range_m;
+        u.range_max_m = o.max_range_m;
+        u.height_min_m = o.height_range_m[0];
+        u.height_max_m = o.height_range_m[1];
+        u.intensity_max = cache.intensity_max;
+        for (i, l) in rig.lidars().enumerate() {
+            u.set_height_row(i, l.vehicle_from_sensor);
+        }
         painter.add(paint_callback(
             rect,
             OverlayCallback {
+                slot: index as u64,
                 points_key: cache.gpu_points_key,
                 points: cache.gpu_points.clone(),
                 transforms: cache.gpu_transforms.clone(),
-                uniforms,
+                uniforms: u,
             },
         ));
         return;
     }
-    let scale = rect.width() / intr.width as f32;
-    let half = studio.point_size * 0.5;
-    let mut mesh = egui::Mesh::default();
-    let (lo, hi) = match studio.color_by {
-        ColorBy::Range => (0.0, studio.max_range_m),
-        ColorBy::Intensity => (
-            0.0,
-            cache.points.iter().map(|p| p.intensity).fold(1.0, f32::max),
-        ),
+    if ensure_cpu(studio, index, camera, &drive).is_err() {
+        return;
+    }
+    let Some(cache) = studio.overlays.get(index) else {
+        return;
     };
-    // Far points first so near ones cover them.
-    let mut order: Vec<&ProjectedPoint> = cache
-        .points
-        .iter()
-        .filter(|p| p.depth_m <= studio.max_range_m)
-        .collect();
-    order.sort_by(|a, b| b.depth_m.total_cmp(&a.depth_m));
-    for p in order {
-        let v = match studio.color_by {
-            ColorBy::Range => p.depth_m,
-            ColorBy::Intensity => p.intensity,
+    let scale = rect.width() / view.width();
+    let half = o.point_size * 0.5;
+    let alpha = (o.opacity * 255.0) as u8;
+    let mut mesh = egui::Mesh::default();
+    for p in cache.cpu.iter().filter(|p| {
+        p.visible
+            && p.p.depth_m >= o.min_range_m
+            && p.p.depth_m <= o.max_range_m
+            && view.expand(2.0).contains(Pos2::from(p.p.pixel))
+    }) {
+        let t = |v: f32, lo: f32, hi: f32| (v - lo) / (hi - lo).max(1e-6);
+        let c = match o.color_by {
+            ColorBy::Range => colormap(t(p.p.depth_m, o.min_range_m, o.max_range_m)),
+            ColorBy::Intensity => colormap(t(p.p.intensity, 0.0, cache.intensity_max)),
+            ColorBy::Height => colormap(t(p.height_m, o.height_range_m[0], o.height_range_m[1])),
+            ColorBy::Lidar => {
+                let [r, g, b] = LIDAR_COLORS[(p.lidar as usize).min(7)];
+                Color32::from_rgb(r, g, b)
+            }
         };
-        let c = colormap((v - lo) / (hi - lo).max(1e-6));
-        let center = rect.min + Vec2::new((p.pixel[0] + 0.5) * scale, (p.pixel[1] + 0.5) * scale);
+        let c = Color32::from_rgba_unmultiplied(c.r(), c.g(), c.b(), alpha);
+        let center = rect.min
+            + Vec2::new(
+                (p.p.pixel[0] + 0.5 - view.min.x) * scale,
+                (p.p.pixel[1] + 0.5 - view.min.y) * scale,
+            );
         mesh.add_colored_rect(Rect::from_center_size(center, Vec2::splat(2.0 * half)), c);
     }
     painter.add(egui::Shape::mesh(mesh));
 }
 
-/// Recompute the texture and projected points when the camera, frame or extrinsics changed.
-fn refresh(studio: &mut Studio, camera: &str, ctx: &egui::Context) -> Result<(), String> {
-    let Some(drive) = studio.drive.as_ref() else {
+/// Recompute a camera's texture, sweeps and GPU transforms when its frame or the extrinsics
+/// changed.
+fn refresh(
+    studio: &mut Studio,
+    index: usize,
+    camera: &str,
+    frame: usize,
+    drive: &Drive,
+    ctx: &egui::Context,
+) -> Result<(), String> {
+    let key = (frame, studio.overlay.stride, studio.overlay.accumulate);
+    let rig = studio.shown_rig().clone();
+    let Some(cache) = studio.overlays.get_mut(index) else {
         return Ok(());
     };
-    let key = (studio.camera, studio.frame, studio.view, studio.stride);
-    let rig = studio.shown_rig().clone();
-    let gpu = studio.gpu;
-    let cache = &mut studio.overlay_cache;
     if cache.key == Some(key) && cache.rig.as_ref() == Some(&rig) {
         return Ok(());
     }
     let stream = drive.stream(camera).ok_or("no such camera")?;
-    let image_stamp = stream.frames[studio.frame].stamp_nanos;
-    if cache.texture.as_ref().map(|(c, f, _)| (*c, *f)) != Some((studio.camera, studio.frame)) {
-        let img = drive
-            .load_image(camera, studio.frame)
-            .map_err(|e| e.to_string())?;
+    let image_stamp = stream
+        .frames
+        .get(frame)
+        .ok_or_else(|| format!("{camera} has no frame {frame}"))?
+        .stamp_nanos;
+    if cache.texture.as_ref().map(|(f, _)| *f) != Some(frame) {
+        let img = drive.load_image(camera, frame).map_err(|e| e.to_string())?;
         let color =
             egui::ColorImage::from_rgb([img.width() as usize, img.height() as usize], img.as_raw());
         let tex = ctx.load_texture(
-            format!("{camera}-{}", studio.frame),
+            format!("{camera}-{frame}"),
             color,
             egui::TextureOptions::LINEAR,
         );
-        cache.texture = Some((studio.camera, studio.frame, tex));
+        cache.texture = Some((frame, tex));
     }
     let cam = rig.sensor(camera).ok_or("no such camera")?;
-    let intr = cam.camera.clone().ok_or("camera has no intrinsics")?;
-    let mut points = Vec::new();
-    // GPU path: which sweeps are drawn (their points are uploaded once), and bucket transforms.
-    let mut gpu_sweeps: Vec<(Arc<LidarSweep>, Vec<Rigid>)> = Vec::new();
-    for lidar in rig.lidars() {
+    // Which sweeps: per LiDAR the one nearest the image, ± `accumulate`.
+    let mut wanted: Vec<(usize, String, usize)> = Vec::new();
+    for (li, lidar) in rig.lidars().enumerate() {
         let Some(ls) = drive.stream(&lidar.name) else {
             continue;
         };
-        // The sweep nearest in time to the image.
-        let Some((idx, _)) = ls
-            .frames
-            .iter()
-            .enumerate()
-            .min_by_key(|(_, f)| (f.stamp_nanos - image_stamp).abs())
-        else {
+        let Some(idx) = nearest_frame(drive, &lidar.name, image_stamp) else {
             continue;
         };
-        let sweep = match cache
-            .sweeps
-            .iter()
-            .find(|(n, i, _)| *n == lidar.name && *i == idx)
-        {
-            Some((_, _, s)) => s.clone(),
-            None => {
-                let s = Arc::new(
-                    drive
-                        .load_sweep(&lidar.name, idx)
-                        .map_err(|e| e.to_string())?,
-                );
-                cache.sweeps.push((lidar.name.clone(), idx, s.clone()));
-                if cache.sweeps.len() > 8 {
-                    cache.sweeps.remove(0);
-                }
-                s
-            }
-        };
-        let view = SweepView {
-            points_in_lidar: &sweep.points_in_sensor,
-            intensity: &sweep.intensity,
-            time_offset_secs: sweep.time_offset_secs.as_deref(),
-            stamp_nanos: sweep.stamp_nanos,
-        };
-        if gpu {
-            let t = camera_from_lidar_buckets(
-                &view,
-                &drive.trajectory,
-                lidar.vehicle_from_sensor,
-                cam.vehicle_from_sensor,
-                image_stamp,
-            )
-            .map_err(|e| format!("{camera} frame {}: {e}", studio.frame))?;
-            gpu_sweeps.push((sweep.clone(), t));
-            continue;
+        let k = studio.overlay.accumulate;
+        for i in idx.saturating_sub(k)..=(idx + k).min(ls.frames.len() - 1) {
+            wanted.push((li, lidar.name.clone(), i));
         }
-        match project_sweep(
+    }
+    let mut sweeps = Vec::with_capacity(wanted.len());
+    for (li, name, i) in &wanted {
+        // Studio-wide cache: sweeps are shared by every camera.
+        let s = studio_sweeps(&mut studio.sweep_cache, drive, name, *i)?;
+        sweeps.push((*li, s));
+    }
+    let Some(cache) = studio.overlays.get_mut(index) else {
+        return Ok(());
+    };
+    let lidars: Vec<_> = rig.lidars().collect();
+    let mut transforms = Vec::with_capacity(sweeps.len());
+    for (li, s) in &sweeps {
+        let view = sweep_view(s);
+        let t = camera_from_lidar_buckets(
             &view,
             &drive.trajectory,
-            lidar.vehicle_from_sensor,
+            lidars[*li].vehicle_from_sensor,
             cam.vehicle_from_sensor,
-            &intr,
             image_stamp,
-            studio.stride,
-        ) {
-            Ok(p) => points.extend(p),
-            Err(e) => return Err(format!("{camera} frame {}: {e}", studio.frame)),
-        }
+        )
+        .map_err(|e| format!("{camera} frame {frame}: {e}"))?;
+        transforms.push(t);
     }
-    if gpu {
-        upload_gpu_points(cache, &gpu_sweeps, studio.stride);
-    }
-    cache.points = points;
+    cache.sweeps = sweeps;
+    upload_gpu_points(cache, &transforms, studio.overlay.stride);
+    cache.cpu.clear();
+    cache.cpu_key = None;
     cache.key = Some(key);
     cache.rig = Some(rig);
     Ok(())
 }
 
+fn studio_sweeps(
+    cache: &mut SweepCache,
+    drive: &Drive,
+    lidar: &str,
+    index: usize,
+) -> Result<Arc<LidarSweep>, String> {
+    cache.get(drive, lidar, index)
+}
+
+fn sweep_view(s: &LidarSweep) -> SweepView<'_> {
+    SweepView {
+        points_in_lidar: &s.points_in_sensor,
+        intensity: &s.intensity,
+        time_offset_secs: s.time_offset_secs.as_deref(),
+        stamp_nanos: s.stamp_nanos,
+    }
+}
+
 /// Rebuild the GPU point list when the set of sweeps changed; always refresh the transforms.
-fn upload_gpu_points(
-    cache: &mut OverlayCache,
-    sweeps: &[(Arc<LidarSweep>, Vec<Rigid>)],
-    stride: usize,
-) {
+fn upload_gpu_points(cache: &mut OverlayCache, transforms: &[Vec<Rigid>], stride: usize) {
     use std::hash::{Hash, Hasher};
     let mut h = std::collections::hash_map::DefaultHasher::new();
-    for (s, t) in sweeps {
-        (Arc::as_ptr(s) as usize, s.stamp_nanos, t.len()).hash(&mut h);
+    for ((li, s), t) in cache.sweeps.iter().zip(transforms) {
+        (Arc::as_ptr(s) as usize, *li, s.stamp_nanos, t.len()).hash(&mut h);
     }
     stride.hash(&mut h);
     let key = h.finish();
     if key != cache.gpu_points_key || cache.gpu_points.is_empty() {
         let mut pts: Vec<(f32, GpuPoint)> = Vec::new();
         let mut base = 0u32;
-        for (s, t) in sweeps {
-            let view = SweepView {
-                points_in_lidar: &s.points_in_sensor,
-                intensity: &s.intensity,
-                time_offset_secs: s.time_offset_secs.as_deref(),
-                stamp_nanos: s.stamp_nanos,
-            };
-            let buckets = point_buckets(&view);
+        for ((li, s), t) in cache.sweeps.iter().zip(transforms) {
+            let buckets = point_buckets(&sweep_view(s));
             for i in (0..s.points_in_sensor.len()).step_by(stride.max(1)) {
                 let p = s.points_in_sensor[i];
                 let range = (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt();
@@ -342,7 +691,7 @@ fn upload_gpu_points(
                             p[2],
                             s.intensity.get(i).copied().unwrap_or(0.0),
                         ],
-                        bucket: base + buckets[i],
+                        packed: pack_bucket(base + buckets[i], *li as u32),
                     },
                 ));
             }
@@ -350,13 +699,83 @@ fn upload_gpu_points(
         }
         // Far to near: nearer splats are drawn over farther ones.
         pts.sort_by(|a, b| b.0.total_cmp(&a.0));
-        cache.gpu_intensity_max = pts
+        cache.intensity_max = pts
             .iter()
             .map(|p| p.1.position_intensity[3])
             .fold(1.0, f32::max);
         cache.gpu_points = Arc::new(pts.into_iter().map(|p| p.1).collect());
         cache.gpu_points_key = key;
     }
-    let all: Vec<Rigid> = sweeps.iter().flat_map(|(_, t)| t.iter().copied()).collect();
+    let all: Vec<Rigid> = transforms.iter().flatten().copied().collect();
     cache.gpu_transforms = transforms_f32(&all);
+}
+
+/// Project the camera's sweeps on the CPU (fallback drawing, hover readout) with occlusion.
+fn ensure_cpu(
+    studio: &mut Studio,
+    index: usize,
+    camera: &str,
+    drive: &Drive,
+) -> Result<(), String> {
+    let occlusion = (
+        studio.overlay.occlusion,
+        studio.overlay.occlusion_px.round() as u32,
+    );
+    let rig = studio.shown_rig().clone();
+    let stride = studio.overlay.stride;
+    let Some(cache) = studio.overlays.get_mut(index) else {
+        return Ok(());
+    };
+    if cache.cpu_key == Some(occlusion) {
+        return Ok(());
+    }
+    let Some((frame, _, _)) = cache.key else {
+        return Ok(());
+    };
+    let cam = rig.sensor(camera).ok_or("no such camera")?;
+    let intr = cam.camera.clone().ok_or("camera has no intrinsics")?;
+    let image_stamp = drive
+        .stream(camera)
+        .and_then(|s| s.frames.get(frame))
+        .ok_or("no such frame")?
+        .stamp_nanos;
+    let lidars: Vec<_> = rig.lidars().collect();
+    let mut cpu = Vec::new();
+    for (li, s) in &cache.sweeps {
+        let lidar = lidars[*li];
+        let projected = project_sweep(
+            &sweep_view(s),
+            &drive.trajectory,
+            lidar.vehicle_from_sensor,
+            cam.vehicle_from_sensor,
+            &intr,
+            image_stamp,
+            stride,
+        )
+        .map_err(|e| format!("{camera} frame {frame}: {e}"))?;
+        let row = lidar.vehicle_from_sensor;
+        cpu.extend(projected.into_iter().map(|p| {
+            let q = s.points_in_sensor[p.index as usize];
+            let z = row
+                .transform_point(glam::DVec3::new(q[0] as f64, q[1] as f64, q[2] as f64))
+                .z;
+            CpuPoint {
+                p,
+                lidar: *li as u8,
+                height_m: z as f32,
+                visible: true,
+            }
+        }));
+    }
+    cpu.sort_by(|a, b| b.p.depth_m.total_cmp(&a.p.depth_m));
+    if occlusion.0 {
+        let pts: Vec<ProjectedPoint> = cpu.iter().map(|c| c.p).collect();
+        let visible = visible_points(&pts, intr.width, intr.height, occlusion.1, 0.05);
+        for (c, v) in cpu.iter_mut().zip(visible) {
+            c.visible = v;
+        }
+    }
+    cache.cpu = cpu;
+    cache.cpu_key = Some(occlusion);
+    Ok(())
 }

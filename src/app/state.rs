@@ -1,24 +1,115 @@
-//! Studio state: the open drive, the extrinsics being edited (with undo/redo), the selection.
+//! Studio state: the open drive, the extrinsics being edited (with undo/redo and axis locks),
+//! what the viewport shows, the selected segments, and the session that is autosaved after
+//! every change.
 
-use std::path::Path;
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use crate::calib::{CalibrationFile, Rig};
 use crate::geometry::Rigid;
 use crate::log::Drive;
+use crate::session::{AxisLocks, RecentFiles, Session};
 
 /// Which set of extrinsics the overlay uses.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum ExtrinsicsView {
     Initial,
     Current,
+    /// The optimiser's best so far.
+    Best,
     GroundTruth,
+}
+
+impl ExtrinsicsView {
+    pub fn label(self) -> &'static str {
+        match self {
+            ExtrinsicsView::Initial => "initial",
+            ExtrinsicsView::Current => "current",
+            ExtrinsicsView::Best => "best",
+            ExtrinsicsView::GroundTruth => "ground truth",
+        }
+    }
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum ColorBy {
     Range,
     Intensity,
+    /// Height above the vehicle origin (vehicle z).
+    Height,
+    /// One colour per LiDAR.
+    Lidar,
+}
+
+/// How LiDAR points are drawn over the images.
+#[derive(Clone, Debug, PartialEq)]
+pub struct OverlaySettings {
+    pub color_by: ColorBy,
+    pub point_size: f32,
+    pub opacity: f32,
+    pub min_range_m: f32,
+    pub max_range_m: f32,
+    pub height_range_m: [f32; 2],
+    /// Keep every n-th point.
+    pub stride: usize,
+    /// Sweeps drawn on each side of the one nearest the image (each through the trajectory at
+    /// its own firing times), for a denser overlay.
+    pub accumulate: usize,
+    /// Depth-tested splats: hide points behind nearer surfaces.
+    pub occlusion: bool,
+    pub occlusion_px: f32,
+}
+
+impl Default for OverlaySettings {
+    fn default() -> Self {
+        Self {
+            color_by: ColorBy::Range,
+            point_size: 2.0,
+            opacity: 1.0,
+            min_range_m: 0.0,
+            max_range_m: 80.0,
+            height_range_m: [-1.0, 4.0],
+            stride: 1,
+            accumulate: 0,
+            occlusion: true,
+            occlusion_px: 4.0,
+        }
+    }
+}
+
+/// Zoom and pan of the single-camera view: the image pixel at the centre and the zoom factor.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ViewZoom {
+    pub center_px: [f32; 2],
+    pub zoom: f32,
+}
+
+impl Default for ViewZoom {
+    fn default() -> Self {
+        Self {
+            center_px: [f32::NAN; 2],
+            zoom: 1.0,
+        }
+    }
+}
+
+/// What is under the cursor in the viewport.
+#[derive(Clone, Debug, PartialEq)]
+pub struct HoverReadout {
+    pub u: f32,
+    pub v: f32,
+    /// Nearest drawn LiDAR point within a few pixels: its depth (m) and LiDAR.
+    pub point: Option<(f32, String)>,
+}
+
+/// Right-hand panel tabs.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum Tab {
+    #[default]
+    Optimise,
+    Checks,
+    Export,
 }
 
 pub struct Studio {
@@ -29,25 +120,46 @@ pub struct Studio {
     pub current: Rig,
     pub undo: Vec<Rig>,
     pub redo: Vec<Rig>,
+    /// Index into the cameras with intrinsics, and the frame of that camera.
     pub camera: usize,
     pub frame: usize,
     pub view: ExtrinsicsView,
-    pub color_by: ColorBy,
-    pub point_size: f32,
-    pub max_range_m: f32,
-    pub stride: usize,
+    /// Blink: alternate `view` with `blink_with` twice a second.
+    pub blink: bool,
+    pub blink_with: ExtrinsicsView,
+    pub(crate) blink_phase: bool,
+    pub overlay: OverlaySettings,
+    /// Show every camera at once (each at its frame nearest in time).
+    pub grid: bool,
+    pub zoom: ViewZoom,
+    pub hover: Option<HoverReadout>,
     pub selected_sensor: Option<String>,
     pub nudge_step_m: f64,
     pub nudge_step_deg: f64,
+    /// Per sensor: x, y, z, roll, pitch, yaw locked against edits and optimisers.
+    pub locks: BTreeMap<String, AxisLocks>,
+    /// Text typed or pasted into a sensor's "paste" box.
+    pub paste_text: String,
+    /// Time ranges to calibrate on (nanoseconds; empty = the whole drive).
+    pub segments: Vec<(i64, i64)>,
+    pub tab: Tab,
     /// Messages for the user; errors are shown, never fatal.
     pub status: Vec<String>,
-    pub(crate) overlay_cache: super::overlay::OverlayCache,
+    pub(crate) overlays: Vec<super::overlay::OverlayCache>,
+    pub(crate) sweep_cache: super::overlay::SweepCache,
     pub optimiser: super::optimiser::OptimiserPanel,
+    pub checks: super::checks::ChecksPanel,
+    pub trajectory_panel: super::trajectory::TrajectoryPanel,
+    pub export: super::export::ExportPanel,
     /// Known ground truth (the simulator's demo), for the overlay and pose errors.
     pub ground_truth: Option<Rig>,
     pub demo: Option<super::demo::DemoJob>,
     /// The overlay is drawn by the wgpu paint callback (false: CPU-projected egui mesh).
     pub gpu: bool,
+    pub recent: RecentFiles,
+    /// Where the session is autosaved after every change (None: no autosave, e.g. in tests).
+    pub autosave: Option<PathBuf>,
+    pub(crate) saved_session: Option<Session>,
 }
 
 impl Default for Studio {
@@ -61,22 +173,38 @@ impl Default for Studio {
             camera: 0,
             frame: 0,
             view: ExtrinsicsView::Current,
-            color_by: ColorBy::Range,
-            point_size: 2.0,
-            max_range_m: 80.0,
-            stride: 1,
+            blink: false,
+            blink_with: ExtrinsicsView::Initial,
+            blink_phase: false,
+            overlay: OverlaySettings::default(),
+            grid: false,
+            zoom: ViewZoom::default(),
+            hover: None,
             selected_sensor: None,
             nudge_step_m: 0.01,
             nudge_step_deg: 0.1,
+            locks: BTreeMap::new(),
+            paste_text: String::new(),
+            segments: Vec::new(),
+            tab: Tab::default(),
             status: Vec::new(),
-            overlay_cache: Default::default(),
+            overlays: Vec::new(),
+            sweep_cache: Default::default(),
             optimiser: Default::default(),
+            checks: Default::default(),
+            trajectory_panel: Default::default(),
+            export: Default::default(),
             ground_truth: None,
             demo: None,
             gpu: false,
+            recent: RecentFiles::default(),
+            autosave: None,
+            saved_session: None,
         }
     }
 }
+
+const AXES: [&str; 6] = ["x", "y", "z", "roll", "pitch", "yaw"];
 
 impl Studio {
     pub fn open_log(&mut self, path: &Path) {
@@ -88,6 +216,8 @@ impl Studio {
                 self.redo.clear();
                 self.camera = 0;
                 self.frame = 0;
+                self.segments.clear();
+                self.locks.clear();
                 self.status.push(format!(
                     "opened {} ({} sensors, {} problems)",
                     path.display(),
@@ -97,9 +227,20 @@ impl Studio {
                 self.drive = Some(Arc::new(drive));
                 self.ground_truth = None;
                 self.optimiser = Default::default();
-                self.overlay_cache = Default::default();
+                self.checks = Default::default();
+                self.trajectory_panel = Default::default();
+                self.overlays.clear();
+                self.sweep_cache = Default::default();
+                self.remember(path);
             }
             Err(e) => self.status.push(format!("error: {e}")),
+        }
+    }
+
+    pub(crate) fn remember(&mut self, path: &Path) {
+        self.recent.push(path);
+        if self.autosave.is_some() {
+            let _ = self.recent.save(&RecentFiles::default_path());
         }
     }
 
@@ -107,26 +248,33 @@ impl Studio {
     pub fn load_calibration(&mut self, path: &Path) {
         match CalibrationFile::load_rig(path) {
             Ok(rig) => {
-                let mut next = self.current.clone();
-                let mut matched = 0;
-                for s in &rig.sensors {
-                    if let Some(t) = next.sensor_mut(&s.name) {
-                        t.vehicle_from_sensor = s.vehicle_from_sensor;
-                        if s.camera.is_some() {
-                            t.camera = s.camera.clone();
-                        }
-                        matched += 1;
-                    }
-                }
-                self.edit(next);
+                let matched = self.apply_rig(&rig);
                 self.status.push(format!(
                     "loaded {} ({matched} of {} sensors matched)",
                     path.display(),
                     rig.sensors.len()
                 ));
+                self.remember(path);
             }
             Err(e) => self.status.push(format!("error: {e}")),
         }
+    }
+
+    /// Take the extrinsics (and intrinsics) of `rig`'s sensors that this rig has, as one edit.
+    fn apply_rig(&mut self, rig: &Rig) -> usize {
+        let mut next = self.current.clone();
+        let mut matched = 0;
+        for s in &rig.sensors {
+            if let Some(t) = next.sensor_mut(&s.name) {
+                t.vehicle_from_sensor = s.vehicle_from_sensor;
+                if s.camera.is_some() {
+                    t.camera = s.camera.clone();
+                }
+                matched += 1;
+            }
+        }
+        self.edit(next);
+        matched
     }
 
     /// Apply an edit to the current rig, recording undo.
@@ -137,12 +285,39 @@ impl Studio {
         }
     }
 
+    /// Set a sensor's extrinsic; locked axes keep their current values.
     pub fn set_extrinsic(&mut self, sensor: &str, vehicle_from_sensor: Rigid) {
         let mut next = self.current.clone();
         if let Some(s) = next.sensor_mut(sensor) {
-            s.vehicle_from_sensor = vehicle_from_sensor;
+            s.vehicle_from_sensor = match self.locks.get(sensor) {
+                Some(locks) => apply_locks(s.vehicle_from_sensor, vehicle_from_sensor, locks),
+                None => vehicle_from_sensor,
+            };
             self.edit(next);
         }
+    }
+
+    /// `candidate` with every locked axis of every sensor taken from `reference`.
+    pub fn respect_locks(&self, reference: &Rig, candidate: &Rig) -> Rig {
+        let mut out = candidate.clone();
+        for s in &mut out.sensors {
+            if let (Some(locks), Some(r)) = (self.locks.get(&s.name), reference.sensor(&s.name)) {
+                s.vehicle_from_sensor =
+                    apply_locks(r.vehicle_from_sensor, s.vehicle_from_sensor, locks);
+            }
+        }
+        out
+    }
+
+    /// Names of a sensor's locked axes, for messages.
+    pub fn locked_axes(&self, sensor: &str) -> Vec<&'static str> {
+        self.locks.get(sensor).map_or_else(Vec::new, |l| {
+            AXES.iter()
+                .zip(l)
+                .filter(|(_, on)| **on)
+                .map(|(a, _)| *a)
+                .collect()
+        })
     }
 
     pub fn undo(&mut self) {
@@ -158,129 +333,193 @@ impl Studio {
     }
 
     /// The overlay's current `camera_from_lidar` table (GPU path) and CPU-projected pixels
-    /// (fallback path): what the viewport draws, for tests and diagnostics.
+    /// (fallback path) for the selected camera: what the viewport draws, for tests.
     pub fn overlay_state(&self) -> (&[[[f32; 4]; 4]], Vec<[f32; 2]>) {
-        self.overlay_cache.state()
+        match self.overlays.get(self.camera) {
+            Some(c) => c.state(),
+            None => (&[], Vec::new()),
+        }
+    }
+
+    /// The view the overlay shows this frame (blink alternates two).
+    pub fn effective_view(&self) -> ExtrinsicsView {
+        if self.blink && self.blink_phase {
+            self.blink_with
+        } else {
+            self.view
+        }
+    }
+
+    /// The rig for a view (falls back to the current rig when that view has none).
+    pub fn rig_for(&self, view: ExtrinsicsView) -> &Rig {
+        match view {
+            ExtrinsicsView::Initial => &self.initial,
+            ExtrinsicsView::Current => &self.current,
+            ExtrinsicsView::Best => self.optimiser.best.as_ref().unwrap_or(&self.current),
+            ExtrinsicsView::GroundTruth => self.ground_truth.as_ref().unwrap_or(&self.current),
+        }
     }
 
     /// The rig the overlay draws with.
     pub fn shown_rig(&self) -> &Rig {
-        match self.view {
-            ExtrinsicsView::Initial => &self.initial,
-            ExtrinsicsView::Current => &self.current,
-            ExtrinsicsView::GroundTruth => self.ground_truth.as_ref().unwrap_or(&self.current),
+        self.rig_for(self.effective_view())
+    }
+
+    /// The session as it stands.
+    pub fn session(&self) -> Session {
+        let mut s = Session::new();
+        s.log = self.drive.as_ref().map(|d| d.path().to_path_buf());
+        s.segments_nanos = self.segments.iter().map(|&(a, b)| [a, b]).collect();
+        s.set_rigs(&self.initial, &self.current, self.optimiser.best.as_ref());
+        s.locks = self.locks.clone();
+        s.camera = self.camera;
+        s.frame = self.frame;
+        s.history = self.optimiser.history.clone();
+        s
+    }
+
+    pub fn save_session(&mut self, path: &Path) {
+        match self.session().save(path) {
+            Ok(()) => self
+                .status
+                .push(format!("saved session {}", path.display())),
+            Err(e) => self.status.push(format!("error: {e}")),
+        }
+    }
+
+    /// Restore a session: open its log, then its rigs, segments, locks and history. Anything
+    /// wrong is an error in the status line; what was open stays open.
+    pub fn restore_session(&mut self, path: &Path) {
+        let session = match Session::load(path) {
+            Ok(s) => s,
+            Err(e) => {
+                self.status.push(format!("error: {e}"));
+                return;
+            }
+        };
+        self.apply_session(&session, path);
+    }
+
+    pub(crate) fn apply_session(&mut self, session: &Session, path: &Path) {
+        let Some(log) = &session.log else {
+            self.status.push(format!(
+                "error: {}: the session names no log",
+                path.display()
+            ));
+            return;
+        };
+        let opened_before = self.drive.as_ref().map(|d| d.path().to_path_buf());
+        if opened_before.as_deref() != Some(log.as_path()) {
+            let n = self.status.len();
+            self.open_log(log);
+            if self.status[n..].iter().any(|s| s.starts_with("error")) {
+                return;
+            }
+        }
+        let rig = |doc: &Option<CalibrationFile>| doc.as_ref().and_then(|d| d.to_rig(path).ok());
+        if let Some(r) = rig(&session.initial) {
+            self.initial = self.merged(&r);
+        }
+        if let Some(r) = rig(&session.current) {
+            let merged = self.merged(&r);
+            self.edit(merged);
+        }
+        self.optimiser.best = rig(&session.best).map(|r| self.merged(&r));
+        self.segments = session
+            .segments_nanos
+            .iter()
+            .map(|s| (s[0], s[1]))
+            .collect();
+        self.locks = session.locks.clone();
+        self.camera = session.camera;
+        self.frame = session.frame;
+        self.optimiser.history = session.history.clone();
+        self.overlays.clear();
+        self.status
+            .push(format!("restored session {}", path.display()));
+    }
+
+    /// This drive's rig with the extrinsics/intrinsics of `other`'s matching sensors.
+    fn merged(&self, other: &Rig) -> Rig {
+        let mut out = self.current.clone();
+        for s in &other.sensors {
+            if let Some(t) = out.sensor_mut(&s.name) {
+                t.vehicle_from_sensor = s.vehicle_from_sensor;
+                if s.camera.is_some() {
+                    t.camera = s.camera.clone();
+                }
+            }
+        }
+        out
+    }
+
+    /// Write the autosave when the session changed (cheap: compares before writing). Not while
+    /// an optimiser is running; its result is saved when it ends.
+    pub fn autosave_if_changed(&mut self) {
+        let Some(path) = self.autosave.clone() else {
+            return;
+        };
+        if self.drive.is_none() || self.optimiser.run.is_some() {
+            return;
+        }
+        let session = self.session();
+        if self.saved_session.as_ref() == Some(&session) {
+            return;
+        }
+        match session.save(&path) {
+            Ok(()) => self.saved_session = Some(session),
+            Err(e) => {
+                self.status.push(format!("error: autosave: {e}"));
+                self.autosave = None;
+            }
         }
     }
 }
 
-impl eframe::App for Studio {
-    fn ui(&mut self, ui: &mut egui::Ui, _frame: &mut eframe::Frame) {
-        self.handle_dropped_files(ui.ctx());
-        super::optimiser::poll(self, ui.ctx());
-        super::demo::poll(self, ui.ctx());
-        egui::Panel::top("menu").show(ui, |ui| self.menu_ui(ui));
-        egui::Panel::bottom("status").show(ui, |ui| self.status_ui(ui));
-        egui::Panel::left("sensors")
-            .default_size(340.0)
-            .show(ui, |ui| super::sensors::sensors_ui(self, ui));
-        egui::Panel::right("optimiser")
-            .default_size(380.0)
-            .show(ui, |ui| super::optimiser::optimiser_ui(self, ui));
-        egui::CentralPanel::default().show(ui, |ui| super::overlay::viewport_ui(self, ui));
+/// `candidate` with the locked axes (x, y, z, roll, pitch, yaw) of `reference`.
+pub fn apply_locks(reference: Rigid, candidate: Rigid, locks: &AxisLocks) -> Rigid {
+    if !locks.iter().any(|&l| l) {
+        return candidate;
     }
+    let mut xyz = candidate.translation.to_array();
+    let r = reference.translation.to_array();
+    for i in 0..3 {
+        if locks[i] {
+            xyz[i] = r[i];
+        }
+    }
+    let mut rpy = candidate.roll_pitch_yaw_rad();
+    let r_rpy = reference.roll_pitch_yaw_rad();
+    for i in 0..3 {
+        if locks[3 + i] {
+            rpy[i] = r_rpy[i];
+        }
+    }
+    Rigid::new(
+        glam::DQuat::from_euler(glam::EulerRot::ZYX, rpy[2], rpy[1], rpy[0]),
+        glam::DVec3::from_array(xyz),
+    )
 }
 
-impl Studio {
-    fn menu_ui(&mut self, ui: &mut egui::Ui) {
-        ui.horizontal(|ui| {
-            if ui.button("Open log…").clicked()
-                && let Some(path) = rfd::FileDialog::new()
-                    .add_filter("MCAP", &["mcap"])
-                    .pick_file()
-            {
-                self.open_log(&path);
-            }
-            if ui.button("Load calibration…").clicked()
-                && let Some(path) = rfd::FileDialog::new()
-                    .add_filter("YAML", &["yaml", "yml"])
-                    .pick_file()
-            {
-                self.load_calibration(&path);
-            }
-            if ui.button("Save calibration…").clicked()
-                && let Some(path) = rfd::FileDialog::new()
-                    .add_filter("YAML", &["yaml"])
-                    .save_file()
-            {
-                match CalibrationFile::from_rig(&self.current).save(&path) {
-                    Ok(()) => self.status.push(format!("saved {}", path.display())),
-                    Err(e) => self.status.push(format!("error: {e}")),
-                }
-            }
-            ui.separator();
-            if ui
-                .add_enabled(!self.undo.is_empty(), egui::Button::new("Undo"))
-                .clicked()
-            {
-                self.undo();
-            }
-            if ui
-                .add_enabled(!self.redo.is_empty(), egui::Button::new("Redo"))
-                .clicked()
-            {
-                self.redo();
-            }
-            ui.separator();
-            ui.label("Drop an .mcap or calibration .yaml anywhere to open it.");
-        });
-    }
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::{DQuat, DVec3, EulerRot};
 
-    fn status_ui(&mut self, ui: &mut egui::Ui) {
-        ui.horizontal(|ui| {
-            match self.status.last() {
-                Some(s) if s.starts_with("error") => ui.colored_label(egui::Color32::LIGHT_RED, s),
-                Some(s) => ui.label(s),
-                None => ui.label("ready"),
-            };
-            if let Some(d) = &self.drive {
-                ui.separator();
-                ui.label(format!("{} · {}", d.path().display(), d.trajectory_source));
-                if !d.problems.is_empty() {
-                    ui.colored_label(
-                        egui::Color32::YELLOW,
-                        format!("{} problems", d.problems.len()),
-                    )
-                    .on_hover_text(
-                        d.problems
-                            .iter()
-                            .take(20)
-                            .map(|p| p.to_string())
-                            .collect::<Vec<_>>()
-                            .join("\n"),
-                    );
-                }
-            }
-        });
-    }
-
-    fn handle_dropped_files(&mut self, ctx: &egui::Context) {
-        let dropped: Vec<_> = ctx.input(|i| {
-            i.raw
-                .dropped_files
-                .iter()
-                .map(|f| f.path().to_path_buf())
-                .filter(|p| !p.as_os_str().is_empty())
-                .collect()
-        });
-        for path in dropped {
-            match path.extension().and_then(|e| e.to_str()) {
-                Some("mcap") => self.open_log(&path),
-                Some("yaml" | "yml") => self.load_calibration(&path),
-                _ => self.status.push(format!(
-                    "error: {}: not an .mcap or .yaml file",
-                    path.display()
-                )),
-            }
-        }
+    #[test]
+    fn locked_axes_keep_the_reference_values() {
+        let a = Rigid::new(
+            DQuat::from_euler(EulerRot::ZYX, 0.1, 0.02, -0.03),
+            DVec3::new(1.0, 2.0, 3.0),
+        );
+        let b = Rigid::new(
+            DQuat::from_euler(EulerRot::ZYX, 0.2, 0.05, 0.01),
+            DVec3::new(1.5, 2.5, 3.5),
+        );
+        let out = apply_locks(a, b, &[true, false, false, false, false, true]);
+        assert_eq!(out.translation, DVec3::new(1.0, 2.5, 3.5));
+        let [r, p, y] = out.roll_pitch_yaw_rad();
+        assert!((y - 0.1).abs() < 1e-12 && (p - 0.05).abs() < 1e-12 && (r - 0.01).abs() < 1e-12);
+        assert_eq!(apply_locks(a, b, &[false; 6]), b);
     }
 }

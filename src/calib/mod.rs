@@ -6,6 +6,7 @@
 
 pub mod file;
 pub mod rig;
+pub mod transform_text;
 
 pub use file::{CalibFileError, CalibrationFile};
 pub use rig::{Rig, Sensor, SensorKind};

@@ -5,6 +5,7 @@
 //! (built from unit quaternions) so `inverse()` of a rigid transform is exact up to rounding.
 
 pub mod camera;
+pub mod motion;
 pub mod projection;
 pub mod rigid;
 pub mod rot6d;

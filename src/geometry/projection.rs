@@ -69,6 +69,30 @@ fn world_from_lidar_buckets(
     Ok((first, poses))
 }
 
+/// Every `stride`-th point of a sweep in the world frame, each moved with the trajectory at
+/// its own firing time (for maps and aggregation).
+pub fn world_points(
+    sweep: &SweepView<'_>,
+    trajectory: &Trajectory,
+    vehicle_from_lidar: Rigid,
+    stride: usize,
+) -> Result<Vec<DVec3>, TrajectoryError> {
+    let (first, poses) = world_from_lidar_buckets(sweep, trajectory, vehicle_from_lidar)?;
+    let stride = stride.max(1);
+    Ok((0..sweep.points_in_lidar.len())
+        .step_by(stride)
+        .map(|i| {
+            let b = match sweep.time_offset_secs {
+                Some(t) => ((t[i] as f64 * 1e9) as i64 / BUCKET_NANOS - first)
+                    .clamp(0, poses.len() as i64 - 1) as usize,
+                None => 0,
+            };
+            let p = sweep.points_in_lidar[i];
+            poses[b].transform_point(DVec3::new(p[0] as f64, p[1] as f64, p[2] as f64))
+        })
+        .collect())
+}
+
 /// Index of each point's firing-time bucket into [`camera_from_lidar_buckets`]. It depends only
 /// on the sweep, so a GPU can keep it while extrinsics change.
 pub fn point_buckets(sweep: &SweepView<'_>) -> Vec<u32> {
@@ -147,6 +171,47 @@ pub fn project_sweep(
             })
         })
         .collect())
+}
+
+/// Occlusion by depth-tested splats: which projected points are not hidden behind a nearer
+/// surface. Every point writes its depth into a `(2r+1)²` square of a `width × height` min-depth
+/// buffer; a point stays visible when its depth, pulled forward by `tolerance` (a fraction of
+/// its depth), is not behind the buffer at its own pixel. The GPU overlay does the same with
+/// round splats (`shaders/lidar_overlay.wgsl`).
+pub fn visible_points(
+    points: &[ProjectedPoint],
+    width: u32,
+    height: u32,
+    radius_px: u32,
+    tolerance: f32,
+) -> Vec<bool> {
+    let (w, h) = (width as usize, height as usize);
+    if w == 0 || h == 0 {
+        return vec![false; points.len()];
+    }
+    let pixel = |p: &ProjectedPoint| {
+        let x = (p.pixel[0].round().max(0.0) as usize).min(w - 1);
+        let y = (p.pixel[1].round().max(0.0) as usize).min(h - 1);
+        (x, y)
+    };
+    let mut min_depth = vec![f32::INFINITY; w * h];
+    let r = radius_px as usize;
+    for p in points {
+        let (x, y) = pixel(p);
+        for yy in y.saturating_sub(r)..=(y + r).min(h - 1) {
+            let row = &mut min_depth[yy * w..(yy + 1) * w];
+            for d in &mut row[x.saturating_sub(r)..=(x + r).min(w - 1)] {
+                *d = d.min(p.depth_m);
+            }
+        }
+    }
+    points
+        .iter()
+        .map(|p| {
+            let (x, y) = pixel(p);
+            p.depth_m * (1.0 - tolerance) <= min_depth[y * w + x]
+        })
+        .collect()
 }
 
 #[cfg(test)]
@@ -272,5 +337,52 @@ mod tests {
                 (px.x as f32 - r.pixel[0]).abs() < 1e-3 && (px.y as f32 - r.pixel[1]).abs() < 1e-3
             );
         }
+    }
+
+    #[test]
+    fn points_behind_a_nearer_surface_are_hidden() {
+        let point = |x: f32, y: f32, depth_m: f32| ProjectedPoint {
+            pixel: [x, y],
+            depth_m,
+            intensity: 0.0,
+            index: 0,
+        };
+        // A sparse near wall (every 4 px, 10 m) over x in [20, 40], a dense far wall (30 m)
+        // everywhere, and a point on the near wall's own surface 2 % further.
+        let mut points = Vec::new();
+        for y in (0..60).step_by(4) {
+            for x in (20..=40).step_by(4) {
+                points.push(point(x as f32, y as f32, 10.0));
+            }
+        }
+        let n_near = points.len();
+        points.push(point(30.0, 30.0, 10.2));
+        for y in 0..60 {
+            for x in 0..60 {
+                points.push(point(x as f32, y as f32, 30.0));
+            }
+        }
+        let visible = visible_points(&points, 64, 64, 2, 0.05);
+        assert!(
+            visible[..=n_near].iter().all(|&v| v),
+            "the near wall is visible"
+        );
+        for (p, v) in points[n_near + 1..].iter().zip(&visible[n_near + 1..]) {
+            let inside = (20.0..=40.0).contains(&p.pixel[0]) && p.pixel[1] < 58.0;
+            let outside = p.pixel[0] < 18.0 || p.pixel[0] > 42.0;
+            if inside {
+                assert!(!v, "far point at {:?} shows through the near wall", p.pixel);
+            }
+            if outside {
+                assert!(
+                    v,
+                    "far point at {:?} was hidden with nothing in front",
+                    p.pixel
+                );
+            }
+        }
+        // Without splat radius the gaps of the sparse near wall let the far wall through.
+        let leaky = visible_points(&points, 64, 64, 0, 0.05);
+        assert!(leaky[n_near + 1..].iter().filter(|&&v| v).count() > 3000);
     }
 }

@@ -124,14 +124,14 @@ impl EdgeFrame {
 
 impl EdgeAlignment {
     /// Prepare `frames` evenly spaced frames of `camera` against `lidar` from a drive, using the
-    /// extrinsics of `rig` for the LiDAR. `segment_nanos` limits the frames to a time range.
+    /// extrinsics of `rig` for the LiDAR. `segments_nanos` limits the frames to time ranges (empty: all).
     pub fn from_drive(
         drive: &Drive,
         rig: &Rig,
         camera: &str,
         lidar: &str,
         frames: usize,
-        segment_nanos: Option<(i64, i64)>,
+        segments_nanos: &[(i64, i64)],
     ) -> Result<Self, AlignError> {
         let cam = rig
             .sensor(camera)
@@ -150,7 +150,9 @@ impl EdgeAlignment {
         let lidar_stream = drive
             .stream(lidar)
             .ok_or_else(|| AlignError::Setup(format!("no sweeps for '{lidar}' in the log")))?;
-        let in_segment = |t: i64| segment_nanos.is_none_or(|(a, b)| t >= a && t <= b);
+        let in_segment = |t: i64| {
+            segments_nanos.is_empty() || segments_nanos.iter().any(|&(a, b)| t >= a && t <= b)
+        };
         let usable: Vec<usize> = (0..lidar_stream.frames.len())
             .filter(|&i| {
                 let t = lidar_stream.frames[i].stamp_nanos;
@@ -159,7 +161,7 @@ impl EdgeAlignment {
             .collect();
         if usable.is_empty() {
             return Err(AlignError::Setup(format!(
-                "no sweep of '{lidar}' inside the trajectory and the segment"
+                "no sweep of '{lidar}' inside the trajectory and the selected segments"
             )));
         }
         let wanted = frames.clamp(1, usable.len());
@@ -228,26 +230,35 @@ impl EdgeAlignment {
 
     /// Mean truncated edge distance (px) of the silhouettes seen through `vehicle_from_camera`.
     pub fn cost(&self, vehicle_from_camera: Rigid) -> f64 {
+        let d = self.distances(vehicle_from_camera);
+        if d.is_empty() {
+            self.truncation_px
+        } else {
+            d.iter().map(|&x| x as f64).sum::<f64>() / d.len() as f64
+        }
+    }
+
+    /// Per silhouette point: its truncated distance (px) to the nearest image edge when seen
+    /// through `vehicle_from_camera` (τ for points behind the camera or outside the image).
+    pub fn distances(&self, vehicle_from_camera: Rigid) -> Vec<f32> {
         let camera_from_vehicle = vehicle_from_camera.inverse();
         let tau = self.truncation_px;
-        let mut sum = 0.0;
-        let mut n = 0usize;
+        let mut out = Vec::with_capacity(self.point_count());
         for f in &self.frames {
             for q in &f.points_in_vehicle {
                 let p = camera_from_vehicle.transform_point(*q);
-                n += 1;
-                if p.z <= 0.1 {
-                    sum += tau;
-                    continue;
-                }
-                sum += self
-                    .intrinsics
-                    .project(p)
-                    .and_then(|px| f.distance_at(px.x, px.y))
-                    .map_or(tau, |d| d.min(tau));
+                let d = if p.z <= 0.1 {
+                    tau
+                } else {
+                    self.intrinsics
+                        .project(p)
+                        .and_then(|px| f.distance_at(px.x, px.y))
+                        .map_or(tau, |d| d.min(tau))
+                };
+                out.push(d as f32);
             }
         }
-        if n == 0 { tau } else { sum / n as f64 }
+        out
     }
 }
 

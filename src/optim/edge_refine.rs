@@ -14,18 +14,18 @@ pub struct EdgeRefiner {
 }
 
 impl EdgeRefiner {
-    /// Prepare `cameras` against `lidar` on `frames` frames of the drive (optionally a segment).
+    /// Prepare `cameras` against `lidar` on `frames` frames of the drive (within `segments_nanos`; empty = the whole drive).
     pub fn new(
         drive: &Drive,
         rig: &Rig,
         lidar: &str,
         cameras: &[String],
         frames: usize,
-        segment_nanos: Option<(i64, i64)>,
+        segments_nanos: &[(i64, i64)],
     ) -> Result<Self, AlignError> {
         let mut problems = Vec::new();
         for cam in cameras {
-            let p = EdgeAlignment::from_drive(drive, rig, cam, lidar, frames, segment_nanos)?;
+            let p = EdgeAlignment::from_drive(drive, rig, cam, lidar, frames, segments_nanos)?;
             let start = rig
                 .sensor(cam)
                 .map(|s| s.vehicle_from_sensor)

@@ -1,0 +1,271 @@
+//! Reprojection checks: for every camera–LiDAR pair the target-free edge-alignment score
+//! (mean distance in px from projected LiDAR depth discontinuities to the nearest image edge,
+//! [`crate::optim::edge_align::EdgeAlignment`]) with the initial and the current extrinsics,
+//! worst pair first, a histogram of the per-point distances of the selected pair, and pose
+//! errors when the ground truth is known. Scoring runs on a worker thread with progress.
+
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::mpsc::{Receiver, channel};
+
+use egui_plot::{Bar, BarChart, Legend, Plot};
+
+use super::Studio;
+use crate::calib::Rig;
+use crate::log::Drive;
+use crate::optim::edge_align::EdgeAlignment;
+
+/// One camera–LiDAR pair scored with two rigs.
+#[derive(Clone, Debug)]
+pub struct PairScore {
+    pub camera: String,
+    pub lidar: String,
+    pub initial_px: f64,
+    pub current_px: f64,
+    pub initial_distances: Vec<f32>,
+    pub current_distances: Vec<f32>,
+}
+
+enum Msg {
+    Progress(usize, usize),
+    Pair(PairScore),
+    Skipped(String),
+    Done,
+}
+
+#[derive(Default)]
+pub struct ChecksPanel {
+    pub results: Vec<PairScore>,
+    pub selected: Option<(String, String)>,
+    pub progress: (usize, usize),
+    pub running: bool,
+    pub skipped: Vec<String>,
+    job: Option<Receiver<Msg>>,
+    cancel: Option<Arc<AtomicBool>>,
+}
+
+/// Score one pair under one rig: the edge-alignment problem on `frames` frames of the segments.
+pub fn score_pair(
+    drive: &Drive,
+    rig: &Rig,
+    camera: &str,
+    lidar: &str,
+    frames: usize,
+    segments: &[(i64, i64)],
+) -> Result<(f64, Vec<f32>), String> {
+    let problem = EdgeAlignment::from_drive(drive, rig, camera, lidar, frames, segments)
+        .map_err(|e| e.to_string())?;
+    let t = rig
+        .sensor(camera)
+        .ok_or_else(|| format!("no sensor '{camera}'"))?
+        .vehicle_from_sensor;
+    let d = problem.distances(t);
+    if d.is_empty() {
+        return Err(format!(
+            "{camera} × {lidar}: no LiDAR silhouette inside the image"
+        ));
+    }
+    let mean = d.iter().map(|&x| x as f64).sum::<f64>() / d.len() as f64;
+    Ok((mean, d))
+}
+
+pub fn start(studio: &mut Studio) {
+    let Some(drive) = studio.drive.clone() else {
+        return;
+    };
+    let (initial, current) = (studio.initial.clone(), studio.current.clone());
+    let segments = studio.segments.clone();
+    let pairs: Vec<(String, String)> = current
+        .cameras()
+        .filter(|c| c.camera.is_some())
+        .flat_map(|c| {
+            current
+                .lidars()
+                .map(move |l| (c.name.clone(), l.name.clone()))
+        })
+        .collect();
+    let (tx, rx) = channel();
+    let cancel = Arc::new(AtomicBool::new(false));
+    let stop = cancel.clone();
+    std::thread::spawn(move || {
+        let total = pairs.len();
+        for (k, (cam, lidar)) in pairs.into_iter().enumerate() {
+            if stop.load(Ordering::Relaxed) {
+                break;
+            }
+            let _ = tx.send(Msg::Progress(k, total));
+            let before = score_pair(&drive, &initial, &cam, &lidar, 3, &segments);
+            let after = score_pair(&drive, &current, &cam, &lidar, 3, &segments);
+            let msg = match (before, after) {
+                (Ok(b), Ok(a)) => Msg::Pair(PairScore {
+                    camera: cam,
+                    lidar,
+                    initial_px: b.0,
+                    current_px: a.0,
+                    initial_distances: b.1,
+                    current_distances: a.1,
+                }),
+                (Err(e), _) | (_, Err(e)) => Msg::Skipped(e),
+            };
+            let _ = tx.send(msg);
+        }
+        let _ = tx.send(Msg::Done);
+    });
+    let c = &mut studio.checks;
+    c.results.clear();
+    c.skipped.clear();
+    c.running = true;
+    c.progress = (0, 0);
+    c.job = Some(rx);
+    c.cancel = Some(cancel);
+}
+
+pub fn poll(studio: &mut Studio, ctx: &egui::Context) {
+    let c = &mut studio.checks;
+    let Some(rx) = &c.job else {
+        return;
+    };
+    for msg in rx.try_iter() {
+        match msg {
+            Msg::Progress(k, n) => c.progress = (k, n),
+            Msg::Pair(p) => {
+                c.progress.0 += 1;
+                c.results.push(p);
+                c.results
+                    .sort_by(|a, b| b.current_px.total_cmp(&a.current_px));
+            }
+            Msg::Skipped(e) => c.skipped.push(e),
+            Msg::Done => c.running = false,
+        }
+    }
+    if c.running {
+        ctx.request_repaint_after(std::time::Duration::from_millis(150));
+    } else {
+        c.job = None;
+    }
+}
+
+pub(crate) fn checks_ui(studio: &mut Studio, ui: &mut egui::Ui) {
+    ui.heading("Reprojection checks");
+    ui.label(
+        "Edge alignment per camera–LiDAR pair: mean px from projected LiDAR depth \
+         discontinuities to the nearest image edge (truncated at 20 px; lower is better), \
+         with the initial and the current extrinsics, on 3 frames of the selected segments.",
+    );
+    ui.horizontal(|ui| {
+        if studio.checks.running {
+            let (k, n) = studio.checks.progress;
+            ui.add(
+                egui::ProgressBar::new(k as f32 / n.max(1) as f32)
+                    .text(format!("pair {k}/{n}"))
+                    .desired_width(200.0),
+            );
+            if ui.button("Cancel").clicked()
+                && let Some(c) = &studio.checks.cancel
+            {
+                c.store(true, Ordering::Relaxed);
+            }
+        } else if ui
+            .add_enabled(
+                studio.drive.is_some(),
+                egui::Button::new("Score every pair"),
+            )
+            .clicked()
+        {
+            start(studio);
+        }
+    });
+    let results = studio.checks.results.clone();
+    if !results.is_empty() {
+        egui::Grid::new("pair_scores").striped(true).show(ui, |ui| {
+            for h in ["camera", "LiDAR", "initial px", "current px", ""] {
+                ui.strong(h);
+            }
+            ui.end_row();
+            for p in &results {
+                let key = (p.camera.clone(), p.lidar.clone());
+                let selected = studio.checks.selected.as_ref() == Some(&key);
+                if ui.selectable_label(selected, &p.camera).clicked() {
+                    studio.checks.selected = Some(key);
+                }
+                ui.label(&p.lidar);
+                ui.label(format!("{:.2}", p.initial_px));
+                ui.label(format!("{:.2}", p.current_px));
+                let better = p.current_px < p.initial_px - 0.05;
+                let worse = p.current_px > p.initial_px + 0.05;
+                if better {
+                    ui.colored_label(egui::Color32::LIGHT_GREEN, "better");
+                } else if worse {
+                    ui.colored_label(egui::Color32::LIGHT_RED, "worse");
+                } else {
+                    ui.weak("same");
+                }
+                ui.end_row();
+            }
+        });
+        let shown = studio
+            .checks
+            .selected
+            .as_ref()
+            .and_then(|(c, l)| results.iter().find(|p| p.camera == *c && p.lidar == *l))
+            .or(results.first());
+        if let Some(p) = shown {
+            histogram_ui(p, ui);
+        }
+    }
+    for s in &studio.checks.skipped {
+        ui.weak(format!("skipped: {s}"));
+    }
+    ui.separator();
+    ui.strong("Checkerboard corner error");
+    ui.weak(
+        "Needs the target detector of the checkerboard calibrator (not in this build); \
+         the edge score above needs no target.",
+    );
+    if let Some(gt) = &studio.ground_truth {
+        ui.separator();
+        let root = studio
+            .optimiser
+            .reference_lidar
+            .clone()
+            .or_else(|| studio.current.lidars().next().map(|l| l.name.clone()))
+            .unwrap_or_default();
+        super::optimiser::pose_errors_ui(&studio.current, gt, &root, ui);
+    }
+}
+
+/// Histogram of per-point edge distances (1 px bins), initial against current.
+fn histogram_ui(p: &PairScore, ui: &mut egui::Ui) {
+    ui.label(format!(
+        "{} × {}: distance to the nearest image edge (px), share of points",
+        p.camera, p.lidar
+    ));
+    let bins = 21;
+    let hist = |d: &[f32]| {
+        let mut h = vec![0.0f64; bins];
+        for &x in d {
+            h[(x.max(0.0) as usize).min(bins - 1)] += 1.0;
+        }
+        let n = d.len().max(1) as f64;
+        h.iter().map(|c| c / n).collect::<Vec<_>>()
+    };
+    let (a, b) = (hist(&p.initial_distances), hist(&p.current_distances));
+    let bars = |h: &[f64], offset: f64| -> Vec<Bar> {
+        h.iter()
+            .enumerate()
+            .map(|(i, v)| Bar::new(i as f64 + offset, *v).width(0.4))
+            .collect()
+    };
+    Plot::new(("edge_hist", &p.camera, &p.lidar))
+        .height(150.0)
+        .legend(Legend::default())
+        .x_axis_label("px (last bin: ≥ 20, truncated)")
+        .show(ui, |plot| {
+            plot.bar_chart(
+                BarChart::new("initial", bars(&a, -0.2)).color(egui::Color32::LIGHT_RED),
+            );
+            plot.bar_chart(
+                BarChart::new("current", bars(&b, 0.2)).color(egui::Color32::LIGHT_GREEN),
+            );
+        });
+}

@@ -1,0 +1,351 @@
+//! The trajectory panel: a top-down map of the drive (trajectory coloured by time over the
+//! aggregated LiDAR map, built on a worker thread), a timeline on which dragging selects the
+//! time segments to calibrate on, and each segment's motion summary
+//! ([`crate::geometry::motion::MotionSummary`]) so a user sees that straight driving
+//! constrains less.
+
+use std::sync::Arc;
+use std::sync::mpsc::{Receiver, channel};
+
+use egui::{Color32, Pos2, Rect, Sense, Stroke, Vec2};
+use egui_plot::{Line, Plot, PlotPoints, Points};
+
+use super::Studio;
+use super::overlay::colormap;
+use crate::calib::Rig;
+use crate::geometry::motion::MotionSummary;
+use crate::geometry::projection::{SweepView, world_points};
+use crate::log::Drive;
+
+/// Points of the top-down map, in the world frame.
+pub struct MapData {
+    pub points_xy: Vec<[f64; 2]>,
+    /// (stamp, x, y) every 0.1 s.
+    pub trajectory: Vec<(i64, [f64; 2])>,
+}
+
+#[derive(Default)]
+pub struct TrajectoryPanel {
+    pub map: Option<Arc<MapData>>,
+    job: Option<Receiver<Result<MapData, String>>>,
+    drag_from: Option<i64>,
+}
+
+const MAP_POINTS: usize = 60_000;
+
+/// Aggregate up to ~`MAP_POINTS` LiDAR points (every LiDAR, sweeps spread over the drive).
+pub fn build_map(drive: &Drive, rig: &Rig) -> Result<MapData, String> {
+    let (t0, t1) = drive
+        .trajectory
+        .time_range_nanos()
+        .ok_or("the drive has no trajectory")?;
+    let trajectory: Vec<(i64, [f64; 2])> = (0..)
+        .map(|k| t0 + k * 100_000_000)
+        .take_while(|&t| t <= t1)
+        .filter_map(|t| {
+            let p = drive.trajectory.world_from_vehicle(t).ok()?.translation;
+            Some((t, [p.x, p.y]))
+        })
+        .collect();
+    let mut points_xy = Vec::new();
+    let lidars: Vec<_> = rig.lidars().collect();
+    let per_lidar = MAP_POINTS / lidars.len().max(1);
+    for lidar in lidars {
+        let Some(stream) = drive.stream(&lidar.name) else {
+            continue;
+        };
+        let n = stream.frames.len();
+        let sweeps: Vec<usize> = (0..n).step_by((n / 16).max(1)).collect();
+        let per_sweep = per_lidar / sweeps.len().max(1);
+        for i in sweeps {
+            let Ok(s) = drive.load_sweep(&lidar.name, i) else {
+                continue;
+            };
+            let stride = (s.points_in_sensor.len() / per_sweep.max(1)).max(1);
+            let view = SweepView {
+                points_in_lidar: &s.points_in_sensor,
+                intensity: &s.intensity,
+                time_offset_secs: s.time_offset_secs.as_deref(),
+                stamp_nanos: s.stamp_nanos,
+            };
+            if let Ok(pts) =
+                world_points(&view, &drive.trajectory, lidar.vehicle_from_sensor, stride)
+            {
+                points_xy.extend(pts.iter().map(|p| [p.x, p.y]));
+            }
+        }
+    }
+    Ok(MapData {
+        points_xy,
+        trajectory,
+    })
+}
+
+pub fn poll(studio: &mut Studio, ctx: &egui::Context) {
+    let panel = &mut studio.trajectory_panel;
+    if panel.map.is_none()
+        && panel.job.is_none()
+        && let Some(drive) = studio.drive.clone()
+    {
+        let (tx, rx) = channel();
+        let rig = studio.current.clone();
+        std::thread::spawn(move || {
+            let _ = tx.send(build_map(&drive, &rig));
+        });
+        panel.job = Some(rx);
+    }
+    if let Some(rx) = &panel.job {
+        match rx.try_recv() {
+            Ok(Ok(map)) => {
+                panel.map = Some(Arc::new(map));
+                panel.job = None;
+            }
+            Ok(Err(e)) => {
+                studio.status.push(format!("error: trajectory map: {e}"));
+                panel.map = Some(Arc::new(MapData {
+                    points_xy: Vec::new(),
+                    trajectory: Vec::new(),
+                }));
+                panel.job = None;
+            }
+            Err(_) => ctx.request_repaint_after(std::time::Duration::from_millis(200)),
+        }
+    }
+}
+
+pub(crate) fn trajectory_ui(studio: &mut Studio, ui: &mut egui::Ui) {
+    let Some(drive) = studio.drive.clone() else {
+        ui.weak("Trajectory: open a drive.");
+        return;
+    };
+    let Some((t0, t1)) = drive.trajectory.time_range_nanos() else {
+        ui.weak("This drive has no trajectory.");
+        return;
+    };
+    let image_stamp = super::overlay::camera_names(&studio.current)
+        .get(studio.camera)
+        .and_then(|c| drive.stream(c))
+        .and_then(|s| s.frames.get(studio.frame))
+        .map(|f| f.stamp_nanos);
+    ui.columns(2, |cols| {
+        map_ui(studio, &mut cols[0], t0, t1, image_stamp);
+        segments_ui(studio, &mut cols[1], &drive, t0, t1, image_stamp);
+    });
+}
+
+fn map_ui(studio: &Studio, ui: &mut egui::Ui, t0: i64, t1: i64, now: Option<i64>) {
+    let Some(map) = studio.trajectory_panel.map.clone() else {
+        ui.horizontal(|ui| {
+            ui.spinner();
+            ui.label("building the top-down map…");
+        });
+        return;
+    };
+    let span = (t1 - t0).max(1) as f64;
+    let in_segment = |t: i64| studio.segments.iter().any(|&(a, b)| t >= a && t <= b);
+    Plot::new("topdown")
+        .data_aspect(1.0)
+        .show_axes([false, false])
+        .show_grid(false)
+        .allow_scroll(false)
+        .show(ui, |plot| {
+            plot.points(
+                Points::new("LiDAR map", PlotPoints::from(map.points_xy.clone()))
+                    .color(Color32::from_gray(110))
+                    .radius(0.8),
+            );
+            // Trajectory coloured by time, thicker inside selected segments.
+            for w in map.trajectory.windows(2) {
+                let (ta, a) = w[0];
+                let (_, b) = w[1];
+                let c = colormap(((ta - t0) as f64 / span) as f32);
+                let width = if in_segment(ta) { 5.0 } else { 2.0 };
+                plot.line(
+                    Line::new("", PlotPoints::from(vec![a, b]))
+                        .color(c)
+                        .width(width),
+                );
+            }
+            if let Some(t) = now
+                && let Some((_, p)) = map.trajectory.iter().min_by_key(|(s, _)| (s - t).abs())
+            {
+                plot.points(
+                    Points::new("now", PlotPoints::from(vec![*p]))
+                        .color(Color32::WHITE)
+                        .radius(5.0),
+                );
+            }
+        });
+}
+
+fn segments_ui(
+    studio: &mut Studio,
+    ui: &mut egui::Ui,
+    drive: &Drive,
+    t0: i64,
+    t1: i64,
+    now: Option<i64>,
+) {
+    ui.label("Segments to calibrate on: drag on the timeline (none = the whole drive)");
+    let (rect, response) =
+        ui.allocate_exact_size(Vec2::new(ui.available_width(), 26.0), Sense::drag());
+    let span = (t1 - t0).max(1) as f64;
+    let to_x = |t: i64| rect.left() + ((t - t0) as f64 / span) as f32 * rect.width();
+    let to_t =
+        |x: f32| t0 + (((x - rect.left()) / rect.width()).clamp(0.0, 1.0) as f64 * span) as i64;
+    let painter = ui.painter_at(rect);
+    // Timeline coloured by time like the map, with yaw rate as a trace.
+    let steps = 120;
+    for k in 0..steps {
+        let a = rect.left() + rect.width() * k as f32 / steps as f32;
+        let b = rect.left() + rect.width() * (k + 1) as f32 / steps as f32;
+        painter.rect_filled(
+            Rect::from_min_max(
+                Pos2::new(a, rect.bottom() - 5.0),
+                Pos2::new(b, rect.bottom()),
+            ),
+            0.0,
+            colormap(k as f32 / steps as f32),
+        );
+    }
+    for &(a, b) in &studio.segments {
+        painter.rect_filled(
+            Rect::from_min_max(
+                Pos2::new(to_x(a), rect.top()),
+                Pos2::new(to_x(b), rect.bottom() - 6.0),
+            ),
+            2.0,
+            Color32::from_rgba_unmultiplied(80, 160, 255, 160),
+        );
+    }
+    if let (Some(from), Some(pos)) = (
+        studio.trajectory_panel.drag_from,
+        response.interact_pointer_pos(),
+    ) {
+        let (a, b) = (from.min(to_t(pos.x)), from.max(to_t(pos.x)));
+        painter.rect_stroke(
+            Rect::from_min_max(
+                Pos2::new(to_x(a), rect.top()),
+                Pos2::new(to_x(b), rect.bottom() - 6.0),
+            ),
+            2.0,
+            Stroke::new(1.5, Color32::WHITE),
+            egui::StrokeKind::Inside,
+        );
+    }
+    if let Some(t) = now {
+        painter.vline(to_x(t), rect.y_range(), Stroke::new(2.0, Color32::WHITE));
+    }
+    painter.rect_stroke(
+        rect,
+        2.0,
+        Stroke::new(1.0, Color32::GRAY),
+        egui::StrokeKind::Inside,
+    );
+    if response.drag_started()
+        && let Some(pos) = response.interact_pointer_pos()
+    {
+        studio.trajectory_panel.drag_from = Some(to_t(pos.x));
+    }
+    if response.drag_stopped() {
+        if let (Some(from), Some(pos)) = (
+            studio.trajectory_panel.drag_from,
+            response.interact_pointer_pos(),
+        ) {
+            let (a, b) = (from.min(to_t(pos.x)), from.max(to_t(pos.x)));
+            if b - a > 200_000_000 {
+                add_segment(&mut studio.segments, (a, b));
+            }
+        }
+        studio.trajectory_panel.drag_from = None;
+    }
+    ui.horizontal(|ui| {
+        if ui.button("clear").clicked() {
+            studio.segments.clear();
+        }
+        ui.weak(format!("drive: {:.1} s", span * 1e-9));
+    });
+    let rows: Vec<(Option<usize>, i64, i64)> = if studio.segments.is_empty() {
+        vec![(None, t0, t1)]
+    } else {
+        studio
+            .segments
+            .iter()
+            .enumerate()
+            .map(|(i, &(a, b))| (Some(i), a, b))
+            .collect()
+    };
+    let mut remove = None;
+    egui::Grid::new("segments").striped(true).show(ui, |ui| {
+        for h in ["segment", "s", "km/h", "max °/s", "turn °", "turns", "", ""] {
+            ui.strong(h);
+        }
+        ui.end_row();
+        for (i, a, b) in rows {
+            let Some(m) = MotionSummary::of(&drive.trajectory, a, b) else {
+                continue;
+            };
+            ui.label(format!(
+                "{:.1}–{:.1} s",
+                (a - t0) as f64 * 1e-9,
+                (b - t0) as f64 * 1e-9
+            ));
+            ui.label(format!("{:.1}", m.duration_s));
+            ui.label(format!("{:.0}", m.mean_speed_mps * 3.6));
+            ui.label(format!("{:.1}", m.max_abs_yaw_rate_deg_s));
+            ui.label(format!("{:.0}", m.total_turn_deg));
+            ui.label(format!("{}", m.turns));
+            let verdict = m.verdict();
+            let short = verdict.split(':').next().unwrap_or(verdict);
+            let color = match short {
+                "turning" => Color32::LIGHT_GREEN,
+                "gentle curves" => Color32::LIGHT_YELLOW,
+                _ => Color32::from_rgb(255, 170, 90),
+            };
+            ui.colored_label(color, short).on_hover_text(verdict);
+            match i {
+                Some(i) => {
+                    if ui.small_button("remove").clicked() {
+                        remove = Some(i);
+                    }
+                }
+                None => {
+                    ui.weak("whole drive");
+                }
+            }
+            ui.end_row();
+        }
+    });
+    if let Some(i) = remove {
+        studio.segments.remove(i);
+    }
+}
+
+/// Add a segment, merging overlapping ones and keeping them sorted.
+pub fn add_segment(segments: &mut Vec<(i64, i64)>, new: (i64, i64)) {
+    segments.push(new);
+    segments.sort();
+    let mut merged: Vec<(i64, i64)> = Vec::with_capacity(segments.len());
+    for &(a, b) in segments.iter() {
+        match merged.last_mut() {
+            Some(last) if a <= last.1 => last.1 = last.1.max(b),
+            _ => merged.push((a, b)),
+        }
+    }
+    *segments = merged;
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn overlapping_segments_merge() {
+        let mut s = vec![(10, 20)];
+        add_segment(&mut s, (30, 40));
+        add_segment(&mut s, (15, 32));
+        assert_eq!(s, vec![(10, 40)]);
+        add_segment(&mut s, (0, 5));
+        assert_eq!(s, vec![(0, 5), (10, 40)]);
+    }
+}

@@ -1,0 +1,278 @@
+//! Studio sessions: what a user had open and had done, saved atomically and restored.
+//!
+//! A session file (JSON, `rigcal_session: 1`) names the log, the selected time segments, the
+//! initial / current / best rigs (as native calibration documents), axis locks, the shown
+//! camera and frame, and the optimiser's loss history. The studio autosaves one after every
+//! change to [`autosave_path`], so a crash loses nothing; [`RecentFiles`] remembers what was
+//! opened. GUI-free, so it is tested headless.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+use thiserror::Error;
+
+use crate::calib::{CalibrationFile, Rig};
+
+pub const SESSION_VERSION: u32 = 1;
+
+#[derive(Debug, Error)]
+pub enum SessionError {
+    #[error("{path}: cannot read: {source}")]
+    Read {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    #[error("{path}: cannot write: {source}")]
+    Write {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    #[error("{path}: not a rigcal session file: {source}")]
+    Parse {
+        path: PathBuf,
+        source: serde_json::Error,
+    },
+    #[error(
+        "{path}: session version {found} is not supported (this build reads {SESSION_VERSION})"
+    )]
+    Version { path: PathBuf, found: u32 },
+}
+
+/// Per sensor: which of x, y, z, roll, pitch, yaw are locked against edits and optimisers.
+pub type AxisLocks = [bool; 6];
+
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Session {
+    pub rigcal_session: u32,
+    pub log: Option<PathBuf>,
+    /// Selected time ranges `[start, end]` in nanoseconds (sensor clock).
+    #[serde(default)]
+    pub segments_nanos: Vec<[i64; 2]>,
+    pub initial: Option<CalibrationFile>,
+    pub current: Option<CalibrationFile>,
+    #[serde(default)]
+    pub best: Option<CalibrationFile>,
+    #[serde(default)]
+    pub locks: BTreeMap<String, AxisLocks>,
+    #[serde(default)]
+    pub camera: usize,
+    #[serde(default)]
+    pub frame: usize,
+    /// Optimiser loss history: (step, [(term, value)]).
+    #[serde(default)]
+    pub history: Vec<(usize, Vec<(String, f64)>)>,
+}
+
+impl Session {
+    pub fn new() -> Self {
+        Self {
+            rigcal_session: SESSION_VERSION,
+            ..Self::default()
+        }
+    }
+
+    pub fn set_rigs(&mut self, initial: &Rig, current: &Rig, best: Option<&Rig>) {
+        self.initial = Some(CalibrationFile::from_rig(initial));
+        self.current = Some(CalibrationFile::from_rig(current));
+        self.best = best.map(CalibrationFile::from_rig);
+    }
+
+    pub fn to_json(&self) -> String {
+        serde_json::to_string_pretty(self).unwrap_or_default()
+    }
+
+    pub fn save(&self, path: &Path) -> Result<(), SessionError> {
+        if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+            std::fs::create_dir_all(dir).map_err(|source| SessionError::Write {
+                path: path.to_path_buf(),
+                source,
+            })?;
+        }
+        crate::util::write_atomic(path, self.to_json().as_bytes()).map_err(|source| {
+            SessionError::Write {
+                path: path.to_path_buf(),
+                source,
+            }
+        })
+    }
+
+    pub fn load(path: &Path) -> Result<Self, SessionError> {
+        let text = std::fs::read_to_string(path).map_err(|source| SessionError::Read {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        let session: Session =
+            serde_json::from_str(&text).map_err(|source| SessionError::Parse {
+                path: path.to_path_buf(),
+                source,
+            })?;
+        if session.rigcal_session != SESSION_VERSION {
+            return Err(SessionError::Version {
+                path: path.to_path_buf(),
+                found: session.rigcal_session,
+            });
+        }
+        Ok(session)
+    }
+}
+
+/// rigcal's per-user state folder: `$XDG_CACHE_HOME/rigcal` or `~/.cache/rigcal`.
+pub fn state_dir() -> PathBuf {
+    crate::sim::demo::demo_dir()
+}
+
+/// Where the studio autosaves its session after every change.
+pub fn autosave_path() -> PathBuf {
+    state_dir().join("autosave.rigcal-session.json")
+}
+
+/// The autosave of the previous run, set aside at start-up (File ▸ Restore last session).
+pub fn previous_session_path() -> PathBuf {
+    state_dir().join("previous.rigcal-session.json")
+}
+
+/// Most recently opened files, newest first, kept in a small text file.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct RecentFiles {
+    pub paths: Vec<PathBuf>,
+}
+
+const RECENT_MAX: usize = 10;
+
+impl RecentFiles {
+    pub fn default_path() -> PathBuf {
+        state_dir().join("recent.txt")
+    }
+
+    /// Read the list; a missing or unreadable file is an empty list.
+    pub fn load(path: &Path) -> Self {
+        let paths = std::fs::read_to_string(path)
+            .map(|t| {
+                t.lines()
+                    .filter(|l| !l.trim().is_empty())
+                    .map(PathBuf::from)
+                    .take(RECENT_MAX)
+                    .collect()
+            })
+            .unwrap_or_default();
+        Self { paths }
+    }
+
+    pub fn push(&mut self, file: &Path) {
+        let file = std::fs::canonicalize(file).unwrap_or_else(|_| file.to_path_buf());
+        self.paths.retain(|p| *p != file);
+        self.paths.insert(0, file);
+        self.paths.truncate(RECENT_MAX);
+    }
+
+    pub fn save(&self, path: &Path) -> std::io::Result<()> {
+        if let Some(dir) = path.parent() {
+            std::fs::create_dir_all(dir)?;
+        }
+        let text: String = self
+            .paths
+            .iter()
+            .map(|p| format!("{}\n", p.display()))
+            .collect();
+        crate::util::write_atomic(path, text.as_bytes())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::calib::{Sensor, SensorKind};
+    use crate::geometry::Rigid;
+    use glam::{DQuat, DVec3};
+
+    fn rig(yaw: f64) -> Rig {
+        Rig {
+            vehicle_frame: "base_link".into(),
+            sensors: vec![Sensor {
+                name: "lidar".into(),
+                kind: SensorKind::Lidar,
+                frame_id: "lidar".into(),
+                topics: vec!["/lidar".into()],
+                camera: None,
+                vehicle_from_sensor: Rigid::new(
+                    DQuat::from_rotation_z(yaw),
+                    DVec3::new(1.0, 0.0, 2.0),
+                ),
+            }],
+        }
+    }
+
+    fn tmp(name: &str) -> PathBuf {
+        let dir = std::env::temp_dir().join(format!("rigcal-session-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        dir.join(name)
+    }
+
+    #[test]
+    fn a_session_round_trips() {
+        let mut s = Session::new();
+        s.log = Some("/data/drive.mcap".into());
+        s.segments_nanos = vec![[1, 5_000_000_000], [7_000_000_000, 9_000_000_000]];
+        s.set_rigs(&rig(0.0), &rig(0.01), Some(&rig(0.02)));
+        s.locks
+            .insert("lidar".into(), [true, false, false, false, false, true]);
+        s.camera = 2;
+        s.frame = 17;
+        s.history = vec![
+            (0, vec![("edge".into(), 3.5)]),
+            (1, vec![("edge".into(), 2.5)]),
+        ];
+        let path = tmp("a.json");
+        s.save(&path).unwrap();
+        let back = Session::load(&path).unwrap();
+        assert_eq!(back, s);
+        let r = back.current.unwrap().to_rig(&path).unwrap();
+        assert!(
+            r.sensors[0]
+                .vehicle_from_sensor
+                .difference(rig(0.01).sensors[0].vehicle_from_sensor)
+                .0
+                < 1e-12
+        );
+    }
+
+    #[test]
+    fn bad_session_files_are_errors_naming_the_file() {
+        let path = tmp("bad.json");
+        std::fs::write(&path, "{ not json").unwrap();
+        let e = Session::load(&path).unwrap_err().to_string();
+        assert!(
+            e.contains("bad.json") && e.contains("not a rigcal session"),
+            "{e}"
+        );
+        std::fs::write(
+            &path,
+            r#"{"rigcal_session": 99, "log": null, "initial": null, "current": null}"#,
+        )
+        .unwrap();
+        let e = Session::load(&path).unwrap_err().to_string();
+        assert!(e.contains("version 99"), "{e}");
+        let e = Session::load(&tmp("missing.json")).unwrap_err().to_string();
+        assert!(
+            e.contains("missing.json") && e.contains("cannot read"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn recent_files_keep_the_newest_first_without_duplicates() {
+        let path = tmp("recent.txt");
+        let mut r = RecentFiles::default();
+        for i in 0..12 {
+            r.push(Path::new(&format!("/nonexistent/{i}.mcap")));
+        }
+        r.push(Path::new("/nonexistent/5.mcap"));
+        assert_eq!(r.paths.len(), RECENT_MAX);
+        assert_eq!(r.paths[0], PathBuf::from("/nonexistent/5.mcap"));
+        assert_eq!(r.paths.iter().filter(|p| p.ends_with("5.mcap")).count(), 1);
+        r.save(&path).unwrap();
+        assert_eq!(RecentFiles::load(&path), r);
+        assert!(RecentFiles::load(&tmp("none.txt")).paths.is_empty());
+    }
+}
