@@ -2,7 +2,8 @@
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 //! The real studio, headless (egui_kittest on Mesa's software Vulkan): open the real PandaSet
 //! drive, edit an extrinsic and see the overlay move in the rendered picture, start and stop the
-//! optimiser, and survive a bad file.
+//! optimiser, survive a bad file; occlusion, colour modes, accumulation, the camera grid, the
+//! hover readout, axis locks, blink, sessions and export.
 
 use std::path::PathBuf;
 use std::time::Duration;
@@ -16,11 +17,22 @@ fn pandaset() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/data/pandaset-002/pandaset-002.mcap")
 }
 
+/// The studio on `log`, after its background work (the trajectory map) has landed, so
+/// pictures taken later differ only by what a test changes.
 fn harness(log: PathBuf) -> Harness<'static, Studio> {
-    Harness::builder()
+    let mut h = Harness::builder()
         .with_size([1600.0, 1000.0])
         .wgpu()
-        .build_eframe(move |cc| new_studio(cc, Some(log), None))
+        .build_eframe(move |cc| new_studio(cc, Some(log), None));
+    let t0 = std::time::Instant::now();
+    while h.state().drive.is_some()
+        && h.state().trajectory_panel.map.is_none()
+        && t0.elapsed().as_secs() < 60
+    {
+        h.step();
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    h
 }
 
 /// Run frames until `done` holds (the optimiser works on its own thread).
@@ -139,5 +151,185 @@ fn a_truncated_log_is_an_error_in_the_ui_and_the_studio_keeps_its_drive() {
         before,
         "a bad calibration file changed the rig"
     );
+    let _ = std::fs::remove_dir_all(dir);
+}
+
+fn rendered_difference(
+    h: &mut Harness<'static, Studio>,
+    change: impl FnOnce(&mut Studio),
+) -> usize {
+    let before = h.render().unwrap();
+    change(h.state_mut());
+    h.run_steps(3);
+    changed_pixels(&before, &h.render().unwrap())
+}
+
+#[test]
+fn occlusion_colour_modes_and_accumulation_change_what_is_drawn() {
+    let mut h = harness(pandaset());
+    h.run_steps(4);
+    let off = rendered_difference(&mut h, |s| s.overlay.occlusion = false);
+    assert!(
+        off > 2_000,
+        "turning occlusion off changed only {off} pixels"
+    );
+    let on = rendered_difference(&mut h, |s| s.overlay.occlusion = true);
+    assert!(on > 2_000, "turning occlusion on changed only {on} pixels");
+    use rigcal::app::state::ColorBy;
+    for mode in [
+        ColorBy::Height,
+        ColorBy::Lidar,
+        ColorBy::Intensity,
+        ColorBy::Range,
+    ] {
+        let d = rendered_difference(&mut h, |s| s.overlay.color_by = mode);
+        assert!(d > 5_000, "colour by {mode:?} changed only {d} pixels");
+    }
+    let before = h.state().overlay_transforms(0).len();
+    let d = rendered_difference(&mut h, |s| s.overlay.accumulate = 2);
+    let after = h.state().overlay_transforms(0).len();
+    assert!(after > before, "accumulating sweeps added no transforms");
+    assert!(d > 5_000, "accumulating sweeps changed only {d} pixels");
+}
+
+#[test]
+fn the_camera_grid_draws_every_camera_and_hover_reads_out_depth() {
+    let mut h = harness(pandaset());
+    h.run_steps(4);
+    // Hovering the image reads out u, v and the depth of a LiDAR point near the cursor.
+    let rect = h.state().image_rect.expect("the image was drawn");
+    let mut found = None;
+    for k in 0..40 {
+        let pos = egui::pos2(
+            rect.left() + rect.width() * (0.1 + 0.02 * k as f32),
+            rect.top() + rect.height() * 0.62,
+        );
+        h.hover_at(pos);
+        h.run_steps(2);
+        if let Some(hv) = h.state().hover.clone()
+            && hv.point.is_some()
+        {
+            found = Some(hv);
+            break;
+        }
+    }
+    let hv = found.expect("no LiDAR point under the cursor anywhere along a row");
+    let (depth, lidar) = hv.point.unwrap();
+    assert!(depth > 0.5 && depth < 200.0, "{depth}");
+    assert!(!lidar.is_empty());
+    assert!(hv.u >= 0.0 && hv.v >= 0.0);
+    // The grid: every camera gets its overlay.
+    let n = h.state().current.cameras().count();
+    h.state_mut().grid = true;
+    h.run_steps(4);
+    for i in 0..n {
+        assert!(
+            !h.state().overlay_transforms(i).is_empty(),
+            "camera {i} has no overlay in the grid"
+        );
+    }
+}
+
+#[test]
+fn axis_locks_hold_against_edits_and_blink_alternates_views() {
+    let mut h = harness(pandaset());
+    h.run_steps(2);
+    let camera = h.state().current.cameras().next().unwrap().name.clone();
+    let t = h
+        .state()
+        .current
+        .sensor(&camera)
+        .unwrap()
+        .vehicle_from_sensor;
+    // Lock yaw: a yaw edit does nothing, an x edit still applies.
+    h.state_mut()
+        .locks
+        .insert(camera.clone(), [false, false, false, false, false, true]);
+    let yawed = rigcal::geometry::Rigid::new(
+        glam::DQuat::from_rotation_z(0.05) * t.rotation,
+        t.translation + DVec3::new(0.1, 0.0, 0.0),
+    );
+    h.state_mut().set_extrinsic(&camera, yawed);
+    let now = h
+        .state()
+        .current
+        .sensor(&camera)
+        .unwrap()
+        .vehicle_from_sensor;
+    assert!((now.roll_pitch_yaw_rad()[2] - t.roll_pitch_yaw_rad()[2]).abs() < 1e-9);
+    assert!((now.translation.x - t.translation.x - 0.1).abs() < 1e-12);
+    assert_eq!(h.state().locked_axes(&camera), vec!["yaw"]);
+    // Blink: the shown rig alternates between the current and the initial extrinsics.
+    use rigcal::app::state::ExtrinsicsView;
+    h.state_mut().blink = true;
+    h.state_mut().blink_with = ExtrinsicsView::Initial;
+    let mut seen = std::collections::HashSet::new();
+    let t0 = std::time::Instant::now();
+    while seen.len() < 2 && t0.elapsed().as_secs() < 10 {
+        h.step();
+        seen.insert(h.state().effective_view());
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    assert_eq!(seen.len(), 2, "blink never alternated: {seen:?}");
+}
+
+#[test]
+fn a_session_restores_edits_segments_and_locks_and_export_round_trips() {
+    let mut h = harness(pandaset());
+    h.run_steps(2);
+    let camera = h.state().current.cameras().next().unwrap().name.clone();
+    let t = h
+        .state()
+        .current
+        .sensor(&camera)
+        .unwrap()
+        .vehicle_from_sensor;
+    h.state_mut().set_extrinsic(
+        &camera,
+        t.perturbed_right(DVec3::new(0.01, 0.0, 0.0), DVec3::new(0.02, 0.0, 0.0)),
+    );
+    let (t0, _) = h
+        .state()
+        .drive
+        .as_ref()
+        .unwrap()
+        .time_range_nanos()
+        .unwrap();
+    h.state_mut().segments = vec![(t0, t0 + 2_000_000_000)];
+    h.state_mut()
+        .locks
+        .insert(camera.clone(), [true, false, false, false, false, false]);
+    let edited = h.state().current.clone();
+    let dir = std::env::temp_dir().join(format!("rigcal-session-test-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("s.json");
+    h.state_mut().save_session(&path);
+    // Reopening the log forgets everything; restoring the session brings it back.
+    let log = pandaset();
+    h.state_mut().open_log(&log);
+    assert_ne!(h.state().current, edited);
+    h.state_mut().restore_session(&path);
+    h.run_steps(2);
+    assert_eq!(h.state().current, edited, "{:?}", h.state().status);
+    assert_eq!(h.state().segments, vec![(t0, t0 + 2_000_000_000)]);
+    assert_eq!(h.state().locked_axes(&camera), vec!["x"]);
+    // A broken session file is an error in the UI; nothing is lost.
+    std::fs::write(dir.join("bad.json"), "{").unwrap();
+    h.state_mut().restore_session(&dir.join("bad.json"));
+    assert!(h.state().status.last().unwrap().starts_with("error"));
+    assert_eq!(h.state().current, edited);
+    // Export: the document names its input and reads back to the same rig.
+    use rigcal::app::state::ExtrinsicsView;
+    let doc = rigcal::app::export::document(h.state(), &edited, ExtrinsicsView::Current);
+    assert!(doc.provenance.contains_key("input") && doc.provenance.contains_key("time_range"));
+    let out = dir.join("export.yaml");
+    doc.save(&out).unwrap();
+    let back = rigcal::calib::CalibrationFile::load_rig(&out).unwrap();
+    for s in &edited.sensors {
+        let (r, t) = s
+            .vehicle_from_sensor
+            .difference(back.sensor(&s.name).unwrap().vehicle_from_sensor);
+        assert!(r < 1e-12 && t < 1e-12, "{}", s.name);
+    }
     let _ = std::fs::remove_dir_all(dir);
 }

@@ -44,7 +44,7 @@ pub struct ChecksPanel {
     cancel: Option<Arc<AtomicBool>>,
 }
 
-/// Score one pair under one rig: the edge-alignment problem on `frames` frames of the segments.
+/// Score one pair under one rig (see [`EdgeAlignment::score_rig`]).
 pub fn score_pair(
     drive: &Drive,
     rig: &Rig,
@@ -53,20 +53,7 @@ pub fn score_pair(
     frames: usize,
     segments: &[(i64, i64)],
 ) -> Result<(f64, Vec<f32>), String> {
-    let problem = EdgeAlignment::from_drive(drive, rig, camera, lidar, frames, segments)
-        .map_err(|e| e.to_string())?;
-    let t = rig
-        .sensor(camera)
-        .ok_or_else(|| format!("no sensor '{camera}'"))?
-        .vehicle_from_sensor;
-    let d = problem.distances(t);
-    if d.is_empty() {
-        return Err(format!(
-            "{camera} × {lidar}: no LiDAR silhouette inside the image"
-        ));
-    }
-    let mean = d.iter().map(|&x| x as f64).sum::<f64>() / d.len() as f64;
-    Ok((mean, d))
+    EdgeAlignment::score_rig(drive, rig, camera, lidar, frames, segments).map_err(|e| e.to_string())
 }
 
 pub fn start(studio: &mut Studio) {

@@ -358,6 +358,7 @@ fn single_ui(studio: &mut Studio, ui: &mut egui::Ui, camera: &str, drive: &Drive
     area.max.y -= readout_height;
     let rect = fit(area, w / h);
     let response = ui.allocate_rect(rect, egui::Sense::click_and_drag());
+    studio.image_rect = Some(rect);
     // Zoom about the cursor with the wheel, pan by dragging, double-click resets.
     let z = &mut studio.zoom;
     if z.center_px[0].is_nan() || response.double_clicked() {

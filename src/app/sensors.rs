@@ -132,7 +132,7 @@ fn sensor_ui(studio: &mut Studio, ui: &mut egui::Ui, name: &str) {
     let mut changed = false;
     let locked = locks.iter().any(|&l| l);
     let title = if locked {
-        format!("{name} ({kind}) 🔒")
+        format!("{name} ({kind}) [locked]")
     } else {
         format!("{name} ({kind})")
     };

@@ -133,6 +133,8 @@ pub struct Studio {
     pub grid: bool,
     pub zoom: ViewZoom,
     pub hover: Option<HoverReadout>,
+    /// Where the single-camera image was drawn last frame (screen points).
+    pub image_rect: Option<egui::Rect>,
     pub selected_sensor: Option<String>,
     pub nudge_step_m: f64,
     pub nudge_step_deg: f64,
@@ -180,6 +182,7 @@ impl Default for Studio {
             grid: false,
             zoom: ViewZoom::default(),
             hover: None,
+            image_rect: None,
             selected_sensor: None,
             nudge_step_m: 0.01,
             nudge_step_deg: 0.1,
@@ -339,6 +342,11 @@ impl Studio {
             Some(c) => c.state(),
             None => (&[], Vec::new()),
         }
+    }
+
+    /// The GPU overlay's `camera_from_lidar` table of camera `index` (empty until drawn).
+    pub fn overlay_transforms(&self, index: usize) -> &[[[f32; 4]; 4]] {
+        self.overlays.get(index).map_or(&[], |c| c.state().0)
     }
 
     /// The view the overlay shows this frame (blink alternates two).

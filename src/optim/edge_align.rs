@@ -29,6 +29,8 @@ pub struct EdgeFrame {
     pub distance_px: Vec<f32>,
     /// Silhouette points in the vehicle frame at the image's stamp.
     pub points_in_vehicle: Vec<DVec3>,
+    /// Stamp of the LiDAR sweep the silhouettes come from (0 when unknown).
+    pub sweep_stamp_nanos: i64,
 }
 
 /// The edge-alignment problem of one camera against one reference LiDAR.
@@ -102,6 +104,7 @@ impl EdgeFrame {
             height: h,
             distance_px: edges::distance_transform(&edges::image_edges(image), w, h),
             points_in_vehicle,
+            sweep_stamp_nanos: 0,
         }
     }
 
@@ -184,7 +187,9 @@ impl EdgeAlignment {
             let image = drive.load_image(camera, image_index)?;
             let points =
                 silhouettes_in_vehicle(&sweep, &drive.trajectory, vehicle_from_lidar, image_stamp)?;
-            out.push(EdgeFrame::new(&image, points));
+            let mut frame = EdgeFrame::new(&image, points);
+            frame.sweep_stamp_nanos = sweep.stamp_nanos;
+            out.push(frame);
         }
         if out.is_empty() {
             return Err(AlignError::Setup(format!(
@@ -200,6 +205,31 @@ impl EdgeAlignment {
         };
         problem.keep_visible(cam.vehicle_from_sensor);
         Ok(problem)
+    }
+
+    /// The alignment score of one camera–LiDAR pair under `rig`: mean truncated edge distance
+    /// (px) and every point's distance, on `frames` frames within `segments_nanos`.
+    pub fn score_rig(
+        drive: &Drive,
+        rig: &Rig,
+        camera: &str,
+        lidar: &str,
+        frames: usize,
+        segments_nanos: &[(i64, i64)],
+    ) -> Result<(f64, Vec<f32>), AlignError> {
+        let problem = Self::from_drive(drive, rig, camera, lidar, frames, segments_nanos)?;
+        let t = rig
+            .sensor(camera)
+            .ok_or_else(|| AlignError::Setup(format!("no sensor '{camera}' in the rig")))?
+            .vehicle_from_sensor;
+        let d = problem.distances(t);
+        if d.is_empty() {
+            return Err(AlignError::Setup(format!(
+                "{camera} × {lidar}: no LiDAR silhouette inside the image"
+            )));
+        }
+        let mean = d.iter().map(|&x| x as f64).sum::<f64>() / d.len() as f64;
+        Ok((mean, d))
     }
 
     /// Keep only the silhouette points that `vehicle_from_camera` puts inside the image (with a
