@@ -1,25 +1,31 @@
-// LiDAR points splatted over a camera image, projected on the GPU through the full camera model,
-// with occlusion by depth-tested splats.
+// LiDAR points splatted over a camera image by compute shaders, projected through the full camera
+// model, with occlusion by depth-tested splats.
 //
-// Each instance is one LiDAR point in its sensor frame with its intensity and a packed index:
-// bits 0..24 the firing-time bucket, bits 24..32 the LiDAR. `camera_from_lidar[bucket]`
-// (computed on the CPU from the trajectory at the bucket's time, the LiDAR and camera
-// extrinsics and the image stamp) moves the point into the camera's optical frame; the camera
-// model (pinhole, plumb_bob / rational_polynomial radial-tangential, or equidistant fisheye, as
-// in src/geometry/camera.rs) gives the pixel. Six vertices per instance make a round splat.
+// `points` holds five 32-bit words per LiDAR point: x, y, z (sensor frame, f32 bits), intensity
+// and a packed index (bits 0..24 the firing-time bucket, bits 24..32 the LiDAR).
+// `camera_from_lidar[bucket]` (computed on the CPU from the trajectory at the bucket's time, the
+// LiDAR and camera extrinsics and the image stamp) moves a point into the camera's optical
+// frame; the camera model (pinhole, plumb_bob / rational_polynomial radial-tangential, or
+// equidistant fisheye, as in src/geometry/camera.rs) gives the pixel, and the view (zoom and
+// pan: image pixels `view_min .. view_min + view_size`) the pixel of the viewport target.
 //
-// Two passes into an offscreen target with a depth buffer (depth = range / range_max):
-//   1. `vs_depth`/`fs_depth` write the depth of every point as a large splat of radius
-//      `occlusion_px` and no colour, so near surfaces cover the points behind them;
-//   2. `vs_color`/`fs_color` draw each point as a splat of radius `point_size_px`, its depth
-//      pulled forward by `depth_tolerance` (relative), with the depth test LessEqual: a point
-//      survives only where nothing clearly nearer was splatted.
-// The viewport shows image pixels `view_min .. view_min + view_size` (zoom and pan).
+// Points are splatted with atomics instead of rasterised triangles: on software Vulkan
+// (lavapipe, what CPU-only laptops run) this is several times faster than one small triangle
+// per point. Two passes, one invocation per point:
+//   1. `cs_occlusion` (when occlusion is on) writes each point's quantised depth as a disk of
+//      radius `occlusion_px` into a quarter-resolution buffer, nearest wins (atomicMax of the
+//      inverted depth), so near surfaces cover the points behind them;
+//   2. `cs_splat` keeps a point only if nothing clearly nearer (by more than
+//      `depth_tolerance`, relative) covers its cell, and writes it as a disk of radius
+//      `point_size_px` into the full-resolution buffer: inverted depth in the high 16 bits
+//      (nearest wins), its 8-bit colour value and LiDAR index below.
+// `overlay_blit.wgsl` turns that buffer into colours in egui's render pass.
 
 struct Uniforms {
     focal: vec2<f32>,
     principal: vec2<f32>,
     image_size: vec2<f32>,
+    // Size of the target in pixels (the viewport on screen, physical pixels).
     viewport_size_px: vec2<f32>,
     // k1, k2, p1, p2 | k3, k4, k5, k6 (ROS order); fisheye: k1..k4 in radtan0.
     radtan0: vec4<f32>,
@@ -39,24 +45,23 @@ struct Uniforms {
     height_min_m: f32,
     height_max_m: f32,
     depth_tolerance: f32,
-    _pad: f32,
+    // Number of points.
+    count: u32,
     // Per LiDAR: the z row of vehicle_from_lidar (r20, r21, r22, t_z).
     height_rows: array<vec4<f32>, 8>,
 };
 
 @group(0) @binding(0) var<uniform> u: Uniforms;
 @group(0) @binding(1) var<storage, read> camera_from_lidar: array<mat4x4<f32>>;
+@group(0) @binding(2) var<storage, read> points: array<u32>;
+@group(0) @binding(3) var<storage, read_write> occlusion: array<atomic<u32>>;
+@group(0) @binding(4) var<storage, read_write> splats: array<atomic<u32>>;
 
-struct PointIn {
-    @location(0) position_intensity: vec4<f32>,
-    @location(1) packed: u32,
-};
-
-struct VertexOut {
-    @builtin(position) clip: vec4<f32>,
-    @location(0) corner: vec2<f32>,
-    @location(1) color: vec4<f32>,
-};
+// Occlusion buffer: one cell per OCCLUSION_CELL × OCCLUSION_CELL target pixels.
+const OCCLUSION_CELL: f32 = 4.0;
+const GROUP: u32 = 64u;
+// Invocations per row of the 2D dispatch grid (65535 workgroups of GROUP).
+const ROW: u32 = 4194240u;
 
 fn distort(p: vec3<f32>) -> vec2<f32> {
     if (u.model == 1u) {
@@ -83,46 +88,35 @@ fn distort(p: vec3<f32>) -> vec2<f32> {
     );
 }
 
-// Turbo-like colour map, t in [0, 1].
-fn colormap(t_in: f32) -> vec3<f32> {
-    let t = clamp(t_in, 0.0, 1.0);
-    let r = 0.13572138 + t * (4.6153926 + t * (-42.66032258 + t * (132.13108234 + t * (-152.94239396 + t * 59.28637943))));
-    let g = 0.09140261 + t * (2.19418839 + t * (4.84296658 + t * (-14.18503333 + t * (4.27729857 + t * 2.82956604))));
-    let b = 0.1066733 + t * (12.64194608 + t * (-60.58204836 + t * (110.36276771 + t * (-89.90310912 + t * 27.34824973))));
-    return clamp(vec3<f32>(r, g, b), vec3<f32>(0.0), vec3<f32>(1.0));
-}
-
-// One colour per LiDAR.
-const PALETTE = array<vec3<f32>, 8>(
-    vec3<f32>(1.0, 0.35, 0.2), vec3<f32>(0.2, 0.8, 1.0), vec3<f32>(0.45, 1.0, 0.3),
-    vec3<f32>(1.0, 0.85, 0.15), vec3<f32>(0.85, 0.4, 1.0), vec3<f32>(1.0, 1.0, 1.0),
-    vec3<f32>(1.0, 0.5, 0.7), vec3<f32>(0.5, 0.6, 1.0),
-);
-
-const CORNERS = array<vec2<f32>, 6>(
-    vec2<f32>(-1.0, -1.0), vec2<f32>(1.0, -1.0), vec2<f32>(1.0, 1.0),
-    vec2<f32>(-1.0, -1.0), vec2<f32>(1.0, 1.0), vec2<f32>(-1.0, 1.0),
-);
-
-// A projected point: clip-space centre (w = 0 when culled) and its range.
 struct Projected {
-    ndc: vec2<f32>,
+    // Position in the target (pixels).
+    target_px: vec2<f32>,
     range: f32,
+    // Quantised range: 0 (near) .. 65535 (range_max).
+    depth_q: u32,
     visible: bool,
-    p_lidar: vec3<f32>,
+    // The point's 8-bit colour value and LiDAR index.
+    value: u32,
+    lidar: u32,
 };
 
-fn project(point: PointIn) -> Projected {
+fn project(index: u32) -> Projected {
     var out: Projected;
     out.visible = false;
-    out.p_lidar = point.position_intensity.xyz;
-    let bucket = point.packed & 0xFFFFFFu;
+    let base = index * 5u;
+    let p_lidar = vec3<f32>(
+        bitcast<f32>(points[base]),
+        bitcast<f32>(points[base + 1u]),
+        bitcast<f32>(points[base + 2u]),
+    );
+    let intensity = bitcast<f32>(points[base + 3u]);
+    let packed = points[base + 4u];
+    let bucket = packed & 0xFFFFFFu;
     if (bucket >= arrayLength(&camera_from_lidar)) {
         return out;
     }
-    let p = (camera_from_lidar[bucket] * vec4<f32>(point.position_intensity.xyz, 1.0)).xyz;
+    let p = (camera_from_lidar[bucket] * vec4<f32>(p_lidar, 1.0)).xyz;
     let range = length(p);
-    out.range = range;
     if (p.z <= 0.05 || range < u.range_min_m || range > u.range_max_m) {
         return out;
     }
@@ -134,82 +128,90 @@ fn project(point: PointIn) -> Projected {
     if (pixel.x < -0.5 || pixel.y < -0.5 || pixel.x > u.image_size.x - 0.5 || pixel.y > u.image_size.y - 0.5) {
         return out;
     }
-    out.ndc = vec2<f32>(
-        2.0 * (pixel.x + 0.5 - u.view_min.x) / u.view_size.x - 1.0,
-        1.0 - 2.0 * (pixel.y + 0.5 - u.view_min.y) / u.view_size.y,
-    );
+    out.target_px = (pixel + vec2<f32>(0.5) - u.view_min) / u.view_size * u.viewport_size_px;
+    out.range = range;
+    out.depth_q = u32(clamp(range / u.range_max_m, 0.0, 1.0) * 65535.0);
+    out.lidar = min(packed >> 24u, 7u);
+    var t: f32;
+    if (u.color_mode == 1u) {
+        t = intensity / max(u.intensity_max, 1e-6);
+    } else if (u.color_mode == 2u) {
+        let row = u.height_rows[out.lidar];
+        t = (dot(row.xyz, p_lidar) + row.w - u.height_min_m) / max(u.height_max_m - u.height_min_m, 1e-6);
+    } else {
+        t = (range - u.range_min_m) / max(u.range_max_m - u.range_min_m, 1e-6);
+    }
+    out.value = u32(clamp(t, 0.0, 1.0) * 255.0);
     out.visible = true;
     return out;
 }
 
-fn splat(pr: Projected, corner: vec2<f32>, radius_px: f32, depth: f32) -> vec4<f32> {
-    // NDC spans 2 across the viewport: a radius of r pixels is 2r / size in NDC.
-    let offset = corner * 2.0 * radius_px / u.viewport_size_px;
-    return vec4<f32>(pr.ndc + offset, clamp(depth, 0.0, 1.0), 1.0);
+fn point_index(gid: vec3<u32>) -> u32 {
+    return gid.y * ROW + gid.x;
 }
 
-fn culled() -> VertexOut {
-    var out: VertexOut;
-    out.clip = vec4<f32>(0.0, 0.0, 2.0, 1.0);
-    out.corner = vec2<f32>(0.0);
-    out.color = vec4<f32>(0.0);
-    return out;
+fn occlusion_size() -> vec2<i32> {
+    return vec2<i32>(ceil(u.viewport_size_px / OCCLUSION_CELL));
 }
 
-@vertex
-fn vs_depth(@builtin(vertex_index) vi: u32, point: PointIn) -> VertexOut {
-    let pr = project(point);
+@compute @workgroup_size(64)
+fn cs_occlusion(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let index = point_index(gid);
+    if (index >= u.count) {
+        return;
+    }
+    let pr = project(index);
     if (!pr.visible) {
-        return culled();
+        return;
     }
-    var out: VertexOut;
-    out.corner = CORNERS[vi % 6u];
-    out.clip = splat(pr, out.corner, u.occlusion_px, pr.range / (u.range_max_m * 1.001));
-    out.color = vec4<f32>(0.0);
-    return out;
+    let size = occlusion_size();
+    let cell = vec2<i32>(floor(pr.target_px / OCCLUSION_CELL));
+    let r = i32(ceil(u.occlusion_px / OCCLUSION_CELL));
+    let value = 65536u - pr.depth_q;
+    for (var dy = -r; dy <= r; dy++) {
+        for (var dx = -r; dx <= r; dx++) {
+            let c = cell + vec2<i32>(dx, dy);
+            if (c.x >= 0 && c.y >= 0 && c.x < size.x && c.y < size.y) {
+                atomicMax(&occlusion[c.y * size.x + c.x], value);
+            }
+        }
+    }
 }
 
-// Depth only: the pipeline's colour write mask is empty.
-@fragment
-fn fs_depth(in: VertexOut) -> @location(0) vec4<f32> {
-    if (dot(in.corner, in.corner) > 1.0) {
-        discard;
+@compute @workgroup_size(64)
+fn cs_splat(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let index = point_index(gid);
+    if (index >= u.count) {
+        return;
     }
-    return vec4<f32>(0.0);
-}
-
-@vertex
-fn vs_color(@builtin(vertex_index) vi: u32, point: PointIn) -> VertexOut {
-    let pr = project(point);
+    let pr = project(index);
     if (!pr.visible) {
-        return culled();
+        return;
     }
-    var out: VertexOut;
-    out.corner = CORNERS[vi % 6u];
-    let depth = pr.range * (1.0 - u.depth_tolerance) / (u.range_max_m * 1.001);
-    out.clip = splat(pr, out.corner, u.point_size_px, depth);
-    let lidar = min(point.packed >> 24u, 7u);
-    var rgb: vec3<f32>;
-    if (u.color_mode == 1u) {
-        rgb = colormap(point.position_intensity.w / max(u.intensity_max, 1e-6));
-    } else if (u.color_mode == 2u) {
-        let row = u.height_rows[lidar];
-        let height = dot(row.xyz, pr.p_lidar) + row.w;
-        rgb = colormap((height - u.height_min_m) / max(u.height_max_m - u.height_min_m, 1e-6));
-    } else if (u.color_mode == 3u) {
-        rgb = PALETTE[lidar];
-    } else {
-        rgb = colormap((pr.range - u.range_min_m) / max(u.range_max_m - u.range_min_m, 1e-6));
+    if (u.occlusion_px > 0.0) {
+        let size = occlusion_size();
+        let cell = clamp(vec2<i32>(floor(pr.target_px / OCCLUSION_CELL)), vec2<i32>(0), size - vec2<i32>(1));
+        let nearest = atomicLoad(&occlusion[cell.y * size.x + cell.x]);
+        if (nearest > 0u) {
+            let nearest_q = f32(65536u - nearest);
+            if (f32(pr.depth_q) * (1.0 - u.depth_tolerance) > nearest_q) {
+                return;
+            }
+        }
     }
-    out.color = vec4<f32>(rgb, u.opacity);
-    return out;
-}
-
-@fragment
-fn fs_color(in: VertexOut) -> @location(0) vec4<f32> {
-    if (dot(in.corner, in.corner) > 1.0) {
-        discard;
+    let w = i32(u.viewport_size_px.x);
+    let h = i32(u.viewport_size_px.y);
+    let center = vec2<i32>(floor(pr.target_px));
+    let s = u.point_size_px;
+    let r = i32(ceil(s - 0.5));
+    let value = ((65535u - pr.depth_q) << 16u) | (pr.value << 8u) | (pr.lidar + 1u);
+    for (var dy = -r; dy <= r; dy++) {
+        for (var dx = -r; dx <= r; dx++) {
+            let q = center + vec2<i32>(dx, dy);
+            let d = vec2<f32>(q) + vec2<f32>(0.5) - pr.target_px;
+            if (dot(d, d) <= s * s && q.x >= 0 && q.y >= 0 && q.x < w && q.y < h) {
+                atomicMax(&splats[q.y * w + q.x], value);
+            }
+        }
     }
-    // Premultiplied alpha, as egui's render target expects.
-    return vec4<f32>(in.color.rgb * in.color.a, in.color.a);
 }

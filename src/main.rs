@@ -24,6 +24,9 @@ enum Command {
         log: Option<PathBuf>,
         #[arg(long)]
         calibration: Option<PathBuf>,
+        /// Restore a saved session (its log, edits, segments, locks and view).
+        #[arg(long)]
+        session: Option<PathBuf>,
     },
     /// Sensors, topics, counts, rates, time range, TF tree and problems of a log.
     Inspect {
@@ -82,8 +85,12 @@ fn main() -> ExitCode {
 fn run() -> Result<()> {
     let cli = Cli::parse();
     match cli.command {
-        None => studio(None, None),
-        Some(Command::Studio { log, calibration }) => studio(log, calibration),
+        None => studio(None, None, None),
+        Some(Command::Studio {
+            log,
+            calibration,
+            session,
+        }) => studio(log, calibration, session),
         Some(Command::Inspect {
             log,
             fixed_frame,
@@ -147,12 +154,20 @@ fn run() -> Result<()> {
 }
 
 #[cfg(feature = "app")]
-fn studio(log: Option<PathBuf>, calibration: Option<PathBuf>) -> Result<()> {
-    rigcal::app::run(log, calibration)
+fn studio(
+    log: Option<PathBuf>,
+    calibration: Option<PathBuf>,
+    session: Option<PathBuf>,
+) -> Result<()> {
+    rigcal::app::run(log, calibration, session)
 }
 
 #[cfg(not(feature = "app"))]
-fn studio(_log: Option<PathBuf>, _calibration: Option<PathBuf>) -> Result<()> {
+fn studio(
+    _log: Option<PathBuf>,
+    _calibration: Option<PathBuf>,
+    _session: Option<PathBuf>,
+) -> Result<()> {
     anyhow::bail!(
         "this build has no studio (built without the `app` feature); use the subcommands, e.g. `rigcal inspect LOG.mcap`"
     )

@@ -62,6 +62,47 @@ pub struct Session {
     /// Optimiser loss history: (step, [(term, value)]).
     #[serde(default)]
     pub history: Vec<(usize, Vec<(String, f64)>)>,
+    /// How the viewport looked.
+    #[serde(default)]
+    pub view: Option<SessionView>,
+}
+
+/// The viewport's settings, as words and numbers so the file stays readable.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SessionView {
+    /// Every camera at once.
+    #[serde(default)]
+    pub grid: bool,
+    /// range | intensity | height | lidar
+    #[serde(default = "default_color_by")]
+    pub color_by: String,
+    /// initial | current | best | ground truth
+    #[serde(default = "default_extrinsics")]
+    pub extrinsics: String,
+    #[serde(default)]
+    pub accumulate: usize,
+    #[serde(default = "default_true")]
+    pub occlusion: bool,
+    #[serde(default = "default_point_size")]
+    pub point_size: f32,
+    #[serde(default = "default_max_range")]
+    pub max_range_m: f32,
+}
+
+fn default_color_by() -> String {
+    "range".into()
+}
+fn default_extrinsics() -> String {
+    "current".into()
+}
+fn default_true() -> bool {
+    true
+}
+fn default_point_size() -> f32 {
+    2.0
+}
+fn default_max_range() -> f32 {
+    80.0
 }
 
 impl Session {

@@ -1,13 +1,13 @@
-//! The camera viewport's LiDAR overlay on the GPU: a wgpu paint callback running
-//! `shaders/lidar_overlay.wgsl`, then `shaders/overlay_blit.wgsl`.
+//! The camera viewport's LiDAR overlay on the GPU: compute shaders in
+//! `shaders/lidar_overlay.wgsl` splat the points, `shaders/overlay_blit.wgsl` resolves them into
+//! egui's render pass (a wgpu paint callback).
 //!
 //! Points stay on the GPU in their LiDAR frames with a firing-time bucket index; only the small
 //! per-bucket `camera_from_lidar` table and the uniforms are uploaded when the extrinsics change,
-//! so an edit re-projects every point in the next frame without CPU work. Occlusion: in
-//! `prepare` each viewport (a *slot*: one per camera tile) renders into its own offscreen
-//! colour and depth target, first a depth-only pass of large splats, then the coloured points
-//! with a depth test (see the shader), so points behind nearer surfaces are not drawn; `paint`
-//! then blends that target into egui's pass. Point buffers are shared between slots by key.
+//! so an edit re-projects every point in the next frame without CPU work. Each viewport (a
+//! *slot*: one per camera tile) has its own splat buffers. In `prepare`, one compute pass splats
+//! depth for occlusion and then the visible points (see the shader); `paint` draws one triangle
+//! that turns the splat buffer into colours. Point buffers are shared between slots by key.
 
 use std::collections::HashMap;
 use std::sync::Arc;
@@ -21,11 +21,14 @@ use crate::geometry::camera::{CameraIntrinsics, CameraModel};
 
 const SHADER: &str = include_str!("../../shaders/lidar_overlay.wgsl");
 const BLIT_SHADER: &str = include_str!("../../shaders/overlay_blit.wgsl");
-const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
 /// Point buffers kept on the GPU (a grid of cameras usually shares one or two).
 const POINT_BUFFERS: usize = 8;
+/// Must match `GROUP`, `ROW` and `OCCLUSION_CELL` in the shader.
+const GROUP: u32 = 64;
+const MAX_GROUPS_X: u32 = 65535;
+const OCCLUSION_CELL: u32 = 4;
 
-/// One point as the vertex shader reads it.
+/// One point as the shader reads it (five 32-bit words).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
 pub struct GpuPoint {
@@ -57,7 +60,7 @@ pub struct Uniforms {
     pub range_min_m: f32,
     pub range_max_m: f32,
     pub intensity_max: f32,
-    /// Radius of the depth-only occlusion splats (physical px); 0 disables occlusion.
+    /// Radius of the occlusion splats (physical px); 0 disables occlusion.
     pub occlusion_px: f32,
     /// Image pixels shown: `view_min .. view_min + view_size` (zoom and pan).
     pub view_min: [f32; 2],
@@ -66,9 +69,19 @@ pub struct Uniforms {
     pub height_max_m: f32,
     /// A point is hidden when something is nearer by more than this fraction of its range.
     pub depth_tolerance: f32,
-    pub _pad: f32,
+    /// Number of points (set when drawing).
+    pub count: u32,
     /// Per LiDAR: the z row of `vehicle_from_lidar`.
     pub height_rows: [[f32; 4]; 8],
+}
+
+/// Must match `Resolve` in `overlay_blit.wgsl`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, bytemuck::Pod, bytemuck::Zeroable)]
+struct ResolveUniforms {
+    viewport_size_px: [f32; 2],
+    color_mode: u32,
+    opacity: f32,
 }
 
 impl Uniforms {
@@ -114,56 +127,34 @@ pub fn transforms_f32(transforms: &[Rigid]) -> Vec<[[f32; 4]; 4]> {
         .collect()
 }
 
-/// An offscreen colour + depth target the size of one viewport.
+/// The splat buffers of one viewport size.
 struct Target {
     size: [u32; 2],
-    color: wgpu::TextureView,
-    depth: wgpu::TextureView,
-    blit: wgpu::BindGroup,
+    occlusion: wgpu::Buffer,
+    splats: wgpu::Buffer,
+    resolve_group: wgpu::BindGroup,
 }
 
-/// Per viewport (camera tile): its uniforms, transforms and target.
+/// Per viewport (camera tile): uniforms, transforms, splat buffers and the compute bind group
+/// (remade when the point buffer, the transforms buffer or the target changes).
 struct Slot {
     uniforms: wgpu::Buffer,
+    resolve_uniforms: wgpu::Buffer,
     transforms: wgpu::Buffer,
     transforms_capacity: u64,
-    bind_group: wgpu::BindGroup,
     target: Option<Target>,
+    group: Option<((u64, u64, [u32; 2]), wgpu::BindGroup)>,
 }
 
 struct Resources {
-    depth_pipeline: wgpu::RenderPipeline,
-    color_pipeline: wgpu::RenderPipeline,
-    blit_pipeline: wgpu::RenderPipeline,
+    occlusion_pipeline: wgpu::ComputePipeline,
+    splat_pipeline: wgpu::ComputePipeline,
+    resolve_pipeline: wgpu::RenderPipeline,
     layout: wgpu::BindGroupLayout,
-    blit_layout: wgpu::BindGroupLayout,
-    sampler: wgpu::Sampler,
-    target_format: wgpu::TextureFormat,
+    resolve_layout: wgpu::BindGroupLayout,
     /// Point buffers by key, most recently used last.
     points: Vec<(u64, wgpu::Buffer, u32)>,
     slots: HashMap<u64, Slot>,
-}
-
-fn bind_group(
-    device: &wgpu::Device,
-    layout: &wgpu::BindGroupLayout,
-    uniforms: &wgpu::Buffer,
-    transforms: &wgpu::Buffer,
-) -> wgpu::BindGroup {
-    device.create_bind_group(&wgpu::BindGroupDescriptor {
-        label: Some("rigcal overlay"),
-        layout,
-        entries: &[
-            wgpu::BindGroupEntry {
-                binding: 0,
-                resource: uniforms.as_entire_binding(),
-            },
-            wgpu::BindGroupEntry {
-                binding: 1,
-                resource: transforms.as_entire_binding(),
-            },
-        ],
-    })
 }
 
 fn transform_buffer(device: &wgpu::Device, count: u64) -> wgpu::Buffer {
@@ -175,84 +166,28 @@ fn transform_buffer(device: &wgpu::Device, count: u64) -> wgpu::Buffer {
     })
 }
 
-fn layout_entry(binding: u32, ty: wgpu::BindingType) -> wgpu::BindGroupLayoutEntry {
+fn entry(
+    binding: u32,
+    visibility: wgpu::ShaderStages,
+    ty: wgpu::BufferBindingType,
+) -> wgpu::BindGroupLayoutEntry {
     wgpu::BindGroupLayoutEntry {
         binding,
-        visibility: wgpu::ShaderStages::VERTEX_FRAGMENT,
-        ty,
+        visibility,
+        ty: wgpu::BindingType::Buffer {
+            ty,
+            has_dynamic_offset: false,
+            min_binding_size: None,
+        },
         count: None,
     }
 }
 
-fn point_pipeline(
-    device: &wgpu::Device,
-    layout: &wgpu::PipelineLayout,
-    module: &wgpu::ShaderModule,
-    target_format: wgpu::TextureFormat,
-    color: Option<wgpu::TextureFormat>,
-) -> wgpu::RenderPipeline {
-    let attributes = [
-        wgpu::VertexAttribute {
-            format: wgpu::VertexFormat::Float32x4,
-            offset: 0,
-            shader_location: 0,
-        },
-        wgpu::VertexAttribute {
-            format: wgpu::VertexFormat::Uint32,
-            offset: 16,
-            shader_location: 1,
-        },
-    ];
-    // Both passes share one render pass with a colour attachment; the depth pass writes none.
-    let targets = [Some(wgpu::ColorTargetState {
-        format: color.unwrap_or(target_format),
-        blend: color.map(|_| wgpu::BlendState::PREMULTIPLIED_ALPHA_BLENDING),
-        write_mask: if color.is_some() {
-            wgpu::ColorWrites::ALL
-        } else {
-            wgpu::ColorWrites::empty()
-        },
-    })];
-    let (vs, fs, label) = if color.is_some() {
-        ("vs_color", "fs_color", "rigcal overlay colour")
-    } else {
-        ("vs_depth", "fs_depth", "rigcal overlay depth")
-    };
-    device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-        label: Some(label),
-        layout: Some(layout),
-        vertex: wgpu::VertexState {
-            module,
-            entry_point: Some(vs),
-            compilation_options: Default::default(),
-            buffers: &[Some(wgpu::VertexBufferLayout {
-                array_stride: std::mem::size_of::<GpuPoint>() as u64,
-                step_mode: wgpu::VertexStepMode::Instance,
-                attributes: &attributes,
-            })],
-        },
-        primitive: wgpu::PrimitiveState::default(),
-        depth_stencil: Some(wgpu::DepthStencilState {
-            format: DEPTH_FORMAT,
-            depth_write_enabled: Some(color.is_none()),
-            depth_compare: Some(if color.is_none() {
-                wgpu::CompareFunction::Less
-            } else {
-                wgpu::CompareFunction::LessEqual
-            }),
-            stencil: Default::default(),
-            bias: Default::default(),
-        }),
-        multisample: wgpu::MultisampleState::default(),
-        fragment: Some(wgpu::FragmentState {
-            module,
-            entry_point: Some(fs),
-            compilation_options: Default::default(),
-            targets: &targets,
-        }),
-        multiview_mask: None,
-        cache: None,
-    })
+fn buffer_entry(binding: u32, buffer: &wgpu::Buffer) -> wgpu::BindGroupEntry<'_> {
+    wgpu::BindGroupEntry {
+        binding,
+        resource: buffer.as_entire_binding(),
+    }
 }
 
 /// Create the pipelines once, at app start. Returns false when there is no wgpu renderer.
@@ -269,36 +204,24 @@ pub fn install(render_state: Option<&RenderState>) -> bool {
         label: Some("overlay_blit.wgsl"),
         source: wgpu::ShaderSource::Wgsl(BLIT_SHADER.into()),
     });
-    let buffer = |ty| wgpu::BindingType::Buffer {
-        ty,
-        has_dynamic_offset: false,
-        min_binding_size: None,
-    };
+    use wgpu::BufferBindingType as B;
+    let cs = wgpu::ShaderStages::COMPUTE;
     let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
         label: Some("rigcal overlay"),
         entries: &[
-            layout_entry(0, buffer(wgpu::BufferBindingType::Uniform)),
-            layout_entry(
-                1,
-                buffer(wgpu::BufferBindingType::Storage { read_only: true }),
-            ),
+            entry(0, cs, B::Uniform),
+            entry(1, cs, B::Storage { read_only: true }),
+            entry(2, cs, B::Storage { read_only: true }),
+            entry(3, cs, B::Storage { read_only: false }),
+            entry(4, cs, B::Storage { read_only: false }),
         ],
     });
-    let blit_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-        label: Some("rigcal overlay blit"),
+    let fs = wgpu::ShaderStages::FRAGMENT;
+    let resolve_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+        label: Some("rigcal overlay resolve"),
         entries: &[
-            layout_entry(
-                0,
-                wgpu::BindingType::Texture {
-                    sample_type: wgpu::TextureSampleType::Float { filterable: true },
-                    view_dimension: wgpu::TextureViewDimension::D2,
-                    multisampled: false,
-                },
-            ),
-            layout_entry(
-                1,
-                wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
-            ),
+            entry(0, fs, B::Uniform),
+            entry(1, fs, B::Storage { read_only: true }),
         ],
     });
     let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
@@ -306,17 +229,26 @@ pub fn install(render_state: Option<&RenderState>) -> bool {
         bind_group_layouts: &[Some(&layout)],
         immediate_size: 0,
     });
-    let blit_pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-        label: Some("rigcal overlay blit"),
-        bind_group_layouts: &[Some(&blit_layout)],
+    let resolve_pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+        label: Some("rigcal overlay resolve"),
+        bind_group_layouts: &[Some(&resolve_layout)],
         immediate_size: 0,
     });
-    let format = rs.target_format;
-    let depth_pipeline = point_pipeline(device, &pipeline_layout, &module, format, None);
-    let color_pipeline = point_pipeline(device, &pipeline_layout, &module, format, Some(format));
-    let blit_pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-        label: Some("rigcal overlay blit"),
-        layout: Some(&blit_pipeline_layout),
+    let compute = |entry_point: &str| {
+        device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+            label: Some(entry_point),
+            layout: Some(&pipeline_layout),
+            module: &module,
+            entry_point: Some(entry_point),
+            compilation_options: Default::default(),
+            cache: None,
+        })
+    };
+    let occlusion_pipeline = compute("cs_occlusion");
+    let splat_pipeline = compute("cs_splat");
+    let resolve_pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+        label: Some("rigcal overlay resolve"),
+        layout: Some(&resolve_pipeline_layout),
         vertex: wgpu::VertexState {
             module: &blit_module,
             entry_point: Some("vs_main"),
@@ -339,18 +271,12 @@ pub fn install(render_state: Option<&RenderState>) -> bool {
         multiview_mask: None,
         cache: None,
     });
-    let sampler = device.create_sampler(&wgpu::SamplerDescriptor {
-        label: Some("rigcal overlay blit"),
-        ..Default::default()
-    });
     rs.renderer.write().callback_resources.insert(Resources {
-        depth_pipeline,
-        color_pipeline,
-        blit_pipeline,
+        occlusion_pipeline,
+        splat_pipeline,
+        resolve_pipeline,
         layout,
-        blit_layout,
-        sampler,
-        target_format: rs.target_format,
+        resolve_layout,
         points: Vec::new(),
         slots: HashMap::new(),
     });
@@ -359,70 +285,55 @@ pub fn install(render_state: Option<&RenderState>) -> bool {
 
 impl Resources {
     fn new_slot(&self, device: &wgpu::Device) -> Slot {
-        let uniforms = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some("rigcal overlay uniforms"),
-            contents: bytemuck::bytes_of(&Uniforms::default()),
-            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
-        });
-        let transforms = transform_buffer(device, 256);
-        let bind_group = bind_group(device, &self.layout, &uniforms, &transforms);
+        let uniform = |label, size| {
+            device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some(label),
+                size,
+                usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            })
+        };
         Slot {
-            uniforms,
-            transforms,
+            uniforms: uniform(
+                "rigcal overlay uniforms",
+                std::mem::size_of::<Uniforms>() as u64,
+            ),
+            resolve_uniforms: uniform(
+                "rigcal overlay resolve uniforms",
+                std::mem::size_of::<ResolveUniforms>() as u64,
+            ),
+            transforms: transform_buffer(device, 256),
             transforms_capacity: 256,
-            bind_group,
             target: None,
+            group: None,
         }
     }
 
-    fn new_target(&self, device: &wgpu::Device, size: [u32; 2]) -> Target {
-        let texture = |label, format, usage| {
-            device
-                .create_texture(&wgpu::TextureDescriptor {
-                    label: Some(label),
-                    size: wgpu::Extent3d {
-                        width: size[0],
-                        height: size[1],
-                        depth_or_array_layers: 1,
-                    },
-                    mip_level_count: 1,
-                    sample_count: 1,
-                    dimension: wgpu::TextureDimension::D2,
-                    format,
-                    usage,
-                    view_formats: &[],
-                })
-                .create_view(&Default::default())
+    fn new_target(&self, device: &wgpu::Device, slot: &Slot, size: [u32; 2]) -> Target {
+        let storage = |label, words: u64| {
+            device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some(label),
+                size: words.max(1) * 4,
+                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            })
         };
-        let color = texture(
-            "rigcal overlay colour",
-            self.target_format,
-            wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING,
-        );
-        let depth = texture(
-            "rigcal overlay depth",
-            DEPTH_FORMAT,
-            wgpu::TextureUsages::RENDER_ATTACHMENT,
-        );
-        let blit = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("rigcal overlay blit"),
-            layout: &self.blit_layout,
+        let cells = |n: u32| n.div_ceil(OCCLUSION_CELL) as u64;
+        let occlusion = storage("rigcal overlay occlusion", cells(size[0]) * cells(size[1]));
+        let splats = storage("rigcal overlay splats", size[0] as u64 * size[1] as u64);
+        let resolve_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("rigcal overlay resolve"),
+            layout: &self.resolve_layout,
             entries: &[
-                wgpu::BindGroupEntry {
-                    binding: 0,
-                    resource: wgpu::BindingResource::TextureView(&color),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 1,
-                    resource: wgpu::BindingResource::Sampler(&self.sampler),
-                },
+                buffer_entry(0, &slot.resolve_uniforms),
+                buffer_entry(1, &splats),
             ],
         });
         Target {
             size,
-            color,
-            depth,
-            blit,
+            occlusion,
+            splats,
+            resolve_group,
         }
     }
 
@@ -438,7 +349,7 @@ impl Resources {
             let buf = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
                 label: Some("rigcal lidar points"),
                 contents: bytemuck::cast_slice(points),
-                usage: wgpu::BufferUsages::VERTEX,
+                usage: wgpu::BufferUsages::STORAGE,
             });
             self.points.push((key, buf, points.len() as u32));
             if self.points.len() > POINT_BUFFERS {
@@ -451,7 +362,7 @@ impl Resources {
 
 /// One frame's draw of the overlay in one viewport.
 pub struct OverlayCallback {
-    /// The viewport (camera tile) this draw belongs to; each has its own offscreen target.
+    /// The viewport (camera tile) this draw belongs to; each has its own splat buffers.
     pub slot: u64,
     /// Identifies `points`; they are uploaded only when it changes.
     pub points_key: u64,
@@ -485,60 +396,80 @@ impl CallbackTrait for OverlayCallback {
             .slots
             .get(&self.slot)
             .is_none_or(|s| s.target.as_ref().is_none_or(|t| t.size != size));
-        let target = needs_target.then(|| r.new_target(device, size));
+        if needs_target {
+            let target = r
+                .slots
+                .get(&self.slot)
+                .map(|slot| r.new_target(device, slot, size));
+            if let Some(slot) = r.slots.get_mut(&self.slot) {
+                slot.target = target;
+            }
+        }
         let Some(slot) = r.slots.get_mut(&self.slot) else {
             return Vec::new();
         };
-        if let Some(t) = target {
-            slot.target = Some(t);
-        }
         let needed = self.transforms.len() as u64;
         if needed > slot.transforms_capacity {
             slot.transforms_capacity = needed.next_power_of_two();
             slot.transforms = transform_buffer(device, slot.transforms_capacity);
-            slot.bind_group = bind_group(device, &r.layout, &slot.uniforms, &slot.transforms);
+            slot.group = None;
         }
         if !self.transforms.is_empty() {
             queue.write_buffer(&slot.transforms, 0, bytemuck::cast_slice(&self.transforms));
         }
-        queue.write_buffer(&slot.uniforms, 0, bytemuck::bytes_of(&self.uniforms));
+        let count = points.map_or(0, |i| r.points[i].2);
+        let mut uniforms = self.uniforms;
+        uniforms.viewport_size_px = [size[0] as f32, size[1] as f32];
+        uniforms.count = count;
+        queue.write_buffer(&slot.uniforms, 0, bytemuck::bytes_of(&uniforms));
+        let resolve = ResolveUniforms {
+            viewport_size_px: uniforms.viewport_size_px,
+            color_mode: uniforms.color_mode,
+            opacity: uniforms.opacity,
+        };
+        queue.write_buffer(&slot.resolve_uniforms, 0, bytemuck::bytes_of(&resolve));
         let Some(target) = &slot.target else {
             return Vec::new();
         };
-        let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
-            label: Some("rigcal overlay"),
-            color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                view: &target.color,
-                depth_slice: None,
-                resolve_target: None,
-                ops: wgpu::Operations {
-                    load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT),
-                    store: wgpu::StoreOp::Store,
-                },
-            })],
-            depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
-                view: &target.depth,
-                depth_ops: Some(wgpu::Operations {
-                    load: wgpu::LoadOp::Clear(1.0),
-                    store: wgpu::StoreOp::Discard,
-                }),
-                stencil_ops: None,
-            }),
-            timestamp_writes: None,
-            occlusion_query_set: None,
-            multiview_mask: None,
-        });
-        if let Some(i) = points {
-            let (_, buffer, count) = &r.points[i];
-            pass.set_bind_group(0, &slot.bind_group, &[]);
-            pass.set_vertex_buffer(0, buffer.slice(..));
-            if self.uniforms.occlusion_px > 0.0 {
-                pass.set_pipeline(&r.depth_pipeline);
-                pass.draw(0..6, 0..*count);
-            }
-            pass.set_pipeline(&r.color_pipeline);
-            pass.draw(0..6, 0..*count);
+        encoder.clear_buffer(&target.splats, 0, None);
+        let Some(i) = points else {
+            return Vec::new();
+        };
+        let group_key = (self.points_key, slot.transforms_capacity, size);
+        if slot.group.as_ref().map(|g| g.0) != Some(group_key) {
+            let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("rigcal overlay"),
+                layout: &r.layout,
+                entries: &[
+                    buffer_entry(0, &slot.uniforms),
+                    buffer_entry(1, &slot.transforms),
+                    buffer_entry(2, &r.points[i].1),
+                    buffer_entry(3, &target.occlusion),
+                    buffer_entry(4, &target.splats),
+                ],
+            });
+            slot.group = Some((group_key, group));
         }
+        let Some((_, group)) = &slot.group else {
+            return Vec::new();
+        };
+        let groups = count.div_ceil(GROUP);
+        let (gx, gy) = (groups.min(MAX_GROUPS_X), groups.div_ceil(MAX_GROUPS_X));
+        let occlusion = uniforms.occlusion_px > 0.0;
+        if occlusion {
+            encoder.clear_buffer(&target.occlusion, 0, None);
+        }
+        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+            label: Some("rigcal overlay splat"),
+            timestamp_writes: None,
+        });
+        pass.set_bind_group(0, group, &[]);
+        if occlusion {
+            pass.set_pipeline(&r.occlusion_pipeline);
+            pass.dispatch_workgroups(gx, gy, 1);
+        }
+        pass.set_pipeline(&r.splat_pipeline);
+        pass.dispatch_workgroups(gx, gy, 1);
         Vec::new()
     }
 
@@ -554,8 +485,8 @@ impl CallbackTrait for OverlayCallback {
         let Some(target) = r.slots.get(&self.slot).and_then(|s| s.target.as_ref()) else {
             return;
         };
-        render_pass.set_pipeline(&r.blit_pipeline);
-        render_pass.set_bind_group(0, &target.blit, &[]);
+        render_pass.set_pipeline(&r.resolve_pipeline);
+        render_pass.set_bind_group(0, &target.resolve_group, &[]);
         render_pass.draw(0..3, 0..1);
     }
 }

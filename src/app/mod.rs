@@ -10,6 +10,7 @@ pub mod export;
 pub mod gpu_overlay;
 pub mod optimiser;
 mod overlay;
+pub mod profile;
 mod sensors;
 pub mod state;
 pub mod trajectory;
@@ -20,7 +21,12 @@ use std::path::PathBuf;
 pub use state::Studio;
 
 /// Open the studio window (blocks until it is closed).
-pub fn run(log: Option<PathBuf>, calibration: Option<PathBuf>) -> anyhow::Result<()> {
+pub fn run(
+    log: Option<PathBuf>,
+    calibration: Option<PathBuf>,
+    session: Option<PathBuf>,
+) -> anyhow::Result<()> {
+    let launch = std::time::Instant::now();
     let options = eframe::NativeOptions {
         viewport: egui::ViewportBuilder::default()
             .with_inner_size([1600.0, 1000.0])
@@ -31,8 +37,19 @@ pub fn run(log: Option<PathBuf>, calibration: Option<PathBuf>) -> anyhow::Result
         "rigcal studio",
         options,
         Box::new(move |cc| {
+            // A session names its own log: open that instead of the demo.
+            let log = log.or_else(|| {
+                session
+                    .as_deref()
+                    .and_then(|p| crate::session::Session::load(p).ok())
+                    .and_then(|s| s.log)
+            });
             let mut studio = new_studio(cc, log, calibration);
             studio.enable_persistence();
+            if let Some(path) = session {
+                studio.restore_session(&path);
+            }
+            studio.profile = profile::Profile::from_env(launch);
             Ok(Box::new(studio))
         }),
     )

@@ -72,7 +72,12 @@ pub(crate) struct OverlayCache {
     /// transforms.
     gpu_points: Arc<Vec<GpuPoint>>,
     gpu_points_key: u64,
+    /// The sweeps and stride `gpu_points` were built from.
+    gpu_base_key: u64,
     gpu_transforms: Vec<[[f32; 4]; 4]>,
+    /// Per sweep: the camera's optical axis in the LiDAR frame when the points were culled
+    /// to the camera's view cone (re-culled when it turns by more than `RECULL_DEG`).
+    gpu_cone_axes: Vec<glam::DVec3>,
     intensity_max: f32,
     /// CPU projection (fallback path, hover readout), far to near; valid for `cpu_key`.
     cpu: Vec<CpuPoint>,
@@ -292,9 +297,26 @@ fn grid_ui(studio: &mut Studio, ui: &mut egui::Ui, cameras: &[String], drive: &D
         return;
     };
     let n = cameras.len();
-    let cols = (n as f32).sqrt().ceil().max(1.0) as usize;
-    let rows = n.div_ceil(cols);
     let area = ui.available_rect_before_wrap();
+    // The column count that makes the tiles largest for the first camera's aspect.
+    let aspect = studio
+        .current
+        .sensor(&cameras[0])
+        .and_then(|s| s.camera.as_ref())
+        .map_or(16.0 / 9.0, |c| c.width as f32 / c.height.max(1) as f32);
+    let cols = (1..=n)
+        .max_by(|&a, &b| {
+            let scale = |c: usize| {
+                let (w, h) = (
+                    area.width() / c as f32,
+                    area.height() / n.div_ceil(c) as f32,
+                );
+                (w / aspect).min(h)
+            };
+            scale(a).total_cmp(&scale(b))
+        })
+        .unwrap_or(1);
+    let rows = n.div_ceil(cols);
     let cell = Vec2::new(area.width() / cols as f32, area.height() / rows as f32);
     ui.allocate_rect(area, egui::Sense::hover());
     for (i, cam) in cameras.iter().enumerate() {
@@ -517,6 +539,10 @@ fn draw_camera(
         for (i, l) in rig.lidars().enumerate() {
             u.set_height_row(i, l.vehicle_from_sensor);
         }
+        if cache.texture.is_some() && !cache.gpu_points.is_empty() {
+            studio.pictures.0 += 1;
+            studio.pictures.1 += cache.gpu_points.len();
+        }
         painter.add(paint_callback(
             rect,
             OverlayCallback {
@@ -562,6 +588,10 @@ fn draw_camera(
                 (p.p.pixel[1] + 0.5 - view.min.y) * scale,
             );
         mesh.add_colored_rect(Rect::from_center_size(center, Vec2::splat(2.0 * half)), c);
+    }
+    if !mesh.is_empty() {
+        studio.pictures.0 += 1;
+        studio.pictures.1 += mesh.vertices.len() / 4;
     }
     painter.add(egui::Shape::mesh(mesh));
 }
@@ -640,7 +670,8 @@ fn refresh(
         transforms.push(t);
     }
     cache.sweeps = sweeps;
-    upload_gpu_points(cache, &transforms, studio.overlay.stride);
+    let cone_cos = view_cone_cos(cam.camera.as_ref().ok_or("camera has no intrinsics")?);
+    upload_gpu_points(cache, &transforms, studio.overlay.stride, cone_cos);
     cache.cpu.clear();
     cache.cpu_key = None;
     cache.key = Some(key);
@@ -667,7 +698,43 @@ fn sweep_view(s: &LidarSweep) -> SweepView<'_> {
 }
 
 /// Rebuild the GPU point list when the set of sweeps changed; always refresh the transforms.
-fn upload_gpu_points(cache: &mut OverlayCache, transforms: &[Vec<Rigid>], stride: usize) {
+/// Extra angle around the camera's field of view kept on the GPU, so edits and optimiser steps
+/// of a few degrees re-project without re-uploading points.
+const CONE_MARGIN_DEG: f64 = 15.0;
+const RECULL_DEG: f64 = 5.0;
+
+/// Cosine of the half-angle of the cone around the optical axis that holds every pixel's ray
+/// plus the margin; -1 (keep everything) for fields of view near or beyond 180°.
+fn view_cone_cos(intr: &crate::geometry::camera::CameraIntrinsics) -> f64 {
+    let (w, h) = (intr.width as f64, intr.height as f64);
+    let mut max_angle: f64 = 0.0;
+    for (x, y) in [
+        (0.0, 0.0),
+        (w, 0.0),
+        (0.0, h),
+        (w, h),
+        (w / 2.0, 0.0),
+        (0.0, h / 2.0),
+    ] {
+        match intr.unproject(glam::DVec2::new(x, y)) {
+            Some(d) => max_angle = max_angle.max(d.normalize().z.clamp(-1.0, 1.0).acos()),
+            None => return -1.0,
+        }
+    }
+    let limit = max_angle + (CONE_MARGIN_DEG + RECULL_DEG).to_radians();
+    if limit >= std::f64::consts::FRAC_PI_2 * 1.9 {
+        -1.0
+    } else {
+        limit.cos()
+    }
+}
+
+fn upload_gpu_points(
+    cache: &mut OverlayCache,
+    transforms: &[Vec<Rigid>],
+    stride: usize,
+    cone_cos: f64,
+) {
     use std::hash::{Hash, Hasher};
     let mut h = std::collections::hash_map::DefaultHasher::new();
     for ((li, s), t) in cache.sweeps.iter().zip(transforms) {
@@ -675,13 +742,38 @@ fn upload_gpu_points(cache: &mut OverlayCache, transforms: &[Vec<Rigid>], stride
     }
     stride.hash(&mut h);
     let key = h.finish();
-    if key != cache.gpu_points_key || cache.gpu_points.is_empty() {
+    // The camera (origin, optical axis) in each sweep's LiDAR frame at its first bucket.
+    let cameras_in_lidar: Vec<(glam::DVec3, glam::DVec3)> = transforms
+        .iter()
+        .map(|t| {
+            let lidar_from_camera = t.first().copied().unwrap_or_default().inverse();
+            (
+                lidar_from_camera.translation,
+                lidar_from_camera.rotation * glam::DVec3::Z,
+            )
+        })
+        .collect();
+    let turned = cache.gpu_cone_axes.len() != cameras_in_lidar.len()
+        || cache
+            .gpu_cone_axes
+            .iter()
+            .zip(&cameras_in_lidar)
+            .any(|(a, (_, b))| a.dot(*b) < RECULL_DEG.to_radians().cos());
+    if key != cache.gpu_base_key || cache.gpu_points.is_empty() || turned {
         let mut pts: Vec<(f32, GpuPoint)> = Vec::new();
         let mut base = 0u32;
-        for ((li, s), t) in cache.sweeps.iter().zip(transforms) {
+        for (((li, s), t), (origin, axis)) in
+            cache.sweeps.iter().zip(transforms).zip(&cameras_in_lidar)
+        {
             let buckets = point_buckets(&sweep_view(s));
             for i in (0..s.points_in_sensor.len()).step_by(stride.max(1)) {
                 let p = s.points_in_sensor[i];
+                if cone_cos > -1.0 {
+                    let d = glam::DVec3::new(p[0] as f64, p[1] as f64, p[2] as f64) - *origin;
+                    if d.dot(*axis) < cone_cos * d.length() {
+                        continue;
+                    }
+                }
                 let range = (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt();
                 pts.push((
                     range,
@@ -705,10 +797,22 @@ fn upload_gpu_points(cache: &mut OverlayCache, transforms: &[Vec<Rigid>], stride
             .map(|p| p.1.position_intensity[3])
             .fold(1.0, f32::max);
         cache.gpu_points = Arc::new(pts.into_iter().map(|p| p.1).collect());
-        cache.gpu_points_key = key;
+        cache.gpu_cone_axes = cameras_in_lidar.iter().map(|c| c.1).collect();
+        // A new key per upload: the GPU keeps buffers by key.
+        cache.gpu_base_key = key;
+        cache.gpu_points_key = key ^ axis_hash(&cache.gpu_cone_axes);
     }
     let all: Vec<Rigid> = transforms.iter().flatten().copied().collect();
     cache.gpu_transforms = transforms_f32(&all);
+}
+
+fn axis_hash(axes: &[glam::DVec3]) -> u64 {
+    use std::hash::{Hash, Hasher};
+    let mut h = std::collections::hash_map::DefaultHasher::new();
+    for a in axes {
+        a.to_array().map(f64::to_bits).hash(&mut h);
+    }
+    h.finish()
 }
 
 /// Project the camera's sweeps on the CPU (fallback drawing, hover readout) with occlusion.

@@ -162,6 +162,10 @@ pub struct Studio {
     /// Where the session is autosaved after every change (None: no autosave, e.g. in tests).
     pub autosave: Option<PathBuf>,
     pub(crate) saved_session: Option<Session>,
+    /// Frame-time measurement (RIGCAL_PROFILE_FRAMES).
+    pub profile: Option<super::profile::Profile>,
+    /// Camera views drawn with their overlay this frame, and the LiDAR points they submitted.
+    pub(crate) pictures: (usize, usize),
 }
 
 impl Default for Studio {
@@ -203,6 +207,8 @@ impl Default for Studio {
             recent: RecentFiles::default(),
             autosave: None,
             saved_session: None,
+            profile: None,
+            pictures: (0, 0),
         }
     }
 }
@@ -383,6 +389,22 @@ impl Studio {
         s.camera = self.camera;
         s.frame = self.frame;
         s.history = self.optimiser.history.clone();
+        let o = &self.overlay;
+        s.view = Some(crate::session::SessionView {
+            grid: self.grid,
+            color_by: match o.color_by {
+                ColorBy::Range => "range",
+                ColorBy::Intensity => "intensity",
+                ColorBy::Height => "height",
+                ColorBy::Lidar => "lidar",
+            }
+            .into(),
+            extrinsics: self.view.label().into(),
+            accumulate: o.accumulate,
+            occlusion: o.occlusion,
+            point_size: o.point_size,
+            max_range_m: o.max_range_m,
+        });
         s
     }
 
@@ -442,6 +464,28 @@ impl Studio {
         self.camera = session.camera;
         self.frame = session.frame;
         self.optimiser.history = session.history.clone();
+        if let Some(v) = &session.view {
+            self.grid = v.grid;
+            self.overlay.color_by = match v.color_by.as_str() {
+                "intensity" => ColorBy::Intensity,
+                "height" => ColorBy::Height,
+                "lidar" => ColorBy::Lidar,
+                _ => ColorBy::Range,
+            };
+            self.view = [
+                ExtrinsicsView::Initial,
+                ExtrinsicsView::Current,
+                ExtrinsicsView::Best,
+                ExtrinsicsView::GroundTruth,
+            ]
+            .into_iter()
+            .find(|x| x.label() == v.extrinsics)
+            .unwrap_or(ExtrinsicsView::Current);
+            self.overlay.accumulate = v.accumulate.min(30);
+            self.overlay.occlusion = v.occlusion;
+            self.overlay.point_size = v.point_size.clamp(0.5, 6.0);
+            self.overlay.max_range_m = v.max_range_m.clamp(1.0, 300.0);
+        }
         self.overlays.clear();
         self.status
             .push(format!("restored session {}", path.display()));

@@ -8,7 +8,7 @@ use std::sync::Arc;
 use std::sync::mpsc::{Receiver, channel};
 
 use egui::{Color32, Pos2, Rect, Sense, Stroke, Vec2};
-use egui_plot::{Line, Plot, PlotPoints, Points};
+use egui_plot::{Line, Plot, PlotImage, PlotPoint, PlotPoints, Points};
 
 use super::Studio;
 use super::overlay::colormap;
@@ -17,16 +17,67 @@ use crate::geometry::motion::MotionSummary;
 use crate::geometry::projection::{SweepView, world_points};
 use crate::log::Drive;
 
-/// Points of the top-down map, in the world frame.
+/// The top-down map: aggregated LiDAR points rasterised into a density image (drawn as one
+/// texture, cheap on software renderers), and the trajectory.
 pub struct MapData {
     pub points_xy: Vec<[f64; 2]>,
     /// (stamp, x, y) every 0.1 s.
     pub trajectory: Vec<(i64, [f64; 2])>,
+    /// World rectangle the raster covers: min x, min y, size (square), and the raster.
+    pub raster_min: [f64; 2],
+    pub raster_size_m: f64,
+    pub raster: Option<egui::ColorImage>,
+}
+
+const RASTER_PX: usize = 512;
+/// LiDAR surroundings shown around the trajectory on the map.
+const MAP_MARGIN_M: f64 = 40.0;
+
+impl MapData {
+    fn rasterise(&mut self) {
+        // The trajectory's bounding box with a margin of LiDAR surroundings.
+        let (mut lo, mut hi) = ([f64::MAX; 2], [f64::MIN; 2]);
+        for (_, p) in &self.trajectory {
+            for k in 0..2 {
+                lo[k] = lo[k].min(p[k] - MAP_MARGIN_M);
+                hi[k] = hi[k].max(p[k] + MAP_MARGIN_M);
+            }
+        }
+        if lo[0] > hi[0] {
+            return;
+        }
+        let size = (hi[0] - lo[0]).max(hi[1] - lo[1]).max(1.0) * 1.02;
+        let center = [(lo[0] + hi[0]) / 2.0, (lo[1] + hi[1]) / 2.0];
+        self.raster_min = [center[0] - size / 2.0, center[1] - size / 2.0];
+        self.raster_size_m = size;
+        let mut count = vec![0u32; RASTER_PX * RASTER_PX];
+        for p in &self.points_xy {
+            let x = ((p[0] - self.raster_min[0]) / size * RASTER_PX as f64) as usize;
+            let y = ((p[1] - self.raster_min[1]) / size * RASTER_PX as f64) as usize;
+            if x < RASTER_PX && y < RASTER_PX {
+                // Image rows go down, world y goes up.
+                count[(RASTER_PX - 1 - y) * RASTER_PX + x] += 1;
+            }
+        }
+        let pixels: Vec<egui::Color32> = count
+            .iter()
+            .map(|&c| {
+                let v = if c == 0 {
+                    0
+                } else {
+                    (70.0 + 40.0 * (c as f32).ln()).min(200.0) as u8
+                };
+                egui::Color32::from_rgba_unmultiplied(v, v, v, if c == 0 { 0 } else { 255 })
+            })
+            .collect();
+        self.raster = Some(egui::ColorImage::new([RASTER_PX, RASTER_PX], pixels));
+    }
 }
 
 #[derive(Default)]
 pub struct TrajectoryPanel {
     pub map: Option<Arc<MapData>>,
+    texture: Option<egui::TextureHandle>,
     job: Option<Receiver<Result<MapData, String>>>,
     drag_from: Option<i64>,
 }
@@ -75,10 +126,15 @@ pub fn build_map(drive: &Drive, rig: &Rig) -> Result<MapData, String> {
             }
         }
     }
-    Ok(MapData {
+    let mut map = MapData {
         points_xy,
         trajectory,
-    })
+        raster_min: [0.0; 2],
+        raster_size_m: 1.0,
+        raster: None,
+    };
+    map.rasterise();
+    Ok(map)
 }
 
 pub fn poll(studio: &mut Studio, ctx: &egui::Context) {
@@ -97,6 +153,9 @@ pub fn poll(studio: &mut Studio, ctx: &egui::Context) {
     if let Some(rx) = &panel.job {
         match rx.try_recv() {
             Ok(Ok(map)) => {
+                panel.texture = map.raster.clone().map(|img| {
+                    ctx.load_texture("trajectory-map", img, egui::TextureOptions::NEAREST)
+                });
                 panel.map = Some(Arc::new(map));
                 panel.job = None;
             }
@@ -105,6 +164,9 @@ pub fn poll(studio: &mut Studio, ctx: &egui::Context) {
                 panel.map = Some(Arc::new(MapData {
                     points_xy: Vec::new(),
                     trajectory: Vec::new(),
+                    raster_min: [0.0; 2],
+                    raster_size_m: 1.0,
+                    raster: None,
                 }));
                 panel.job = None;
             }
@@ -149,22 +211,26 @@ fn map_ui(studio: &Studio, ui: &mut egui::Ui, t0: i64, t1: i64, now: Option<i64>
         .show_grid(false)
         .allow_scroll(false)
         .show(ui, |plot| {
-            plot.points(
-                Points::new("LiDAR map", PlotPoints::from(map.points_xy.clone()))
-                    .color(Color32::from_gray(110))
-                    .radius(0.8),
-            );
+            if let Some(tex) = &studio.trajectory_panel.texture {
+                let half = map.raster_size_m / 2.0;
+                plot.image(PlotImage::new(
+                    "LiDAR map",
+                    tex.id(),
+                    PlotPoint::new(map.raster_min[0] + half, map.raster_min[1] + half),
+                    Vec2::splat(map.raster_size_m as f32),
+                ));
+            }
             // Trajectory coloured by time, thicker inside selected segments.
-            for w in map.trajectory.windows(2) {
-                let (ta, a) = w[0];
-                let (_, b) = w[1];
+            // Chunks of 1 s, each in its time colour (one line per chunk keeps this cheap).
+            let mut start = 0;
+            while start + 1 < map.trajectory.len() {
+                let end = (start + 10).min(map.trajectory.len() - 1);
+                let (ta, _) = map.trajectory[start];
                 let c = colormap(((ta - t0) as f64 / span) as f32);
                 let width = if in_segment(ta) { 5.0 } else { 2.0 };
-                plot.line(
-                    Line::new("", PlotPoints::from(vec![a, b]))
-                        .color(c)
-                        .width(width),
-                );
+                let pts: Vec<[f64; 2]> = map.trajectory[start..=end].iter().map(|x| x.1).collect();
+                plot.line(Line::new("", PlotPoints::from(pts)).color(c).width(width));
+                start = end;
             }
             if let Some(t) = now
                 && let Some((_, p)) = map.trajectory.iter().min_by_key(|(s, _)| (s - t).abs())

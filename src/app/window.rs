@@ -10,6 +10,7 @@ use crate::session::Session;
 
 impl eframe::App for Studio {
     fn ui(&mut self, ui: &mut egui::Ui, _frame: &mut eframe::Frame) {
+        self.pictures = (0, 0);
         self.handle_dropped_files(ui.ctx());
         self.handle_shortcuts(ui.ctx());
         super::optimiser::poll(self, ui.ctx());
@@ -42,6 +43,16 @@ impl eframe::App for Studio {
             });
         egui::CentralPanel::default().show(ui, |ui| super::overlay::viewport_ui(self, ui));
         self.autosave_if_changed();
+        if let Some(p) = &mut self.profile {
+            let (pictures, points) = self.pictures;
+            if let Some(report) = p.on_frame(pictures, points, pictures) {
+                println!("{report}");
+                ui.ctx().send_viewport_cmd(egui::ViewportCommand::Close);
+                self.profile = None;
+            } else {
+                ui.ctx().request_repaint();
+            }
+        }
     }
 }
 
