@@ -717,7 +717,10 @@ fn view_cone_cos(intr: &crate::geometry::camera::CameraIntrinsics) -> f64 {
         (0.0, h / 2.0),
     ] {
         match intr.unproject(glam::DVec2::new(x, y)) {
-            Some(d) => max_angle = max_angle.max(d.normalize().z.clamp(-1.0, 1.0).acos()),
+            Some(d) => {
+                let z = d.normalize_or_zero().z.clamp(-1.0, 1.0);
+                max_angle = max_angle.max(z.acos());
+            }
             None => return -1.0,
         }
     }
