@@ -25,13 +25,18 @@ session() { # name grid accumulate
 JSON
 }
 session one false 0
+session grid0 true 0
 session grid true 15
 echo "machine: $(nproc) cores, $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 | xargs); $(date -u +%F)"
-for case in one grid; do
+for case in one grid0 grid; do
   echo "== $case"
   DISPLAY="$display" RIGCAL_PROFILE_FRAMES=30 timeout 600 "$bin" studio --session "$tmp/$case.json" 2>/dev/null
 done
 echo "== launch to first picture, default (one camera, the PandaSet log), 3 runs"
 for i in 1 2 3; do
   DISPLAY="$display" RIGCAL_PROFILE_FRAMES=1 timeout 600 "$bin" studio "$log" 2>/dev/null | head -1
+done
+echo "== the demo: first start (the simulator writes the demo drive), then from the cache"
+for i in 1 2; do
+  DISPLAY="$display" RIGCAL_PROFILE_FRAMES=1 timeout 900 "$bin" 2>/dev/null | head -1
 done

@@ -818,6 +818,29 @@ fn axis_hash(axes: &[glam::DVec3]) -> u64 {
     h.finish()
 }
 
+/// For reports: LiDAR points that land inside the shown images, and how many of those
+/// survive occlusion (CPU projection of what the GPU draws).
+pub(crate) fn points_in_images(studio: &mut Studio) -> (usize, usize) {
+    let Some(drive) = studio.drive.clone() else {
+        return (0, 0);
+    };
+    let cameras = camera_names(&studio.current);
+    let shown: Vec<usize> = if studio.grid {
+        (0..cameras.len()).collect()
+    } else {
+        vec![studio.camera]
+    };
+    let (mut inside, mut visible) = (0, 0);
+    for i in shown {
+        if i < cameras.len() && ensure_cpu(studio, i, &cameras[i], &drive).is_ok() {
+            let cpu = &studio.overlays[i].cpu;
+            inside += cpu.len();
+            visible += cpu.iter().filter(|p| p.visible).count();
+        }
+    }
+    (inside, visible)
+}
+
 /// Project the camera's sweeps on the CPU (fallback drawing, hover readout) with occlusion.
 fn ensure_cpu(
     studio: &mut Studio,
