@@ -87,6 +87,9 @@ pub struct SessionView {
     pub point_size: f32,
     #[serde(default = "default_max_range")]
     pub max_range_m: f32,
+    /// The right-hand panel: optimise | checks | export
+    #[serde(default)]
+    pub tab: String,
 }
 
 fn default_color_by() -> String {

@@ -795,10 +795,18 @@ fn upload_gpu_points(
         }
         // Far to near: nearer splats are drawn over farther ones.
         pts.sort_by(|a, b| b.0.total_cmp(&a.0));
-        cache.intensity_max = pts
+        // Colour scale to the 98th percentile: a few retro-reflectors would wash out the rest.
+        let mut sample: Vec<f32> = pts
             .iter()
+            .step_by((pts.len() / 4096).max(1))
             .map(|p| p.1.position_intensity[3])
-            .fold(1.0, f32::max);
+            .collect();
+        sample.sort_by(f32::total_cmp);
+        cache.intensity_max = sample
+            .get(sample.len() * 98 / 100)
+            .copied()
+            .unwrap_or(1.0)
+            .max(1e-3);
         cache.gpu_points = Arc::new(pts.into_iter().map(|p| p.1).collect());
         cache.gpu_cone_axes = cameras_in_lidar.iter().map(|c| c.1).collect();
         // A new key per upload: the GPU keeps buffers by key.

@@ -69,7 +69,7 @@ impl Default for OverlaySettings {
             opacity: 1.0,
             min_range_m: 0.0,
             max_range_m: 80.0,
-            height_range_m: [-1.0, 4.0],
+            height_range_m: [-2.5, 3.5],
             stride: 1,
             accumulate: 0,
             occlusion: true,
@@ -404,6 +404,12 @@ impl Studio {
             occlusion: o.occlusion,
             point_size: o.point_size,
             max_range_m: o.max_range_m,
+            tab: match self.tab {
+                Tab::Optimise => "optimise",
+                Tab::Checks => "checks",
+                Tab::Export => "export",
+            }
+            .into(),
         });
         s
     }
@@ -485,6 +491,11 @@ impl Studio {
             self.overlay.occlusion = v.occlusion;
             self.overlay.point_size = v.point_size.clamp(0.5, 6.0);
             self.overlay.max_range_m = v.max_range_m.clamp(1.0, 300.0);
+            self.tab = match v.tab.as_str() {
+                "checks" => Tab::Checks,
+                "export" => Tab::Export,
+                _ => Tab::Optimise,
+            };
         }
         self.overlays.clear();
         self.status

@@ -48,9 +48,7 @@ impl eframe::App for Studio {
             if let Some(report) = p.on_frame(pictures, points, pictures) {
                 println!("{report}");
                 let (inside, visible) = super::overlay::points_in_images(self);
-                println!(
-                    "LiDAR points inside the shown images: {inside} ({visible} not occluded)"
-                );
+                println!("LiDAR points inside the shown images: {inside} ({visible} not occluded)");
                 ui.ctx().send_viewport_cmd(egui::ViewportCommand::Close);
                 self.profile = None;
             } else {
