@@ -12,6 +12,7 @@ use egui_plot::{Bar, BarChart, Legend, Plot};
 
 use super::Studio;
 use crate::calib::Rig;
+use crate::eval::checkerboard::{BoardSpec, CornerError, pair_corner_error};
 use crate::log::Drive;
 use crate::optim::edge_align::EdgeAlignment;
 
@@ -33,9 +34,23 @@ enum Msg {
     Done,
 }
 
+/// Checkerboard corner error of one camera–LiDAR pair with two rigs.
+#[derive(Clone, Debug)]
+pub struct CornerRow {
+    pub camera: String,
+    pub lidar: String,
+    pub initial: Option<CornerError>,
+    pub current: Option<CornerError>,
+}
+
 #[derive(Default)]
 pub struct ChecksPanel {
     pub results: Vec<PairScore>,
+    pub spec: Option<BoardSpec>,
+    pub corners: Vec<CornerRow>,
+    pub corners_progress: (usize, usize),
+    pub corners_running: bool,
+    corner_job: Option<Receiver<Option<CornerRow>>>,
     pub selected: Option<(String, String)>,
     pub progress: (usize, usize),
     pub running: bool,
@@ -107,8 +122,63 @@ pub fn start(studio: &mut Studio) {
     c.cancel = Some(cancel);
 }
 
+/// Measure the checkerboard corner error of every camera–LiDAR pair (initial and current).
+pub fn start_corners(studio: &mut Studio) {
+    let Some(drive) = studio.drive.clone() else {
+        return;
+    };
+    let spec = studio.checks.spec.unwrap_or_default();
+    let (initial, current) = (studio.initial.clone(), studio.current.clone());
+    let pairs: Vec<(String, String)> = current
+        .cameras()
+        .filter(|c| c.camera.is_some())
+        .flat_map(|c| {
+            current
+                .lidars()
+                .map(move |l| (c.name.clone(), l.name.clone()))
+        })
+        .collect();
+    let (tx, rx) = channel();
+    studio.checks.corners_progress = (0, pairs.len());
+    std::thread::spawn(move || {
+        for (camera, lidar) in pairs {
+            let a = pair_corner_error(&drive, &initial, &camera, &lidar, 2, &spec);
+            let b = pair_corner_error(&drive, &current, &camera, &lidar, 2, &spec);
+            let row = CornerRow {
+                camera,
+                lidar,
+                initial: a.ok().flatten(),
+                current: b.ok().flatten(),
+            };
+            if tx.send(Some(row)).is_err() {
+                return;
+            }
+        }
+        let _ = tx.send(None);
+    });
+    studio.checks.corners.clear();
+    studio.checks.corners_running = true;
+    studio.checks.corner_job = Some(rx);
+}
+
 pub fn poll(studio: &mut Studio, ctx: &egui::Context) {
     let c = &mut studio.checks;
+    if let Some(rx) = &c.corner_job {
+        for msg in rx.try_iter() {
+            match msg {
+                Some(row) => {
+                    c.corners_progress.0 += 1;
+                    c.corners.push(row);
+                }
+                None => c.corners_running = false,
+            }
+        }
+        if c.corners_running {
+            ctx.request_repaint_after(std::time::Duration::from_millis(150));
+        } else {
+            c.corner_job = None;
+        }
+    }
     let Some(rx) = &c.job else {
         return;
     };
@@ -204,11 +274,7 @@ pub(crate) fn checks_ui(studio: &mut Studio, ui: &mut egui::Ui) {
         ui.weak(format!("skipped: {s}"));
     }
     ui.separator();
-    ui.strong("Checkerboard corner error");
-    ui.weak(
-        "Needs the target detector of the checkerboard calibrator (not in this build); \
-         the edge score above needs no target.",
-    );
+    corners_ui(studio, ui);
     if let Some(gt) = &studio.ground_truth {
         ui.separator();
         let root = studio
@@ -219,6 +285,103 @@ pub(crate) fn checks_ui(studio: &mut Studio, ui: &mut egui::Ui) {
             .unwrap_or_default();
         super::optimiser::pose_errors_ui(&studio.current, gt, &root, ui);
     }
+}
+
+/// The checkerboard corner error (paper's re-projection metric) per camera–LiDAR pair.
+fn corners_ui(studio: &mut Studio, ui: &mut egui::Ui) {
+    ui.strong("Checkerboard corner error (target scenes)");
+    ui.label(
+        "Board corners derived from LiDAR points, projected into the image, against the \
+         corners detected there (px, mean). Boards stand upright; the pattern is centred.",
+    );
+    let mut spec = studio.checks.spec.unwrap_or_default();
+    ui.horizontal(|ui| {
+        ui.add(
+            egui::DragValue::new(&mut spec.squares_u)
+                .range(2..=30)
+                .suffix(" ×"),
+        );
+        ui.add(
+            egui::DragValue::new(&mut spec.squares_v)
+                .range(2..=30)
+                .suffix(" squares"),
+        );
+        let mut sq_cm = spec.square_m * 100.0;
+        let mut margin_cm = spec.margin_m * 100.0;
+        ui.add(
+            egui::DragValue::new(&mut sq_cm)
+                .range(1.0..=50.0)
+                .speed(0.1)
+                .suffix(" cm"),
+        );
+        ui.add(
+            egui::DragValue::new(&mut margin_cm)
+                .range(0.0..=50.0)
+                .speed(0.1)
+                .prefix("margin ")
+                .suffix(" cm"),
+        );
+        spec.square_m = sq_cm / 100.0;
+        spec.margin_m = margin_cm / 100.0;
+    });
+    studio.checks.spec = Some(spec);
+    if studio.checks.corners_running {
+        let (k, n) = studio.checks.corners_progress;
+        ui.add(
+            egui::ProgressBar::new(k as f32 / n.max(1) as f32)
+                .text(format!("pair {k}/{n}"))
+                .desired_width(200.0),
+        );
+    } else if ui
+        .add_enabled(
+            studio.drive.is_some(),
+            egui::Button::new("Measure corner error"),
+        )
+        .clicked()
+    {
+        start_corners(studio);
+    }
+    let rows: Vec<&CornerRow> = studio
+        .checks
+        .corners
+        .iter()
+        .filter(|r| r.initial.is_some() || r.current.is_some())
+        .collect();
+    if rows.is_empty() {
+        if !studio.checks.corners.is_empty() && !studio.checks.corners_running {
+            ui.weak("no checkerboard found in any camera–LiDAR pair");
+        }
+        return;
+    }
+    let px = |e: &Option<CornerError>| {
+        e.as_ref()
+            .map_or("–".into(), |e| format!("{:.2}", e.mean_px))
+    };
+    egui::Grid::new("corner_errors")
+        .striped(true)
+        .show(ui, |ui| {
+            for h in [
+                "camera",
+                "LiDAR",
+                "boards",
+                "corners",
+                "initial px",
+                "current px",
+            ] {
+                ui.strong(h);
+            }
+            ui.end_row();
+            for r in rows {
+                let shown = r.current.as_ref().or(r.initial.as_ref());
+                ui.label(&r.camera);
+                ui.label(&r.lidar);
+                ui.label(shown.map_or(0, |e| e.boards).to_string());
+                ui.label(shown.map_or(0, |e| e.corners).to_string());
+                ui.label(px(&r.initial));
+                ui.label(px(&r.current));
+                ui.end_row();
+            }
+        });
 }
 
 /// Histogram of per-point edge distances (1 px bins), initial against current.

@@ -1,4 +1,5 @@
 //! Evaluation: metrics that tell how well a calibration aligns the sensors.
 
+pub mod checkerboard;
 pub mod edges;
 pub mod fast;
