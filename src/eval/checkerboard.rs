@@ -7,9 +7,10 @@
 //!   ground are clustered on a 15 cm voxel grid; each cluster gets a RANSAC plane (3 cm); a
 //!   near-vertical plane whose inliers span the board's known width (and at most its height)
 //!   is a board. Its horizontal axis is `up × normal` (boards stand upright, as in the
-//!   simulator's checkerboard scene); its centre is the middle of the inliers' extent along
-//!   both axes (rings sample the left and right edges densely; top and bottom are bounded by
-//!   the ring spacing). The whole cluster must be no wider than the board, the plane needs 40
+//!   simulator's checkerboard scene); its centre is the middle of the inliers' extent: vertically
+//!   from the rows (1 cm bins of at least 8 points: rings crossing the board, not the stand or
+//!   stray noisy returns), horizontally within those rows (rings sample the left and right
+//!   edges densely; top and bottom are bounded by the ring spacing). The whole cluster must be no wider than the board, the plane needs 40
 //!   points and must hang clear of the ground (boards are on stands). The inner corners follow from the known pattern, centred on the board.
 //! - **Corners in the image** ([`saddle_points`]): X-junctions are maxima of the saddle response
 //!   `Ixy² − Ixx·Iyy` of the Gaussian-blurred grey image (σ = 1.5 px), refined to sub-pixel by a
@@ -17,7 +18,8 @@
 //! - **Matching** ([`corner_error`]): the projected LiDAR corners are shifted over ±100 px to
 //!   the translation that lands most of them within 2.5 px of a detected corner (a one-square
 //!   shift matches fewer); each corner's error is then its distance to that detected corner,
-//!   *without* the shift. A board counts when at least half its corners are found.
+//!   *without* the shift. A board counts when all its corners project inside the image and at
+//!   least half of them are found there.
 
 use std::collections::HashMap;
 
@@ -98,6 +100,7 @@ const VOXEL_M: f64 = 0.15;
 const PLANE_M: f64 = 0.03;
 const GROUND_CLEARANCE_M: f64 = 0.3;
 const MIN_INLIERS: usize = 40;
+const ROW_POINTS: usize = 8;
 
 /// Boards among `points` (a frame whose +z is up, e.g. the vehicle or world frame).
 pub fn boards_in_points(points: &[DVec3], spec: &BoardSpec) -> Vec<BoardPose> {
@@ -133,14 +136,34 @@ pub fn boards_in_points(points: &[DVec3], spec: &BoardSpec) -> Vec<BoardPose> {
             v = -v;
         }
         let mean = inliers.iter().map(|&i| pts[i]).sum::<DVec3>() / inliers.len() as f64;
-        let (mut a0, mut a1, mut b0, mut b1) = (f64::MAX, f64::MIN, f64::MAX, f64::MIN);
-        for &i in &inliers {
-            let d = pts[i] - mean;
-            let (a, b) = (d.dot(u), d.dot(v));
-            a0 = a0.min(a);
-            a1 = a1.max(a);
-            b0 = b0.min(b);
-            b1 = b1.max(b);
+        let coords: Vec<(f64, f64)> = inliers
+            .iter()
+            .map(|&i| {
+                let d = pts[i] - mean;
+                (d.dot(u), d.dot(v))
+            })
+            .collect();
+        // Vertical extent from rows: 1 cm bins of v holding at least ROW_POINTS points (a ring
+        // across the board has dozens; a stand or a noisy stray return has a few).
+        let mut rows: HashMap<i64, usize> = HashMap::new();
+        for (_, b) in &coords {
+            *rows.entry((b / 0.01).floor() as i64).or_default() += 1;
+        }
+        let full: Vec<i64> = rows
+            .iter()
+            .filter(|(_, n)| **n >= ROW_POINTS)
+            .map(|(k, _)| *k)
+            .collect();
+        let (Some(&r0), Some(&r1)) = (full.iter().min(), full.iter().max()) else {
+            continue;
+        };
+        let (b0, b1) = (r0 as f64 * 0.01, (r1 + 1) as f64 * 0.01);
+        let (mut a0, mut a1) = (f64::MAX, f64::MIN);
+        for (a, b) in &coords {
+            if *b >= b0 - 0.01 && *b <= b1 + 0.01 {
+                a0 = a0.min(*a);
+                a1 = a1.max(*a);
+            }
         }
         let (ext_u, ext_v) = (a1 - a0, b1 - b0);
         // The whole cluster (stand included) must be no wider than the board: a board-sized
@@ -158,7 +181,7 @@ pub fn boards_in_points(points: &[DVec3], spec: &BoardSpec) -> Vec<BoardPose> {
         if lowest < ground + GROUND_CLEARANCE_M + 0.05 {
             continue;
         }
-        if !(0.75 * w..=1.1 * w).contains(&ext_u) || !(0.25 * h..=1.1 * h).contains(&ext_v) {
+        if !(0.9 * w..=1.1 * w).contains(&ext_u) || !(0.6 * h..=1.1 * h).contains(&ext_v) {
             continue;
         }
         boards.push(BoardPose {
@@ -458,7 +481,13 @@ pub fn corner_error(
                 (q.z > 0.3).then(|| intrinsics.project(q)).flatten()
             })
             .collect();
-        if predicted.len() < spec.inner_corners().len() / 2 {
+        // Only boards wholly inside the image: a partial grid can match one square off.
+        let margin = 8.0;
+        if predicted.len() < spec.inner_corners().len()
+            || predicted.iter().any(|p| {
+                p.x < margin || p.y < margin || p.x > w as f64 - margin || p.y > h as f64 - margin
+            })
+        {
             continue;
         }
         let (mut lo, mut hi) = (DVec2::splat(f64::MAX), DVec2::splat(f64::MIN));
