@@ -333,3 +333,69 @@ fn a_session_restores_edits_segments_and_locks_and_export_round_trips() {
     }
     let _ = std::fs::remove_dir_all(dir);
 }
+
+/// Mean rotation error (deg) of the cameras against the ground truth, root = first LiDAR.
+fn camera_rotation_error_deg(s: &Studio) -> f64 {
+    let gt = s.ground_truth.as_ref().unwrap();
+    let root = gt.lidars().next().unwrap().name.clone();
+    let errors =
+        rigcal::geometry::rig_errors(&gt.extrinsics(), &s.current.extrinsics(), &root).unwrap();
+    let cams: Vec<f64> = errors
+        .iter()
+        .filter(|e| gt.sensor(&e.sensor).is_some_and(|x| x.camera.is_some()))
+        .map(|e| e.rotation_deg)
+        .collect();
+    cams.iter().sum::<f64>() / cams.len() as f64
+}
+
+#[test]
+fn the_demo_is_generated_with_progress_opens_off_and_the_optimiser_brings_it_closer() {
+    use rigcal::sim::demo::demo_config;
+    // The demo's recipe with two of its cameras.
+    let mut cfg = demo_config();
+    cfg.rig
+        .cameras
+        .retain(|c| c.name == "front_camera" || c.name == "left_camera");
+    cfg.duration_secs = 4.0;
+    let dir = std::env::temp_dir().join(format!("rigcal-demo-test-{}", std::process::id()));
+    let job_dir = dir.clone();
+    let mut h = Harness::builder()
+        .with_size([1600.0, 1000.0])
+        .wgpu()
+        .build_eframe(move |cc| {
+            let mut s = rigcal::app::bare_studio(cc);
+            rigcal::app::demo::start_in(&mut s, job_dir, cfg);
+            s
+        });
+    // Progress is shown while the simulator writes the drive; then it opens with its truth.
+    let mut saw_progress = false;
+    let t0 = std::time::Instant::now();
+    while t0.elapsed().as_secs() < 600 && h.state().drive.is_none() {
+        h.step();
+        if h.state().demo.as_ref().is_some_and(|j| j.progress.1 > 0) {
+            saw_progress = true;
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    assert!(h.state().drive.is_some(), "{:?}", h.state().status);
+    assert!(saw_progress, "no progress was shown");
+    assert!(h.state().ground_truth.is_some());
+    h.run_steps(4);
+    // The initial guess is visibly off: the ground-truth overlay differs.
+    use rigcal::app::state::ExtrinsicsView;
+    let initial = h.render().unwrap();
+    h.state_mut().view = ExtrinsicsView::GroundTruth;
+    h.run_steps(3);
+    let truth = h.render().unwrap();
+    assert!(changed_pixels(&initial, &truth) > 5_000);
+    h.state_mut().view = ExtrinsicsView::Current;
+    // The optimiser brings the cameras closer to the truth.
+    let before = camera_rotation_error_deg(h.state());
+    h.get_by_label("Start").click();
+    assert!(run_until(&mut h, 300.0, |s| s.optimiser.run.is_none()
+        && !s.optimiser.history.is_empty()));
+    let after = camera_rotation_error_deg(h.state());
+    eprintln!("demo cameras: {before:.2}° -> {after:.2}°");
+    assert!(after < before, "{before:.2}° -> {after:.2}°");
+    let _ = std::fs::remove_dir_all(dir);
+}

@@ -21,11 +21,15 @@ pub struct DemoJob {
 }
 
 pub fn start(studio: &mut Studio) {
+    start_in(studio, demo::demo_dir(), demo::demo_config());
+}
+
+/// Generate (or reuse) a drive made by `config` in `dir` and open it as the demo.
+pub fn start_in(studio: &mut Studio, dir: PathBuf, config: crate::sim::synth::SynthConfig) {
     let (tx, rx) = channel();
-    let dir = demo::demo_dir();
     std::thread::spawn(move || {
         let ptx = tx.clone();
-        let result = demo::ensure_demo(&dir, &mut |d, n| {
+        let result = demo::ensure_drive(&dir, &config, &mut |d, n| {
             let _ = ptx.send(DemoMessage::Progress(d, n));
         });
         let _ = tx.send(match result {

@@ -63,10 +63,7 @@ pub fn new_studio(
     log: Option<PathBuf>,
     calibration: Option<PathBuf>,
 ) -> Studio {
-    let mut studio = Studio {
-        gpu: gpu_overlay::install(cc.wgpu_render_state.as_ref()),
-        ..Studio::default()
-    };
+    let mut studio = bare_studio(cc);
     match log {
         Some(path) => studio.open_log(&path),
         None => demo::start(&mut studio),
@@ -75,4 +72,12 @@ pub fn new_studio(
         studio.load_calibration(&path);
     }
     studio
+}
+
+/// The studio with its GPU overlay installed and nothing open (tests open what they need).
+pub fn bare_studio(cc: &eframe::CreationContext<'_>) -> Studio {
+    Studio {
+        gpu: gpu_overlay::install(cc.wgpu_render_state.as_ref()),
+        ..Studio::default()
+    }
 }

@@ -52,6 +52,15 @@ pub fn ensure_demo(
     dir: &Path,
     progress: &mut dyn FnMut(usize, usize),
 ) -> Result<(PathBuf, PathBuf), SimError> {
+    ensure_drive(dir, &demo_config(), progress)
+}
+
+/// [`ensure_demo`] with another recipe (tests use a smaller drive).
+pub fn ensure_drive(
+    dir: &Path,
+    config: &SynthConfig,
+    progress: &mut dyn FnMut(usize, usize),
+) -> Result<(PathBuf, PathBuf), SimError> {
     let (mcap, gt) = demo_paths(dir);
     if mcap.is_file() && gt.is_file() {
         return Ok((mcap, gt));
@@ -62,6 +71,6 @@ pub fn ensure_demo(
             dir.display()
         ))
     })?;
-    synthesize(&demo_config(), &mcap, &gt, progress)?;
+    synthesize(config, &mcap, &gt, progress)?;
     Ok((mcap, gt))
 }
