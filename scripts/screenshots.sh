@@ -4,7 +4,7 @@
 # demo drive before and after a run of the optimiser. Views are set with session files
 # (`rigcal studio --session`), buttons are clicked with xdotool.
 # Usage: scripts/screenshots.sh [SHOT…]  (default: all of pandaset pandaset-grid pandaset-checks
-# pandaset-export demo)      Needs: xvfb mesa-vulkan-drivers libvulkan1 imagemagick xdotool
+# pandaset-export checkerboard-checks demo)      Needs: xvfb mesa-vulkan-drivers libvulkan1 imagemagick xdotool
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bin="${RIGCAL_BIN:-target/release/rigcal}"
@@ -52,6 +52,19 @@ fi
 if want pandaset-export; then
   session export 3 false 0 intensity export
   start --session "$tmp/export.json"; shot pandaset-export 6; stop
+fi
+if want checkerboard-checks; then
+  # The stationary checkerboard scene with a 1° / 5 cm initial guess; the ground truth loaded as
+  # the current extrinsics, so the corner error shows before (initial) and after (current).
+  "$bin" synth --scene checkerboard --rig pandaset --trajectory stationary --seconds 1 \
+    --perturb-deg 1 --perturb-cm 5 --seed 3 --out "$tmp/cb.mcap" --ground-truth "$tmp/cb-gt.yaml" >/dev/null
+  cat > "$tmp/cb.json" <<JSON
+{"rigcal_session": 1, "log": "$tmp/cb.mcap", "initial": null, "current": null, "camera": 0,
+ "view": {"tab": "checks", "color_by": "intensity"}}
+JSON
+  start --session "$tmp/cb.json" --calibration "$tmp/cb-gt.yaml"; sleep 6
+  click 1277 276   # Checks: "Measure corner error"
+  shot checkerboard-checks 45; stop
 fi
 [ -n "$SHOTS" ] && ! want demo && exit 0
 
