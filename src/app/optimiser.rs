@@ -303,7 +303,7 @@ fn losses_ui(studio: &Studio, ui: &mut egui::Ui) {
                 plot.line(Line::new(n.clone(), PlotPoints::from(pts)));
             }
         });
-    ui.label("Rotation change from the start (deg)");
+    ui.label("Rotation change from the start (log₁₀ deg; 10⁻³° floor)");
     let mut sensors: Vec<String> = Vec::new();
     for (_, s, _) in &studio.optimiser.pose_change {
         if !sensors.contains(s) {
@@ -314,6 +314,7 @@ fn losses_ui(studio: &Studio, ui: &mut egui::Ui) {
         .height(140.0)
         .legend(Legend::default())
         .x_axis_label("step")
+        .y_axis_label("log₁₀ deg")
         .show(ui, |plot| {
             for s in &sensors {
                 let pts: Vec<[f64; 2]> = studio
@@ -321,7 +322,7 @@ fn losses_ui(studio: &Studio, ui: &mut egui::Ui) {
                     .pose_change
                     .iter()
                     .filter(|(_, n, _)| n == s)
-                    .map(|(k, _, v)| [*k as f64, *v])
+                    .map(|(k, _, v)| [*k as f64, v.max(1e-3).log10()])
                     .collect();
                 plot.line(Line::new(s.clone(), PlotPoints::from(pts)));
             }
