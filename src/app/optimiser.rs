@@ -19,12 +19,14 @@ use super::Studio;
 pub enum Method {
     #[default]
     EdgeAlign,
+    UnicalLidar,
 }
 
 impl Method {
     fn label(self) -> &'static str {
         match self {
             Method::EdgeAlign => "Edge alignment (cameras vs LiDAR, rotation)",
+            Method::UnicalLidar => "UniCal, LiDAR depth stage (scene + LiDARs; slow on CPU)",
         }
     }
 }
@@ -152,6 +154,22 @@ pub fn start(studio: &mut Studio) {
         }
     ));
     studio.optimiser.started_from = Some(rig);
+    if studio.optimiser.method == Method::UnicalLidar {
+        studio.optimiser.message = Some(format!(
+            "preparing the neural scene from {frames} sweep(s) per LiDAR…"
+        ));
+        studio.optimiser.run = Some(Run::spawn_with(move || {
+            crate::unical::calibrator::UnicalLidarStage::from_drive(
+                &drive,
+                &prepare_rig,
+                frames,
+                &segments,
+                Default::default(),
+            )
+            .map(|r| Box::new(r) as Box<dyn Calibrator>)
+        }));
+        return;
+    }
     studio.optimiser.run = Some(Run::spawn_with(move || {
         EdgeRefiner::new(&drive, &prepare_rig, &lidar, &cameras, frames, &segments)
             .map(|r| Box::new(r) as Box<dyn Calibrator>)
@@ -169,11 +187,9 @@ pub fn optimiser_ui(studio: &mut Studio, ui: &mut egui::Ui) {
         egui::ComboBox::from_label("method")
             .selected_text(studio.optimiser.method.label())
             .show_ui(ui, |ui| {
-                ui.selectable_value(
-                    &mut studio.optimiser.method,
-                    Method::EdgeAlign,
-                    Method::EdgeAlign.label(),
-                );
+                for m in [Method::EdgeAlign, Method::UnicalLidar] {
+                    ui.selectable_value(&mut studio.optimiser.method, m, m.label());
+                }
             });
         let lidars: Vec<String> = studio
             .current

@@ -11,10 +11,12 @@
 //! - [`occupancy`]: the 0.5 m occupancy grid from aggregated LiDAR and 10 cm ray sampling (§7).
 //! - [`lidar_depth`]: the LiDAR depth loss for a batch of rays with scene, β and pose gradients.
 //! - [`depth_calib`]: the LiDAR stage: scene + every LiDAR extrinsic from depth (a full step).
+//! - [`calibrator`]: that stage prepared from a drive as an `optim::runner::Calibrator`.
 //! - [`composite`]: SDF → opacity and front-to-back compositing of depth, opacity and features
 //!   (Eq. 2), with a division-free backward pass.
 
 pub mod adam;
+pub mod calibrator;
 pub mod composite;
 pub mod depth_calib;
 pub mod field;

@@ -1,0 +1,58 @@
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+//! UniCal's LiDAR stage as a runner `Calibrator` on the real PandaSet drive: it prepares from
+//! the drive, steps with finite losses, moves only LiDAR extrinsics, ends at its step budget,
+//! and a segment without sweeps is a clear error.
+
+use std::path::PathBuf;
+
+use rigcal::log::Drive;
+use rigcal::optim::runner::Calibrator;
+use rigcal::unical::calibrator::UnicalLidarStage;
+use rigcal::unical::depth_calib::DepthCalibConfig;
+
+fn pandaset() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/data/pandaset-002/pandaset-002.mcap")
+}
+
+#[test]
+fn the_lidar_stage_runs_as_a_calibrator_on_the_real_drive() {
+    let drive = Drive::open(&pandaset()).unwrap();
+    let config = DepthCalibConfig {
+        rays_per_sensor: 256,
+        iterations: 3,
+        ..DepthCalibConfig::default()
+    };
+    let mut stage = UnicalLidarStage::from_drive(&drive, &drive.rig, 2, &[], config).unwrap();
+    assert_eq!(stage.max_steps(), 3);
+    let mut last = None;
+    for k in 0..3 {
+        let r = stage.step();
+        assert!(r.losses.iter().all(|(_, v)| v.is_finite()), "{r:?}");
+        assert_eq!(r.done, k == 2);
+        last = Some(r);
+    }
+    assert!(last.unwrap().losses.iter().any(|(n, _)| n == "depth loss"));
+    let now = stage.current();
+    let mut lidar_moved = false;
+    for s in &drive.rig.sensors {
+        let t = now.sensor(&s.name).unwrap().vehicle_from_sensor;
+        let (rot, trans) = s.vehicle_from_sensor.difference(t);
+        if s.camera.is_some() {
+            assert!(rot + trans < 1e-12, "{} moved", s.name);
+        } else {
+            lidar_moved |= rot + trans > 1e-9;
+        }
+    }
+    assert!(lidar_moved, "no LiDAR extrinsic changed");
+    let (_, t1) = drive.trajectory.time_range_nanos().unwrap();
+    let e = UnicalLidarStage::from_drive(
+        &drive,
+        &drive.rig,
+        2,
+        &[(t1 + 1_000_000_000, t1 + 2_000_000_000)],
+        DepthCalibConfig::default(),
+    )
+    .err()
+    .unwrap();
+    assert!(e.contains("segments"), "{e}");
+}
