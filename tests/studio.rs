@@ -399,3 +399,37 @@ fn the_demo_is_generated_with_progress_opens_off_and_the_optimiser_brings_it_clo
     assert!(after < before, "{before:.2}° -> {after:.2}°");
     let _ = std::fs::remove_dir_all(dir);
 }
+
+#[test]
+fn the_unical_lidar_stage_runs_from_the_optimiser_panel() {
+    use rigcal::app::optimiser::Method;
+    let mut h = harness(pandaset());
+    h.run_steps(2);
+    h.state_mut().optimiser.method = Method::UnicalLidar;
+    h.state_mut().optimiser.frames = 2;
+    // Let the panel lay out with the new method before clicking.
+    h.run_steps(2);
+    h.get_by_label("Start").click();
+    h.run_steps(1);
+    assert!(
+        h.state().optimiser.run.is_some(),
+        "{:?} {:?}",
+        s_status(&h),
+        h.state().optimiser.message
+    );
+    assert!(
+        run_until(&mut h, 300.0, |s| s.optimiser.progress.0 > 0),
+        "no packet from UniCal: {:?}",
+        s_status(&h)
+    );
+    let losses = h.state().optimiser.history.last().unwrap().1.clone();
+    assert!(
+        losses
+            .iter()
+            .any(|(n, v)| n == "depth loss" && v.is_finite()),
+        "{losses:?}"
+    );
+    h.get_by_label("Stop").click();
+    assert!(run_until(&mut h, 120.0, |s| s.optimiser.run.is_none()));
+    assert!(h.state().status.iter().all(|s| !s.starts_with("error")));
+}

@@ -319,7 +319,7 @@ fn losses_ui(studio: &Studio, ui: &mut egui::Ui) {
                 plot.line(Line::new(n.clone(), PlotPoints::from(pts)));
             }
         });
-    ui.label("Rotation change from the start (log₁₀ deg; 10⁻³° floor)");
+    ui.label("Rotation change from the start (log₁₀ deg, floor 0.001°)");
     let mut sensors: Vec<String> = Vec::new();
     for (_, s, _) in &studio.optimiser.pose_change {
         if !sensors.contains(s) {
