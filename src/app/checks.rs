@@ -59,6 +59,14 @@ pub struct ChecksPanel {
     cancel: Option<Arc<AtomicBool>>,
 }
 
+/// Every (camera with intrinsics, LiDAR) pair of a rig.
+fn camera_lidar_pairs(rig: &Rig) -> Vec<(String, String)> {
+    rig.cameras()
+        .filter(|c| c.camera.is_some())
+        .flat_map(|c| rig.lidars().map(move |l| (c.name.clone(), l.name.clone())))
+        .collect()
+}
+
 /// Score one pair under one rig (see [`EdgeAlignment::score_rig`]).
 pub fn score_pair(
     drive: &Drive,
@@ -77,15 +85,7 @@ pub fn start(studio: &mut Studio) {
     };
     let (initial, current) = (studio.initial.clone(), studio.current.clone());
     let segments = studio.segments.clone();
-    let pairs: Vec<(String, String)> = current
-        .cameras()
-        .filter(|c| c.camera.is_some())
-        .flat_map(|c| {
-            current
-                .lidars()
-                .map(move |l| (c.name.clone(), l.name.clone()))
-        })
-        .collect();
+    let pairs = camera_lidar_pairs(&current);
     let (tx, rx) = channel();
     let cancel = Arc::new(AtomicBool::new(false));
     let stop = cancel.clone();
@@ -129,15 +129,7 @@ pub fn start_corners(studio: &mut Studio) {
     };
     let spec = studio.checks.spec.unwrap_or_default();
     let (initial, current) = (studio.initial.clone(), studio.current.clone());
-    let pairs: Vec<(String, String)> = current
-        .cameras()
-        .filter(|c| c.camera.is_some())
-        .flat_map(|c| {
-            current
-                .lidars()
-                .map(move |l| (c.name.clone(), l.name.clone()))
-        })
-        .collect();
+    let pairs = camera_lidar_pairs(&current);
     let (tx, rx) = channel();
     studio.checks.corners_progress = (0, pairs.len());
     std::thread::spawn(move || {
@@ -275,16 +267,7 @@ pub(crate) fn checks_ui(studio: &mut Studio, ui: &mut egui::Ui) {
     }
     ui.separator();
     corners_ui(studio, ui);
-    if let Some(gt) = &studio.ground_truth {
-        ui.separator();
-        let root = studio
-            .optimiser
-            .reference_lidar
-            .clone()
-            .or_else(|| studio.current.lidars().next().map(|l| l.name.clone()))
-            .unwrap_or_default();
-        super::optimiser::pose_errors_ui(&studio.current, gt, &root, ui);
-    }
+    super::optimiser::ground_truth_errors_ui(studio, ui);
 }
 
 /// The checkerboard corner error (paper's re-projection metric) per camera–LiDAR pair.

@@ -275,16 +275,7 @@ pub fn optimiser_ui(studio: &mut Studio, ui: &mut egui::Ui) {
     losses_ui(studio, ui);
     ui.separator();
     alignment_table_ui(studio, ui);
-    if let Some(gt) = &studio.ground_truth {
-        ui.separator();
-        let root = studio
-            .optimiser
-            .reference_lidar
-            .clone()
-            .or_else(|| studio.current.lidars().next().map(|l| l.name.clone()))
-            .unwrap_or_default();
-        pose_errors_ui(&studio.current, gt, &root, ui);
-    }
+    ground_truth_errors_ui(studio, ui);
 }
 
 /// Loss curves (log10 scale) and per-sensor rotation change against the step.
@@ -378,9 +369,23 @@ fn alignment_table_ui(studio: &Studio, ui: &mut egui::Ui) {
     });
 }
 
+/// Pose errors against the ground truth when it is known, root = the reference LiDAR.
+pub(crate) fn ground_truth_errors_ui(studio: &Studio, ui: &mut egui::Ui) {
+    if let Some(gt) = &studio.ground_truth {
+        ui.separator();
+        let root = studio
+            .optimiser
+            .reference_lidar
+            .clone()
+            .or_else(|| studio.current.lidars().next().map(|l| l.name.clone()))
+            .unwrap_or_default();
+        pose_errors_ui(&studio.current, gt, &root, ui);
+    }
+}
+
 /// Per sensor: rotation (deg) and translation (cm) error of the current rig against the known
 /// ground truth after aligning the root sensor (method.md §13), the reference LiDAR here.
-pub(crate) fn pose_errors_ui(current: &Rig, gt: &Rig, root: &str, ui: &mut egui::Ui) {
+fn pose_errors_ui(current: &Rig, gt: &Rig, root: &str, ui: &mut egui::Ui) {
     ui.label(format!(
         "Error against the ground truth (current rig, root {root} aligned)"
     ));
