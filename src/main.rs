@@ -38,6 +38,28 @@ enum Command {
         #[arg(long)]
         vehicle_frame: Option<String>,
     },
+    /// Calibrate a drive and write the native calibration file.
+    Calibrate {
+        log: PathBuf,
+        /// unical | edge (icp, mi, target, pose-graph: not in this build yet)
+        #[arg(long)]
+        method: String,
+        /// Initial extrinsics (native calibration file); default: the log's /tf_static.
+        #[arg(long)]
+        init: Option<PathBuf>,
+        /// Time range in seconds from the start of the log, START..END.
+        #[arg(long)]
+        segment: Option<String>,
+        /// Sensors to optimise, comma-separated (default: all the method handles).
+        #[arg(long, value_delimiter = ',')]
+        sensors: Vec<String>,
+        #[arg(long)]
+        iterations: Option<usize>,
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        #[arg(long)]
+        out: PathBuf,
+    },
     /// Simulate a drive with known ground truth and write it as a ROS 2 MCAP.
     Synth {
         /// urban | parking-lot | featureless | checkerboard
@@ -104,6 +126,42 @@ fn run() -> Result<()> {
             let drive = rigcal::log::Drive::open_with(&log, &options)
                 .with_context(|| format!("cannot inspect {}", log.display()))?;
             print!("{}", rigcal::cli::inspect::report(&drive));
+            Ok(())
+        }
+        Some(Command::Calibrate {
+            log,
+            method,
+            init,
+            segment,
+            sensors,
+            iterations,
+            seed,
+            out,
+        }) => {
+            let args = rigcal::cli::calibrate::CalibrateArgs {
+                log: log.clone(),
+                method,
+                init,
+                segment,
+                sensors,
+                iterations,
+                seed,
+                out: out.clone(),
+            };
+            let started = std::time::Instant::now();
+            let mut bar = rigcal::cli::progress::Progress::new("calibrate", 1);
+            rigcal::cli::calibrate::calibrate(&args, &mut |done, total| {
+                bar.set_total(total as u64);
+                bar.set(done as u64);
+            })
+            .map_err(anyhow::Error::msg)
+            .with_context(|| format!("cannot calibrate {}", log.display()))?;
+            bar.finish();
+            println!(
+                "wrote {} in {:.1} s",
+                out.display(),
+                started.elapsed().as_secs_f64()
+            );
             Ok(())
         }
         Some(Command::Synth {

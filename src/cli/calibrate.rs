@@ -1,0 +1,189 @@
+//! `rigcal calibrate`: run a calibrator on a drive without the studio and write the native
+//! calibration file (atomically), with provenance and the final losses as metrics.
+//!
+//! Methods available now: `edge` (cameras against a reference LiDAR by edge alignment,
+//! rotation) and `unical` (UniCal's LiDAR depth stage: the scene and every LiDAR extrinsic;
+//! the camera terms of UniCal are not in this build, so cameras keep their initial guess).
+//! `icp`, `mi`, `target` and `pose-graph` are named by the contract and refused with a clear
+//! message until they land.
+
+use std::path::{Path, PathBuf};
+
+use crate::calib::{CalibrationFile, Rig};
+use crate::log::Drive;
+use crate::optim::edge_refine::EdgeRefiner;
+use crate::optim::runner::Calibrator;
+use crate::unical::calibrator::UnicalLidarStage;
+use crate::unical::depth_calib::DepthCalibConfig;
+
+/// What `rigcal calibrate` was asked to do.
+#[derive(Clone, Debug)]
+pub struct CalibrateArgs {
+    pub log: PathBuf,
+    pub method: String,
+    pub init: Option<PathBuf>,
+    /// Seconds from the start of the log, `START..END`.
+    pub segment: Option<String>,
+    /// Sensors to optimise (edge: cameras; default all).
+    pub sensors: Vec<String>,
+    pub iterations: Option<usize>,
+    pub seed: u64,
+    pub out: PathBuf,
+}
+
+/// Parse `START..END` (seconds from `t0`) into nanoseconds.
+pub fn parse_segment(text: &str, t0_nanos: i64) -> Result<(i64, i64), String> {
+    let (a, b) = text
+        .split_once("..")
+        .ok_or_else(|| format!("--segment '{text}': expected START..END in seconds"))?;
+    let parse = |s: &str| {
+        s.trim()
+            .parse::<f64>()
+            .ok()
+            .filter(|v| v.is_finite() && *v >= 0.0)
+            .ok_or_else(|| format!("--segment '{text}': '{s}' is not a time in seconds"))
+    };
+    let (a, b) = (parse(a)?, parse(b)?);
+    if b <= a {
+        return Err(format!("--segment '{text}': END must be after START"));
+    }
+    Ok((t0_nanos + (a * 1e9) as i64, t0_nanos + (b * 1e9) as i64))
+}
+
+/// Run the calibration; `progress(step, max_steps)` is called after every step. Returns the
+/// written document.
+pub fn calibrate(
+    args: &CalibrateArgs,
+    progress: &mut dyn FnMut(usize, usize),
+) -> Result<CalibrationFile, String> {
+    let drive = Drive::open(&args.log).map_err(|e| e.to_string())?;
+    let mut rig = drive.rig.clone();
+    if let Some(init) = &args.init {
+        let other = CalibrationFile::load_rig(init).map_err(|e| e.to_string())?;
+        for s in &other.sensors {
+            if let Some(t) = rig.sensor_mut(&s.name) {
+                t.vehicle_from_sensor = s.vehicle_from_sensor;
+            }
+        }
+    }
+    for s in &args.sensors {
+        if rig.sensor(s).is_none() {
+            return Err(format!(
+                "--sensors: '{s}' is not a sensor of {}",
+                args.log.display()
+            ));
+        }
+    }
+    let t0 = drive.time_range_nanos().map_or(0, |r| r.0);
+    let segments: Vec<(i64, i64)> = match &args.segment {
+        Some(s) => vec![parse_segment(s, t0)?],
+        None => Vec::new(),
+    };
+    let mut calibrator: Box<dyn Calibrator> = match args.method.as_str() {
+        "edge" => {
+            let lidar = rig
+                .lidars()
+                .map(|l| l.name.clone())
+                .find(|l| args.sensors.is_empty() || !args.sensors.contains(l))
+                .or_else(|| rig.lidars().next().map(|l| l.name.clone()))
+                .ok_or("the log has no LiDAR")?;
+            let cameras: Vec<String> = rig
+                .cameras()
+                .filter(|c| c.camera.is_some())
+                .map(|c| c.name.clone())
+                .filter(|c| args.sensors.is_empty() || args.sensors.contains(c))
+                .collect();
+            Box::new(
+                EdgeRefiner::new(&drive, &rig, &lidar, &cameras, 4, &segments)
+                    .map_err(|e| e.to_string())?,
+            )
+        }
+        "unical" => {
+            let config = DepthCalibConfig {
+                iterations: args.iterations.unwrap_or(300),
+                seed: args.seed,
+                ..DepthCalibConfig::default()
+            };
+            Box::new(UnicalLidarStage::from_drive(
+                &drive, &rig, 4, &segments, config,
+            )?)
+        }
+        m @ ("icp" | "mi" | "target" | "pose-graph") => {
+            return Err(format!(
+                "--method {m} is not in this build yet (available: unical, edge)"
+            ));
+        }
+        m => {
+            return Err(format!(
+                "unknown --method '{m}' (expected unical, icp, mi, target, pose-graph or edge)"
+            ));
+        }
+    };
+    let max_steps = match (args.method.as_str(), args.iterations) {
+        ("edge", Some(n)) => n.min(calibrator.max_steps()),
+        _ => calibrator.max_steps(),
+    };
+    let mut last = Vec::new();
+    for step in 1..=max_steps {
+        let r = calibrator.step();
+        last = r.losses;
+        progress(step, max_steps);
+        if r.done {
+            break;
+        }
+    }
+    let mut result: Rig = calibrator.best();
+    // Sensors not asked for keep their initial extrinsics.
+    if !args.sensors.is_empty() {
+        for s in &mut result.sensors {
+            if !args.sensors.contains(&s.name)
+                && let Some(r) = rig.sensor(&s.name)
+            {
+                s.vehicle_from_sensor = r.vehicle_from_sensor;
+            }
+        }
+    }
+    let mut doc = CalibrationFile::from_rig(&result);
+    let v = |s: String| serde_yaml::Value::String(s);
+    doc.provenance
+        .insert("input".into(), v(args.log.display().to_string()));
+    doc.provenance
+        .insert("method".into(), v(calibrator.name().to_string()));
+    if let Some(s) = &args.segment {
+        doc.provenance
+            .insert("time_range".into(), v(format!("{s} s")));
+    }
+    if let Some(i) = &args.init {
+        doc.provenance
+            .insert("init".into(), v(i.display().to_string()));
+    }
+    doc.provenance.insert(
+        "version".into(),
+        v(format!("rigcal {}", env!("CARGO_PKG_VERSION"))),
+    );
+    for (name, value) in last {
+        doc.metrics.insert(name, serde_yaml::Value::from(value));
+    }
+    save(&doc, &args.out)?;
+    Ok(doc)
+}
+
+fn save(doc: &CalibrationFile, path: &Path) -> Result<(), String> {
+    doc.save(path).map_err(|e| e.to_string())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn segments_parse_in_seconds_from_the_start() {
+        assert_eq!(
+            parse_segment("1.5..4", 100),
+            Ok((1_500_000_100, 4_000_000_100))
+        );
+        assert!(parse_segment("4..1", 0).unwrap_err().contains("after"));
+        assert!(parse_segment("a..1", 0).unwrap_err().contains("'a'"));
+        assert!(parse_segment("3", 0).unwrap_err().contains("START..END"));
+    }
+}
