@@ -13,7 +13,6 @@ use egui_plot::{Bar, BarChart, Legend, Plot};
 use super::Studio;
 use crate::calib::Rig;
 use crate::eval::checkerboard::{BoardSpec, CornerError, pair_corner_error};
-use crate::log::Drive;
 use crate::optim::edge_align::EdgeAlignment;
 
 /// One camera–LiDAR pair scored with two rigs.
@@ -67,16 +66,12 @@ fn camera_lidar_pairs(rig: &Rig) -> Vec<(String, String)> {
         .collect()
 }
 
-/// Score one pair under one rig (see [`EdgeAlignment::score_rig`]).
-pub fn score_pair(
-    drive: &Drive,
-    rig: &Rig,
-    camera: &str,
-    lidar: &str,
-    frames: usize,
-    segments: &[(i64, i64)],
-) -> Result<(f64, Vec<f32>), String> {
-    EdgeAlignment::score_rig(drive, rig, camera, lidar, frames, segments).map_err(|e| e.to_string())
+fn pair_progress_ui(ui: &mut egui::Ui, (k, n): (usize, usize)) {
+    ui.add(
+        egui::ProgressBar::new(k as f32 / n.max(1) as f32)
+            .text(format!("pair {k}/{n}"))
+            .desired_width(200.0),
+    );
 }
 
 pub fn start(studio: &mut Studio) {
@@ -96,8 +91,8 @@ pub fn start(studio: &mut Studio) {
                 break;
             }
             let _ = tx.send(Msg::Progress(k, total));
-            let before = score_pair(&drive, &initial, &cam, &lidar, 3, &segments);
-            let after = score_pair(&drive, &current, &cam, &lidar, 3, &segments);
+            let score = |rig| EdgeAlignment::score_rig(&drive, rig, &cam, &lidar, 3, &segments);
+            let (before, after) = (score(&initial), score(&current));
             let msg = match (before, after) {
                 (Ok(b), Ok(a)) => Msg::Pair(PairScore {
                     camera: cam,
@@ -107,7 +102,7 @@ pub fn start(studio: &mut Studio) {
                     initial_distances: b.1,
                     current_distances: a.1,
                 }),
-                (Err(e), _) | (_, Err(e)) => Msg::Skipped(e),
+                (Err(e), _) | (_, Err(e)) => Msg::Skipped(e.to_string()),
             };
             let _ = tx.send(msg);
         }
@@ -203,12 +198,7 @@ pub(crate) fn checks_ui(studio: &mut Studio, ui: &mut egui::Ui) {
     );
     ui.horizontal(|ui| {
         if studio.checks.running {
-            let (k, n) = studio.checks.progress;
-            ui.add(
-                egui::ProgressBar::new(k as f32 / n.max(1) as f32)
-                    .text(format!("pair {k}/{n}"))
-                    .desired_width(200.0),
-            );
+            pair_progress_ui(ui, studio.checks.progress);
             if ui.button("Cancel").clicked()
                 && let Some(c) = &studio.checks.cancel
             {
@@ -309,12 +299,7 @@ fn corners_ui(studio: &mut Studio, ui: &mut egui::Ui) {
     });
     studio.checks.spec = Some(spec);
     if studio.checks.corners_running {
-        let (k, n) = studio.checks.corners_progress;
-        ui.add(
-            egui::ProgressBar::new(k as f32 / n.max(1) as f32)
-                .text(format!("pair {k}/{n}"))
-                .desired_width(200.0),
-        );
+        pair_progress_ui(ui, studio.checks.corners_progress);
     } else if ui
         .add_enabled(
             studio.drive.is_some(),

@@ -607,13 +607,18 @@ fn refresh(
     ctx: &egui::Context,
 ) -> Result<(), String> {
     let key = (frame, studio.overlay.stride, studio.overlay.accumulate);
+    // Every frame: compare without cloning the rig.
+    let unchanged = studio
+        .overlays
+        .get(index)
+        .is_some_and(|c| c.key == Some(key) && c.rig.as_ref() == Some(studio.shown_rig()));
+    if unchanged {
+        return Ok(());
+    }
     let rig = studio.shown_rig().clone();
     let Some(cache) = studio.overlays.get_mut(index) else {
         return Ok(());
     };
-    if cache.key == Some(key) && cache.rig.as_ref() == Some(&rig) {
-        return Ok(());
-    }
     let stream = drive.stream(camera).ok_or("no such camera")?;
     let image_stamp = stream
         .frames
@@ -649,7 +654,7 @@ fn refresh(
     let mut sweeps = Vec::with_capacity(wanted.len());
     for (li, name, i) in &wanted {
         // Studio-wide cache: sweeps are shared by every camera.
-        let s = studio_sweeps(&mut studio.sweep_cache, drive, name, *i)?;
+        let s = studio.sweep_cache.get(drive, name, *i)?;
         sweeps.push((*li, s));
     }
     let Some(cache) = studio.overlays.get_mut(index) else {
@@ -677,15 +682,6 @@ fn refresh(
     cache.key = Some(key);
     cache.rig = Some(rig);
     Ok(())
-}
-
-fn studio_sweeps(
-    cache: &mut SweepCache,
-    drive: &Drive,
-    lidar: &str,
-    index: usize,
-) -> Result<Arc<LidarSweep>, String> {
-    cache.get(drive, lidar, index)
 }
 
 fn sweep_view(s: &LidarSweep) -> SweepView<'_> {

@@ -162,6 +162,8 @@ pub struct Studio {
     /// Where the session is autosaved after every change (None: no autosave, e.g. in tests).
     pub autosave: Option<PathBuf>,
     pub(crate) saved_session: Option<Session>,
+    /// When the autosave last compared the session (it runs at most once a second).
+    pub(crate) autosave_checked: Option<std::time::Instant>,
     /// Frame-time measurement (RIGCAL_PROFILE_FRAMES).
     pub profile: Option<super::profile::Profile>,
     /// Camera views drawn with their overlay this frame, and the LiDAR points they submitted.
@@ -207,6 +209,7 @@ impl Default for Studio {
             recent: RecentFiles::default(),
             autosave: None,
             saved_session: None,
+            autosave_checked: None,
             profile: None,
             pictures: (0, 0),
         }
@@ -271,17 +274,12 @@ impl Studio {
 
     /// Take the extrinsics (and intrinsics) of `rig`'s sensors that this rig has, as one edit.
     fn apply_rig(&mut self, rig: &Rig) -> usize {
-        let mut next = self.current.clone();
-        let mut matched = 0;
-        for s in &rig.sensors {
-            if let Some(t) = next.sensor_mut(&s.name) {
-                t.vehicle_from_sensor = s.vehicle_from_sensor;
-                if s.camera.is_some() {
-                    t.camera = s.camera.clone();
-                }
-                matched += 1;
-            }
-        }
+        let matched = rig
+            .sensors
+            .iter()
+            .filter(|s| self.current.sensor(&s.name).is_some())
+            .count();
+        let next = self.merged(rig);
         self.edit(next);
         matched
     }
@@ -516,7 +514,7 @@ impl Studio {
         out
     }
 
-    /// Write the autosave when the session changed (cheap: compares before writing). Not while
+    /// Write the autosave when the session changed, checking at most once a second. Not while
     /// an optimiser is running; its result is saved when it ends.
     pub fn autosave_if_changed(&mut self) {
         let Some(path) = self.autosave.clone() else {
@@ -525,6 +523,15 @@ impl Studio {
         if self.drive.is_none() || self.optimiser.run.is_some() {
             return;
         }
+        // Building the session clones the rigs and the loss history: not on every frame.
+        let now = std::time::Instant::now();
+        if self
+            .autosave_checked
+            .is_some_and(|t| now.duration_since(t).as_secs_f64() < 1.0)
+        {
+            return;
+        }
+        self.autosave_checked = Some(now);
         let session = self.session();
         if self.saved_session.as_ref() == Some(&session) {
             return;

@@ -20,7 +20,6 @@ use crate::log::Drive;
 /// The top-down map: aggregated LiDAR points rasterised into a density image (drawn as one
 /// texture, cheap on software renderers), and the trajectory.
 pub struct MapData {
-    pub points_xy: Vec<[f64; 2]>,
     /// (stamp, x, y) every 0.1 s.
     pub trajectory: Vec<(i64, [f64; 2])>,
     /// World rectangle the raster covers: min x, min y, size (square), and the raster.
@@ -34,7 +33,7 @@ const RASTER_PX: usize = 512;
 const MAP_MARGIN_M: f64 = 40.0;
 
 impl MapData {
-    fn rasterise(&mut self) {
+    fn rasterise(&mut self, points_xy: &[[f64; 2]]) {
         // The trajectory's bounding box with a margin of LiDAR surroundings.
         let (mut lo, mut hi) = ([f64::MAX; 2], [f64::MIN; 2]);
         for (_, p) in &self.trajectory {
@@ -51,7 +50,7 @@ impl MapData {
         self.raster_min = [center[0] - size / 2.0, center[1] - size / 2.0];
         self.raster_size_m = size;
         let mut count = vec![0u32; RASTER_PX * RASTER_PX];
-        for p in &self.points_xy {
+        for p in points_xy {
             let x = ((p[0] - self.raster_min[0]) / size * RASTER_PX as f64) as usize;
             let y = ((p[1] - self.raster_min[1]) / size * RASTER_PX as f64) as usize;
             if x < RASTER_PX && y < RASTER_PX {
@@ -127,13 +126,12 @@ pub fn build_map(drive: &Drive, rig: &Rig) -> Result<MapData, String> {
         }
     }
     let mut map = MapData {
-        points_xy,
         trajectory,
         raster_min: [0.0; 2],
         raster_size_m: 1.0,
         raster: None,
     };
-    map.rasterise();
+    map.rasterise(&points_xy);
     Ok(map)
 }
 
@@ -162,7 +160,6 @@ pub fn poll(studio: &mut Studio, ctx: &egui::Context) {
             Ok(Err(e)) => {
                 studio.status.push(format!("error: trajectory map: {e}"));
                 panel.map = Some(Arc::new(MapData {
-                    points_xy: Vec::new(),
                     trajectory: Vec::new(),
                     raster_min: [0.0; 2],
                     raster_size_m: 1.0,
@@ -204,7 +201,9 @@ fn map_ui(studio: &Studio, ui: &mut egui::Ui, t0: i64, t1: i64, now: Option<i64>
         return;
     };
     let span = (t1 - t0).max(1) as f64;
-    let in_segment = |t: i64| studio.segments.iter().any(|&(a, b)| t >= a && t <= b);
+    // Highlight only selected segments (none selected: nothing is highlighted).
+    let in_segment =
+        |t: i64| !studio.segments.is_empty() && crate::log::in_segments(&studio.segments, t);
     Plot::new("topdown")
         .data_aspect(1.0)
         .show_axes([false, false])

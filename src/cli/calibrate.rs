@@ -7,7 +7,7 @@
 //! `icp`, `mi`, `target` and `pose-graph` are named by the contract and refused with a clear
 //! message until they land.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use crate::calib::{CalibrationFile, Rig};
 use crate::log::Drive;
@@ -164,12 +164,8 @@ pub fn calibrate(
     for (name, value) in last {
         doc.metrics.insert(name, serde_yaml::Value::from(value));
     }
-    save(&doc, &args.out)?;
+    doc.save(&args.out).map_err(|e| e.to_string())?;
     Ok(doc)
-}
-
-fn save(doc: &CalibrationFile, path: &Path) -> Result<(), String> {
-    doc.save(path).map_err(|e| e.to_string())
 }
 
 #[cfg(test)]

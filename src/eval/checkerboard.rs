@@ -21,7 +21,7 @@
 //!   *without* the shift. A board counts when all its corners project inside the image and at
 //!   least half of them are found there.
 
-use std::collections::HashMap;
+use std::collections::{HashMap, HashSet};
 
 use glam::{DVec2, DVec3};
 use image::RgbImage;
@@ -208,15 +208,14 @@ fn voxel_clusters(points: &[DVec3]) -> Vec<Vec<usize>> {
     for (i, p) in points.iter().enumerate() {
         voxels.entry(key(*p)).or_default().push(i);
     }
-    let mut seen: HashMap<(i64, i64, i64), bool> = HashMap::new();
+    let mut seen: HashSet<(i64, i64, i64)> = HashSet::new();
     let mut clusters = Vec::new();
     let mut keys: Vec<_> = voxels.keys().copied().collect();
     keys.sort_unstable();
     for start in keys {
-        if seen.contains_key(&start) {
+        if !seen.insert(start) {
             continue;
         }
-        seen.insert(start, true);
         let mut stack = vec![start];
         let mut members = Vec::new();
         while let Some(k) = stack.pop() {
@@ -227,8 +226,7 @@ fn voxel_clusters(points: &[DVec3]) -> Vec<Vec<usize>> {
                 for dy in -1..=1 {
                     for dz in -1..=1 {
                         let n = (k.0 + dx, k.1 + dy, k.2 + dz);
-                        if voxels.contains_key(&n) && !seen.contains_key(&n) {
-                            seen.insert(n, true);
+                        if voxels.contains_key(&n) && seen.insert(n) {
                             stack.push(n);
                         }
                     }
@@ -611,11 +609,9 @@ pub fn pair_corner_error(
     if images.is_empty() || sweeps.is_empty() {
         return Ok(None);
     }
-    let wanted = frames.clamp(1, images.len());
+    let all: Vec<usize> = (0..images.len()).collect();
     let mut parts = Vec::new();
-    for k in 0..wanted {
-        let i = (k * images.len()) / wanted + images.len() / (2 * wanted);
-        let i = i.min(images.len() - 1);
+    for i in crate::log::spread_evenly(&all, frames) {
         let stamp = images[i].stamp_nanos;
         let Some(j) = (0..sweeps.len()).min_by_key(|&j| (sweeps[j].stamp_nanos - stamp).abs())
         else {

@@ -417,6 +417,20 @@ impl Drive {
         self.streams.iter().find(|s| s.sensor == sensor)
     }
 
+    /// Frame indices of `sensor` stamped inside the trajectory and, unless `segments_nanos` is
+    /// empty, inside one of the segments.
+    pub fn frames_within(&self, sensor: &str, segments_nanos: &[(i64, i64)]) -> Vec<usize> {
+        let Some(stream) = self.stream(sensor) else {
+            return Vec::new();
+        };
+        (0..stream.frames.len())
+            .filter(|&i| {
+                let t = stream.frames[i].stamp_nanos;
+                in_segments(segments_nanos, t) && self.trajectory.world_from_vehicle(t).is_ok()
+            })
+            .collect()
+    }
+
     fn stream_index(&self, sensor: &str) -> Result<usize, LogError> {
         self.streams
             .iter()
@@ -538,4 +552,35 @@ fn static_root_of_sensors(
         .max_by_key(|(_, n)| *n)
         .map(|(f, _)| f)
         .unwrap_or_else(|| "base_link".into())
+}
+
+/// Whether `t` lies in one of `segments_nanos` (inclusive); every time does when there are none.
+pub fn in_segments(segments_nanos: &[(i64, i64)], t: i64) -> bool {
+    segments_nanos.is_empty() || segments_nanos.iter().any(|&(a, b)| t >= a && t <= b)
+}
+
+/// `n` (at least 1, at most all) of `items`, spread evenly: each from the middle of its share.
+pub fn spread_evenly<T: Copy>(items: &[T], n: usize) -> Vec<T> {
+    let n = n.clamp(1, items.len().max(1));
+    (0..n)
+        .filter_map(|k| {
+            items
+                .get((k * items.len()) / n + items.len() / (2 * n))
+                .copied()
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod spread_tests {
+    use super::*;
+
+    #[test]
+    fn spread_takes_the_middle_of_each_share() {
+        assert_eq!(spread_evenly(&[0, 1, 2, 3, 4, 5, 6, 7], 2), vec![2, 6]);
+        assert_eq!(spread_evenly(&[5, 6, 7], 10), vec![5, 6, 7]);
+        assert!(spread_evenly::<u8>(&[], 3).is_empty());
+        assert!(in_segments(&[], 7) && in_segments(&[(0, 5), (6, 9)], 7));
+        assert!(!in_segments(&[(0, 5)], 7));
+    }
 }

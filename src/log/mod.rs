@@ -20,6 +20,8 @@ pub mod ros2;
 pub mod tf;
 pub mod types;
 
-pub use drive::{Drive, DriveOptions, SensorStream, StampSource, TopicStats};
+pub use drive::{
+    Drive, DriveOptions, SensorStream, StampSource, TopicStats, in_segments, spread_evenly,
+};
 pub use error::{LogError, Problem};
 pub use pointcloud::LidarSweep;

@@ -150,28 +150,20 @@ impl EdgeAlignment {
         let cam_stream = drive
             .stream(camera)
             .ok_or_else(|| AlignError::Setup(format!("no images for '{camera}' in the log")))?;
-        let lidar_stream = drive
-            .stream(lidar)
-            .ok_or_else(|| AlignError::Setup(format!("no sweeps for '{lidar}' in the log")))?;
-        let in_segment = |t: i64| {
-            segments_nanos.is_empty() || segments_nanos.iter().any(|&(a, b)| t >= a && t <= b)
-        };
-        let usable: Vec<usize> = (0..lidar_stream.frames.len())
-            .filter(|&i| {
-                let t = lidar_stream.frames[i].stamp_nanos;
-                in_segment(t) && drive.trajectory.world_from_vehicle(t).is_ok()
-            })
-            .collect();
+        if drive.stream(lidar).is_none() {
+            return Err(AlignError::Setup(format!(
+                "no sweeps for '{lidar}' in the log"
+            )));
+        }
+        let usable = drive.frames_within(lidar, segments_nanos);
         if usable.is_empty() {
             return Err(AlignError::Setup(format!(
                 "no sweep of '{lidar}' inside the trajectory and the selected segments"
             )));
         }
-        let wanted = frames.clamp(1, usable.len());
-        let mut out = Vec::with_capacity(wanted);
-        for k in 0..wanted {
-            let sweep_index = usable[(k * usable.len()) / wanted + usable.len() / (2 * wanted)];
-            let sweep = drive.load_sweep(lidar, sweep_index.min(lidar_stream.frames.len() - 1))?;
+        let mut out = Vec::with_capacity(frames);
+        for sweep_index in crate::log::spread_evenly(&usable, frames) {
+            let sweep = drive.load_sweep(lidar, sweep_index)?;
             // The image nearest in time to the sweep.
             let Some(image_index) = (0..cam_stream.frames.len())
                 .min_by_key(|&j| (cam_stream.frames[j].stamp_nanos - sweep.stamp_nanos).abs())

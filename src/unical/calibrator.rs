@@ -7,7 +7,7 @@
 
 use super::depth_calib::{DepthCalibConfig, DepthCalibration, LidarData};
 use crate::calib::Rig;
-use crate::log::Drive;
+use crate::log::{Drive, spread_evenly};
 use crate::optim::runner::{Calibrator, StepReport};
 
 pub struct UnicalLidarStage {
@@ -25,33 +25,16 @@ impl UnicalLidarStage {
         segments_nanos: &[(i64, i64)],
         config: DepthCalibConfig,
     ) -> Result<Self, String> {
-        let in_segment = |t: i64| {
-            segments_nanos.is_empty() || segments_nanos.iter().any(|&(a, b)| t >= a && t <= b)
-        };
         let mut lidars = Vec::new();
         for lidar in rig.lidars() {
-            let Some(stream) = drive.stream(&lidar.name) else {
-                continue;
-            };
-            let usable: Vec<usize> = (0..stream.frames.len())
-                .filter(|&i| {
-                    let t = stream.frames[i].stamp_nanos;
-                    in_segment(t) && drive.trajectory.world_from_vehicle(t).is_ok()
-                })
-                .collect();
+            let usable = drive.frames_within(&lidar.name, segments_nanos);
             if usable.is_empty() {
                 continue;
             }
-            let n = sweeps_per_lidar.clamp(1, usable.len());
-            let mut sweeps = Vec::with_capacity(n);
-            for k in 0..n {
-                let i = usable[(k * usable.len()) / n + usable.len() / (2 * n)];
-                sweeps.push(
-                    drive
-                        .load_sweep(&lidar.name, i)
-                        .map_err(|e| e.to_string())?,
-                );
-            }
+            let sweeps = spread_evenly(&usable, sweeps_per_lidar)
+                .into_iter()
+                .map(|i| drive.load_sweep(&lidar.name, i).map_err(|e| e.to_string()))
+                .collect::<Result<Vec<_>, _>>()?;
             lidars.push(LidarData {
                 name: lidar.name.clone(),
                 initial: lidar.vehicle_from_sensor,
