@@ -37,6 +37,7 @@ fn main() -> anyhow::Result<()> {
     let traj = Trajectory::new(trajectories::generate(&tcfg));
     let world =
         rigcal::sim::world::World::build(scene, &trajectories::path_polyline(&tcfg, 1.0), 7);
+    eprintln!("{world:?}");
     let rig = SimRig::preset(RigPreset::Pandaset).scaled(scale);
     let cam = rig
         .cameras
@@ -45,9 +46,12 @@ fn main() -> anyhow::Result<()> {
         .ok_or_else(|| anyhow::anyhow!("no camera {camera}"))?;
     let started = std::time::Instant::now();
     let pose = traj.world_from_vehicle((time_s * 1e9) as i64)? * cam.vehicle_from_camera;
+    let table = RayTable::new(&cam.intrinsics);
+    eprintln!("ray table in {:.2} s", started.elapsed().as_secs_f64());
+    let started = std::time::Instant::now();
     let img = camera_sim::render(
         &world,
-        &RayTable::new(&cam.intrinsics),
+        &table,
         &cam.intrinsics,
         pose,
         Exposure {

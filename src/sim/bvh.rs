@@ -12,6 +12,9 @@ pub struct Triangle {
     pub e1: Vec3,
     pub e2: Vec3,
     pub material: u32,
+    /// The flat face this triangle belongs to (both halves of a quad share one), so that
+    /// anti-aliasing and shading interpolation do not see a quad's diagonal as an edge.
+    pub face: u32,
 }
 
 impl Triangle {
@@ -21,6 +24,7 @@ impl Triangle {
             e1: b - a,
             e2: c - a,
             material,
+            face: u32::MAX,
         }
     }
     pub fn normal(&self) -> Vec3 {
@@ -78,6 +82,19 @@ impl Bvh {
     /// Nearest hit with t in (t_min, t_max).
     pub fn intersect(&self, origin: Vec3, dir: Vec3, t_min: f32, t_max: f32) -> Option<Hit> {
         self.traverse(origin, dir, t_min, t_max, false)
+    }
+
+    /// Distance along the ray to one triangle, if it is hit within (t_min, t_max).
+    pub fn intersect_triangle(
+        &self,
+        triangle: u32,
+        origin: Vec3,
+        dir: Vec3,
+        t_min: f32,
+        t_max: f32,
+    ) -> Option<f32> {
+        let tri = self.triangles.get(triangle as usize)?;
+        intersect_triangle(tri, origin, dir, t_min, t_max)
     }
 
     /// Whether anything blocks the segment (shadow rays).

@@ -6,6 +6,7 @@ pub mod camera_sim;
 pub mod demo;
 pub mod lidar_sim;
 pub mod noise;
+pub mod raster;
 pub mod rigs;
 pub mod synth;
 pub mod trajectories;

@@ -15,13 +15,23 @@ pub fn hash3(x: i32, y: i32, z: i32, seed: u64) -> f32 {
     (h >> 40) as f32 / (1u64 << 24) as f32
 }
 
+/// `x.floor()` without a libm call (the baseline x86-64 target has no rounding instruction).
+#[inline]
+pub fn floor(x: f32) -> f32 {
+    if x.abs() >= 8_388_608.0 || x.is_nan() {
+        return x; // already integral (or NaN)
+    }
+    let t = x as i32 as f32;
+    if t > x { t - 1.0 } else { t }
+}
+
 fn smooth(t: f32) -> f32 {
     t * t * (3.0 - 2.0 * t)
 }
 
 /// 2D value noise in [0, 1).
 pub fn value2(x: f32, y: f32, seed: u64) -> f32 {
-    let (xi, yi) = (x.floor(), y.floor());
+    let (xi, yi) = (floor(x), floor(y));
     let (fx, fy) = (smooth(x - xi), smooth(y - yi));
     let (xi, yi) = (xi as i32, yi as i32);
     let a = hash3(xi, yi, 0, seed);
@@ -40,10 +50,16 @@ pub fn fbm2(x: f32, y: f32, base_scale: f32, octaves: u32, footprint: f32, seed:
     let mut norm = 0.0;
     let mut amp = 1.0;
     let mut scale = base_scale;
+    let inv_footprint = 1.0 / (2.0 * footprint.max(1e-6));
     for o in 0..octaves {
         // Feature size of this octave is 1/scale; fade when it drops below two footprints.
-        let fade = ((1.0 / scale) / (2.0 * footprint.max(1e-6))).clamp(0.0, 1.0);
-        let v = value2(x * scale, y * scale, seed.wrapping_add(o as u64 * 1013));
+        let fade = ((1.0 / scale) * inv_footprint).clamp(0.0, 1.0);
+        // A faded octave is its mean; so are all finer ones (cheap far away).
+        let v = if fade > 0.0 {
+            value2(x * scale, y * scale, seed.wrapping_add(o as u64 * 1013))
+        } else {
+            0.5
+        };
         sum += amp * (fade * v + (1.0 - fade) * 0.5);
         norm += amp;
         amp *= 0.5;
@@ -56,11 +72,11 @@ pub fn fbm2(x: f32, y: f32, base_scale: f32, octaves: u32, footprint: f32, seed:
 /// (in periods) repeating every 1. Anti-aliased stripes, dashes and grids.
 pub fn stripe(x: f32, duty: f32, w: f32) -> f32 {
     let integral = |t: f32| {
-        let f = t.floor();
+        let f = floor(t);
         f * duty + (t - f).min(duty)
     };
     if w < 1e-6 {
-        return if x - x.floor() < duty { 1.0 } else { 0.0 };
+        return if x - floor(x) < duty { 1.0 } else { 0.0 };
     }
     ((integral(x + 0.5 * w) - integral(x - 0.5 * w)) / w).clamp(0.0, 1.0)
 }
@@ -86,6 +102,26 @@ mod tests {
         }
         assert_eq!(value2(1.3, 2.7, 5), value2(1.3, 2.7, 5));
         assert_ne!(value2(1.3, 2.7, 5), value2(1.3, 2.7, 6));
+    }
+
+    #[test]
+    fn fast_floor_matches_floor() {
+        for x in [
+            -3.5f32,
+            -3.0,
+            -0.2,
+            -0.0,
+            0.0,
+            0.7,
+            2.0,
+            1e9,
+            -1e9,
+            8_388_607.5,
+            -2.5e-8,
+        ] {
+            assert_eq!(floor(x), x.floor(), "{x}");
+        }
+        assert!(floor(f32::NAN).is_nan());
     }
 
     #[test]

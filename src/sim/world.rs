@@ -16,6 +16,7 @@ use glam::{DVec3, Vec3};
 
 use super::bvh::{Bvh, Triangle};
 use super::noise::{band, fbm2, hash3, hash64, stripe, value2};
+use super::raster::Candidate;
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum SceneKind {
@@ -221,7 +222,7 @@ pub struct SurfaceHit {
     pub normal: Vec3,
     /// `None` for the ground plane.
     pub material: Option<u32>,
-    /// Identifies the primitive (for edge-adaptive anti-aliasing); the ground is u32::MAX.
+    /// Identifies the flat face hit (for edge-adaptive anti-aliasing); the ground is u32::MAX.
     pub primitive: u32,
 }
 
@@ -395,6 +396,27 @@ impl Builder {
 }
 
 /// Points along the path every `step` metres with their heading (yaw) and the left normal.
+/// Number the flat faces: a triangle joins its predecessor's face when both have the same
+/// material, lie in one plane and share a vertex (the builder emits a quad's halves in a row).
+fn assign_faces(tris: &mut [Triangle]) {
+    let mut face = 0u32;
+    for k in 0..tris.len() {
+        if k > 0 {
+            let (a, b) = (&tris[k - 1], &tris[k]);
+            let (na, nb) = (a.normal(), b.normal());
+            let verts = |t: &Triangle| [t.v0, t.v0 + t.e1, t.v0 + t.e2];
+            let shared = verts(a)
+                .iter()
+                .any(|p| verts(b).iter().any(|q| p.distance_squared(*q) < 1e-8));
+            let coplanar = na.dot(nb) > 0.9999 && (b.v0 - a.v0).dot(na).abs() < 1e-3;
+            if !(a.material == b.material && coplanar && shared) {
+                face += 1;
+            }
+        }
+        tris[k].face = face;
+    }
+}
+
 fn stations(path: &[Vec3], step: f32) -> Vec<(Vec3, f32)> {
     let mut out = Vec::new();
     let mut carry = 0.0;
@@ -490,6 +512,7 @@ impl World {
             }
         }
         let sun_dir = Vec3::new(0.45, -0.35, 0.82).normalize_or_zero();
+        assign_faces(&mut b.tris);
         Self {
             kind,
             bvh: Bvh::build(b.tris),
@@ -503,35 +526,94 @@ impl World {
 
     /// Nearest surface along a ray (ground plane or triangles).
     pub fn trace(&self, origin: Vec3, dir: Vec3, t_max: f32) -> Option<SurfaceHit> {
-        let mut best: Option<SurfaceHit> = None;
-        if dir.z < -1e-6 {
-            let t = -origin.z / dir.z;
-            if t > 1e-3 && t < t_max {
-                best = Some(SurfaceHit {
-                    t,
-                    point: origin + dir * t,
-                    normal: Vec3::Z,
-                    material: None,
-                    primitive: u32::MAX,
-                });
+        let ground = self.ground_hit(origin, dir, t_max);
+        let limit = ground.map_or(t_max, |h| h.t);
+        match self.bvh.intersect(origin, dir, 1e-3, limit) {
+            Some(h) => Some(self.triangle_hit(origin, dir, h.t, h.triangle)),
+            None => ground,
+        }
+    }
+
+    /// [`World::trace`] helped by a rasterised candidate for the first triangle: the candidate
+    /// is confirmed by one exact intersection, and only silhouettes (or a candidate the ray
+    /// narrowly misses) go through the BVH. Same answer as `trace` wherever the candidate is
+    /// right.
+    pub fn trace_with(
+        &self,
+        origin: Vec3,
+        dir: Vec3,
+        t_max: f32,
+        candidate: Candidate,
+    ) -> Option<SurfaceHit> {
+        match candidate {
+            Candidate::Trace => self.trace(origin, dir, t_max),
+            Candidate::Nothing => self.ground_hit(origin, dir, t_max),
+            Candidate::Triangle(id) => {
+                let ground = self.ground_hit(origin, dir, t_max);
+                let limit = ground.map_or(t_max, |h| h.t);
+                match self.bvh.intersect_triangle(id, origin, dir, 1e-3, f32::MAX) {
+                    Some(t) if t < limit => Some(self.triangle_hit(origin, dir, t, id)),
+                    Some(_) => ground,
+                    None => self.trace(origin, dir, t_max),
+                }
             }
         }
-        let limit = best.map_or(t_max, |h| h.t);
-        if let Some(h) = self.bvh.intersect(origin, dir, 1e-3, limit) {
-            let tri = &self.bvh.triangles[h.triangle as usize];
-            let mut n = tri.normal();
-            if n.dot(dir) > 0.0 {
-                n = -n;
+    }
+
+    /// The primitive [`World::trace_with`] would report (the ground is `u32::MAX`, `Some(None)`
+    /// is nothing within range), from the candidate and at most one exact intersection; `None`
+    /// when that takes a BVH trace.
+    pub fn first_primitive(
+        &self,
+        origin: Vec3,
+        dir: Vec3,
+        t_max: f32,
+        candidate: Candidate,
+    ) -> Option<Option<u32>> {
+        let ground = self
+            .ground_hit(origin, dir, t_max)
+            .map(|h| (h.t, h.primitive));
+        match candidate {
+            Candidate::Trace => None,
+            Candidate::Nothing => Some(ground.map(|g| g.1)),
+            Candidate::Triangle(id) => {
+                let limit = ground.map_or(t_max, |g| g.0);
+                match self.bvh.intersect_triangle(id, origin, dir, 1e-3, f32::MAX) {
+                    Some(t) if t < limit => Some(Some(self.bvh.triangles[id as usize].face)),
+                    Some(_) => Some(ground.map(|g| g.1)),
+                    None => None,
+                }
             }
-            best = Some(SurfaceHit {
-                t: h.t,
-                point: origin + dir * h.t,
-                normal: n,
-                material: Some(tri.material),
-                primitive: h.triangle,
-            });
         }
-        best
+    }
+
+    fn ground_hit(&self, origin: Vec3, dir: Vec3, t_max: f32) -> Option<SurfaceHit> {
+        if dir.z >= -1e-6 {
+            return None;
+        }
+        let t = -origin.z / dir.z;
+        (t > 1e-3 && t < t_max).then(|| SurfaceHit {
+            t,
+            point: origin + dir * t,
+            normal: Vec3::Z,
+            material: None,
+            primitive: u32::MAX,
+        })
+    }
+
+    fn triangle_hit(&self, origin: Vec3, dir: Vec3, t: f32, triangle: u32) -> SurfaceHit {
+        let tri = &self.bvh.triangles[triangle as usize];
+        let mut n = tri.normal();
+        if n.dot(dir) > 0.0 {
+            n = -n;
+        }
+        SurfaceHit {
+            t,
+            point: origin + dir * t,
+            normal: n,
+            material: Some(tri.material),
+            primitive: tri.face,
+        }
     }
 
     pub fn occluded(&self, origin: Vec3, dir: Vec3, t_max: f32) -> bool {
