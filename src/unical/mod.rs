@@ -10,6 +10,8 @@
 //! - [`pose`]: extrinsics as 6D rotation + translation (§11) and the ray → pose backward pass.
 //! - [`occupancy`]: the 0.5 m occupancy grid from aggregated LiDAR and 10 cm ray sampling (§7).
 //! - [`lidar_depth`]: the LiDAR depth loss for a batch of rays with scene, β and pose gradients.
+//! - [`camera_rgb`]: the camera colour term (feature rendering, sky, colour decoder on SH view
+//!   encoding, per-camera exposure) with scene, decoder, exposure and pose gradients.
 //! - [`depth_calib`]: the LiDAR stage: scene + every LiDAR extrinsic from depth (a full step).
 //! - [`calibrator`]: that stage prepared from a drive as an `optim::runner::Calibrator`.
 //! - [`composite`]: SDF → opacity and front-to-back compositing of depth, opacity and features
@@ -17,6 +19,7 @@
 
 pub mod adam;
 pub mod calibrator;
+pub mod camera_rgb;
 pub mod composite;
 pub mod depth_calib;
 pub mod field;
