@@ -57,6 +57,10 @@ enum Command {
         iterations: Option<usize>,
         #[arg(long, default_value_t = 1)]
         seed: u64,
+        /// unical: images per camera for the colour term (cameras join the optimisation;
+        /// 0 = LiDAR depth stage only)
+        #[arg(long, default_value_t = 0)]
+        camera_frames: usize,
         #[arg(long)]
         out: PathBuf,
     },
@@ -136,6 +140,7 @@ fn run() -> Result<()> {
             sensors,
             iterations,
             seed,
+            camera_frames,
             out,
         }) => {
             let args = rigcal::cli::calibrate::CalibrateArgs {
@@ -146,6 +151,7 @@ fn run() -> Result<()> {
                 sensors,
                 iterations,
                 seed,
+                camera_frames,
                 out: out.clone(),
             };
             let started = std::time::Instant::now();

@@ -56,3 +56,47 @@ fn the_lidar_stage_runs_as_a_calibrator_on_the_real_drive() {
     .unwrap();
     assert!(e.contains("segments"), "{e}");
 }
+
+/// With cameras: every camera's images are loaded (downscaled), the colour loss is reported and
+/// finite, and camera extrinsics now move too; a bad scale is a clear error.
+#[test]
+fn cameras_join_the_stage_through_the_colour_term() {
+    let drive = Drive::open(&pandaset()).unwrap();
+    let config = DepthCalibConfig {
+        rays_per_sensor: 128,
+        rays_per_camera: 64,
+        iterations: 2,
+        ..DepthCalibConfig::default()
+    };
+    let mut stage = UnicalLidarStage::from_drive(&drive, &drive.rig, 1, &[], config.clone())
+        .unwrap()
+        .with_cameras(&drive, 1, &[], 0.0625)
+        .unwrap();
+    assert!(stage.name().contains("colour"), "{}", stage.name());
+    for _ in 0..2 {
+        let r = stage.step();
+        assert!(r.losses.iter().all(|(_, v)| v.is_finite()), "{r:?}");
+        let colour = r.losses.iter().find(|(n, _)| n == "colour loss").unwrap().1;
+        assert!(colour > 0.0 && colour < 3.0, "{colour}");
+    }
+    let now = stage.current();
+    let cameras_moved = drive
+        .rig
+        .sensors
+        .iter()
+        .filter(|s| s.camera.is_some())
+        .filter(|s| {
+            let (rot, trans) = s
+                .vehicle_from_sensor
+                .difference(now.sensor(&s.name).unwrap().vehicle_from_sensor);
+            rot + trans > 1e-9
+        })
+        .count();
+    assert_eq!(cameras_moved, 6);
+    let e = UnicalLidarStage::from_drive(&drive, &drive.rig, 1, &[], config)
+        .unwrap()
+        .with_cameras(&drive, 1, &[], 1.5)
+        .err()
+        .unwrap();
+    assert!(e.contains("scale"), "{e}");
+}

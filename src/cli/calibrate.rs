@@ -28,6 +28,8 @@ pub struct CalibrateArgs {
     pub sensors: Vec<String>,
     pub iterations: Option<usize>,
     pub seed: u64,
+    /// unical: images per camera for the colour term (0: LiDAR depth stage only).
+    pub camera_frames: usize,
     pub out: PathBuf,
 }
 
@@ -79,46 +81,48 @@ pub fn calibrate(
         Some(s) => vec![parse_segment(s, t0)?],
         None => Vec::new(),
     };
-    let mut calibrator: Box<dyn Calibrator> = match args.method.as_str() {
-        "edge" => {
-            let lidar = rig
-                .lidars()
-                .map(|l| l.name.clone())
-                .find(|l| args.sensors.is_empty() || !args.sensors.contains(l))
-                .or_else(|| rig.lidars().next().map(|l| l.name.clone()))
-                .ok_or("the log has no LiDAR")?;
-            let cameras: Vec<String> = rig
-                .cameras()
-                .filter(|c| c.camera.is_some())
-                .map(|c| c.name.clone())
-                .filter(|c| args.sensors.is_empty() || args.sensors.contains(c))
-                .collect();
-            Box::new(
-                EdgeRefiner::new(&drive, &rig, &lidar, &cameras, 4, &segments)
-                    .map_err(|e| e.to_string())?,
-            )
-        }
-        "unical" => {
-            let config = DepthCalibConfig {
-                iterations: args.iterations.unwrap_or(300),
-                seed: args.seed,
-                ..DepthCalibConfig::default()
-            };
-            Box::new(UnicalLidarStage::from_drive(
-                &drive, &rig, 4, &segments, config,
-            )?)
-        }
-        m @ ("icp" | "mi" | "target" | "pose-graph") => {
-            return Err(format!(
-                "--method {m} is not in this build yet (available: unical, edge)"
-            ));
-        }
-        m => {
-            return Err(format!(
-                "unknown --method '{m}' (expected unical, icp, mi, target, pose-graph or edge)"
-            ));
-        }
-    };
+    let mut calibrator: Box<dyn Calibrator> =
+        match args.method.as_str() {
+            "edge" => {
+                let lidar = rig
+                    .lidars()
+                    .map(|l| l.name.clone())
+                    .find(|l| args.sensors.is_empty() || !args.sensors.contains(l))
+                    .or_else(|| rig.lidars().next().map(|l| l.name.clone()))
+                    .ok_or("the log has no LiDAR")?;
+                let cameras: Vec<String> = rig
+                    .cameras()
+                    .filter(|c| c.camera.is_some())
+                    .map(|c| c.name.clone())
+                    .filter(|c| args.sensors.is_empty() || args.sensors.contains(c))
+                    .collect();
+                Box::new(
+                    EdgeRefiner::new(&drive, &rig, &lidar, &cameras, 4, &segments)
+                        .map_err(|e| e.to_string())?,
+                )
+            }
+            "unical" => {
+                let config = DepthCalibConfig {
+                    iterations: args.iterations.unwrap_or(300),
+                    seed: args.seed,
+                    ..DepthCalibConfig::default()
+                };
+                Box::new(
+                    UnicalLidarStage::from_drive(&drive, &rig, 4, &segments, config)?
+                        .with_cameras(&drive, args.camera_frames, &segments, 0.125)?,
+                )
+            }
+            m @ ("icp" | "mi" | "target" | "pose-graph") => {
+                return Err(format!(
+                    "--method {m} is not in this build yet (available: unical, edge)"
+                ));
+            }
+            m => {
+                return Err(format!(
+                    "unknown --method '{m}' (expected unical, icp, mi, target, pose-graph or edge)"
+                ));
+            }
+        };
     let max_steps = match (args.method.as_str(), args.iterations) {
         ("edge", Some(n)) => n.min(calibrator.max_steps()),
         _ => calibrator.max_steps(),

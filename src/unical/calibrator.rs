@@ -1,11 +1,12 @@
-//! UniCal as a [`Calibrator`] for the studio and the runner: the LiDAR stage
-//! ([`DepthCalibration`]: one neural scene and every LiDAR extrinsic, learned jointly from LiDAR
-//! depth) prepared from a drive. Cameras are not optimised by this stage yet.
+//! UniCal as a [`Calibrator`] for the studio and the runner: [`DepthCalibration`] (one neural
+//! scene and every LiDAR extrinsic, learned jointly from LiDAR depth) prepared from a drive;
+//! with [`UnicalLidarStage::with_cameras`] the cameras join through the colour term (their
+//! images downscaled, intrinsics scaled to match).
 //!
 //! The objective is stochastic (random rays per step) and the scene keeps improving, so the
 //! "best" rig is the latest one rather than the lowest single-step loss.
 
-use super::depth_calib::{DepthCalibConfig, DepthCalibration, LidarData};
+use super::depth_calib::{CameraData, CameraFrame, DepthCalibConfig, DepthCalibration, LidarData};
 use crate::calib::Rig;
 use crate::log::{Drive, spread_evenly};
 use crate::optim::runner::{Calibrator, StepReport};
@@ -50,6 +51,58 @@ impl UnicalLidarStage {
         })
     }
 
+    /// Add `frames_per_camera` images of every camera (spread over the segments), downscaled by
+    /// `scale` (e.g. 0.125: 1920×1080 → 240×135), to the optimisation.
+    pub fn with_cameras(
+        mut self,
+        drive: &Drive,
+        frames_per_camera: usize,
+        segments_nanos: &[(i64, i64)],
+        scale: f64,
+    ) -> Result<Self, String> {
+        if frames_per_camera == 0 {
+            return Ok(self);
+        }
+        if !(scale > 0.0 && scale <= 1.0) {
+            return Err(format!("camera image scale {scale} is not in (0, 1]"));
+        }
+        let mut cameras = Vec::new();
+        for cam in self.rig.cameras() {
+            let Some(intrinsics) = &cam.camera else {
+                continue;
+            };
+            let Some(stream) = drive.stream(&cam.name) else {
+                continue;
+            };
+            let usable = drive.frames_within(&cam.name, segments_nanos);
+            let small = intrinsics.scaled(scale);
+            let mut frames = Vec::new();
+            for i in spread_evenly(&usable, frames_per_camera) {
+                let img = drive.load_image(&cam.name, i).map_err(|e| e.to_string())?;
+                let resized = image::imageops::resize(
+                    img.as_ref(),
+                    small.width.max(1),
+                    small.height.max(1),
+                    image::imageops::FilterType::Triangle,
+                );
+                frames.push(CameraFrame {
+                    stamp_nanos: stream.frames[i].stamp_nanos,
+                    rgb: resized.into_raw(),
+                });
+            }
+            if !frames.is_empty() {
+                cameras.push(CameraData {
+                    name: cam.name.clone(),
+                    initial: cam.vehicle_from_sensor,
+                    intrinsics: small,
+                    frames,
+                });
+            }
+        }
+        self.calib = self.calib.with_cameras(cameras);
+        Ok(self)
+    }
+
     fn rig_now(&self) -> Rig {
         let mut rig = self.rig.clone();
         for (name, t) in self.calib.extrinsics() {
@@ -63,7 +116,11 @@ impl UnicalLidarStage {
 
 impl Calibrator for UnicalLidarStage {
     fn name(&self) -> &str {
-        "UniCal (LiDAR depth stage)"
+        if self.calib.exposures().is_empty() {
+            "UniCal (LiDAR depth stage)"
+        } else {
+            "UniCal (LiDAR depth + camera colour)"
+        }
     }
 
     fn max_steps(&self) -> usize {
@@ -72,11 +129,15 @@ impl Calibrator for UnicalLidarStage {
 
     fn step(&mut self) -> StepReport {
         let r = self.calib.step();
+        let mut losses = vec![
+            ("depth loss".into(), r.loss),
+            ("|depth error| m".into(), r.mean_abs_error_m),
+        ];
+        if !self.calib.exposures().is_empty() {
+            losses.push(("colour loss".into(), r.colour_loss));
+        }
         StepReport {
-            losses: vec![
-                ("depth loss".into(), r.loss),
-                ("|depth error| m".into(), r.mean_abs_error_m),
-            ],
+            losses,
             done: self.calib.iteration >= self.calib.config.iterations,
         }
     }
