@@ -545,19 +545,8 @@ impl World {
         t_max: f32,
         candidate: Candidate,
     ) -> Option<SurfaceHit> {
-        match candidate {
-            Candidate::Trace => self.trace(origin, dir, t_max),
-            Candidate::Nothing => self.ground_hit(origin, dir, t_max),
-            Candidate::Triangle(id) => {
-                let ground = self.ground_hit(origin, dir, t_max);
-                let limit = ground.map_or(t_max, |h| h.t);
-                match self.bvh.intersect_triangle(id, origin, dir, 1e-3, f32::MAX) {
-                    Some(t) if t < limit => Some(self.triangle_hit(origin, dir, t, id)),
-                    Some(_) => ground,
-                    None => self.trace(origin, dir, t_max),
-                }
-            }
-        }
+        self.resolve(origin, dir, t_max, candidate)
+            .unwrap_or_else(|| self.trace(origin, dir, t_max))
     }
 
     /// The primitive [`World::trace_with`] would report (the ground is `u32::MAX`, `Some(None)`
@@ -570,18 +559,31 @@ impl World {
         t_max: f32,
         candidate: Candidate,
     ) -> Option<Option<u32>> {
-        let ground = self
-            .ground_hit(origin, dir, t_max)
-            .map(|h| (h.t, h.primitive));
+        self.resolve(origin, dir, t_max, candidate)
+            .map(|hit| hit.map(|h| h.primitive))
+    }
+
+    /// The first surface from a rasterised candidate and at most one exact intersection
+    /// (`Some(None)`: nothing within range), or `None` when only a BVH trace can tell.
+    fn resolve(
+        &self,
+        origin: Vec3,
+        dir: Vec3,
+        t_max: f32,
+        candidate: Candidate,
+    ) -> Option<Option<SurfaceHit>> {
         match candidate {
             Candidate::Trace => None,
-            Candidate::Nothing => Some(ground.map(|g| g.1)),
+            Candidate::Nothing => Some(self.ground_hit(origin, dir, t_max)),
             Candidate::Triangle(id) => {
-                let limit = ground.map_or(t_max, |g| g.0);
-                match self.bvh.intersect_triangle(id, origin, dir, 1e-3, f32::MAX) {
-                    Some(t) if t < limit => Some(Some(self.bvh.triangles[id as usize].face)),
-                    Some(_) => Some(ground.map(|g| g.1)),
-                    None => None,
+                let ground = self.ground_hit(origin, dir, t_max);
+                let limit = ground.map_or(t_max, |h| h.t);
+                match self
+                    .bvh
+                    .intersect_triangle(id, origin, dir, 1e-3, f32::MAX)?
+                {
+                    t if t < limit => Some(Some(self.triangle_hit(origin, dir, t, id))),
+                    _ => Some(ground),
                 }
             }
         }

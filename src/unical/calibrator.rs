@@ -116,7 +116,7 @@ impl UnicalLidarStage {
 
 impl Calibrator for UnicalLidarStage {
     fn name(&self) -> &str {
-        if self.calib.exposures().is_empty() {
+        if !self.calib.has_cameras() {
             "UniCal (LiDAR depth stage)"
         } else {
             "UniCal (LiDAR depth + camera colour)"
@@ -133,7 +133,7 @@ impl Calibrator for UnicalLidarStage {
             ("depth loss".into(), r.loss),
             ("|depth error| m".into(), r.mean_abs_error_m),
         ];
-        if !self.calib.exposures().is_empty() {
+        if self.calib.has_cameras() {
             losses.push(("colour loss".into(), r.colour_loss));
         }
         StepReport {

@@ -209,22 +209,11 @@ pub fn colour_step(
             .zip(&d_sh_sky)
             .map(|(a, b)| a + b)
             .collect();
-        let (d_alpha, d_features) =
+        let upstream =
             composite_backward(&alphas, taus, &features, dim, &c, 0.0, -d_t_sky, d_feature);
-        let (mut d_o, mut d_d) = (DVec3::ZERO, DVec3::ZERO);
-        for (i, (s, tau)) in samples.iter().zip(taus).enumerate() {
-            let (_, da_ds, da_db) = alpha_from_sdf(s.sdf(), beta);
-            out.beta_grad += (d_alpha[i] * da_db) as f64;
-            let d_x = field.backward(
-                s,
-                d_alpha[i] * da_ds,
-                &d_features[i * dim..(i + 1) * dim],
-                &mut out.grid,
-                &mut out.geo,
-            );
-            d_o += d_x;
-            d_d += d_x * *tau as f64;
-        }
+        let (d_o, mut d_d, d_beta) =
+            field.ray_backward(&samples, taus, beta, &upstream, &mut out.grid, &mut out.geo);
+        out.beta_grad += d_beta;
         d_d += sh_backward(d, &d_sh);
         out.pose
             .add(&pose.ray_backward(ray.world_from_vehicle, ray.dir_in_sensor, d_o, d_d));

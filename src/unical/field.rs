@@ -8,6 +8,7 @@
 
 use glam::DVec3;
 
+use super::composite::alpha_from_sdf;
 use super::hash_grid::{HashGrid, HashGridConfig, SparseGrad};
 use super::mlp::{Mlp, MlpGrad, Trace};
 
@@ -106,6 +107,33 @@ impl SceneField {
         self.grid.backward(sample.unit, &d_h, grid_grad);
         let g = self.grid.grad_x(sample.unit, &d_h);
         DVec3::new(g[0] as f64, g[1] as f64, g[2] as f64) / self.box_size
+    }
+
+    /// Backward through the samples `x_i = o + τ_i d` of one ray, given the compositing's
+    /// `(∂L/∂α_i, ∂L/∂f_i)` (features row per sample; empty for depth-only terms): accumulates
+    /// the field's gradients and returns `(∂L/∂o, ∂L/∂d, ∂L/∂β)`.
+    pub fn ray_backward(
+        &self,
+        samples: &[FieldSample],
+        taus_m: &[f32],
+        beta: f32,
+        upstream: &(Vec<f32>, Vec<f32>),
+        grid_grad: &mut SparseGrad,
+        mlp_grad: &mut MlpGrad,
+    ) -> (DVec3, DVec3, f64) {
+        let (d_alpha, d_features) = upstream;
+        let dim = self.geo.output_dim().saturating_sub(1);
+        let zeros = vec![0.0; dim];
+        let (mut d_o, mut d_d, mut d_beta) = (DVec3::ZERO, DVec3::ZERO, 0.0);
+        for (i, (s, tau)) in samples.iter().zip(taus_m).enumerate() {
+            let (_, da_ds, da_db) = alpha_from_sdf(s.sdf(), beta);
+            d_beta += (d_alpha[i] * da_db) as f64;
+            let d_f = d_features.get(i * dim..(i + 1) * dim).unwrap_or(&zeros);
+            let d_x = self.backward(s, d_alpha[i] * da_ds, d_f, grid_grad, mlp_grad);
+            d_o += d_x;
+            d_d += d_x * *tau as f64;
+        }
+        (d_o, d_d, d_beta)
     }
 }
 

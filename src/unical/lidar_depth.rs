@@ -57,7 +57,6 @@ pub fn depth_step(
         pose: PoseGrad::default(),
     };
     let n = rays.len().max(1) as f64;
-    let no_feature = vec![0.0; field.geo.output_dim().saturating_sub(1)];
     for ray in rays {
         if ray.taus_m.is_empty() {
             continue;
@@ -76,7 +75,7 @@ pub fn depth_step(
         let r = (c.depth_m - ray.range_m) as f64;
         out.loss += r * r / n;
         out.mean_abs_error_m += r.abs() / n;
-        let (d_alpha, _) = composite_backward(
+        let upstream = composite_backward(
             &alphas,
             &ray.taus_m,
             &[],
@@ -86,14 +85,15 @@ pub fn depth_step(
             0.0,
             &[],
         );
-        let (mut d_o, mut d_d) = (DVec3::ZERO, DVec3::ZERO);
-        for ((s, da), tau) in samples.iter().zip(&d_alpha).zip(&ray.taus_m) {
-            let (_, da_ds, da_db) = alpha_from_sdf(s.sdf(), beta);
-            out.beta_grad += (da * da_db) as f64;
-            let d_x = field.backward(s, da * da_ds, &no_feature, &mut out.grid, &mut out.mlp);
-            d_o += d_x;
-            d_d += d_x * *tau as f64;
-        }
+        let (d_o, d_d, d_beta) = field.ray_backward(
+            &samples,
+            &ray.taus_m,
+            beta,
+            &upstream,
+            &mut out.grid,
+            &mut out.mlp,
+        );
+        out.beta_grad += d_beta;
         out.pose
             .add(&pose.ray_backward(ray.world_from_vehicle, ray.dir_in_sensor, d_o, d_d));
     }
