@@ -61,6 +61,10 @@ enum Command {
         /// 0 = LiDAR depth stage only)
         #[arg(long, default_value_t = 0)]
         camera_frames: usize,
+        /// unical: a sensor whose extrinsic stays fixed (the root); default: every sensor
+        /// moves and the trajectory fixes the gauge
+        #[arg(long)]
+        root: Option<String>,
         #[arg(long)]
         out: PathBuf,
     },
@@ -141,6 +145,7 @@ fn run() -> Result<()> {
             iterations,
             seed,
             camera_frames,
+            root,
             out,
         }) => {
             let args = rigcal::cli::calibrate::CalibrateArgs {
@@ -152,6 +157,7 @@ fn run() -> Result<()> {
                 iterations,
                 seed,
                 camera_frames,
+                root,
                 out: out.clone(),
             };
             let started = std::time::Instant::now();

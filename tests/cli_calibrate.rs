@@ -85,6 +85,8 @@ fn bad_arguments_fail_with_one_line() {
     assert!(!ok && err.contains("not in this build"), "{err}");
     let (ok, err) = run(&["--method", "edge", "--sensors", "nope"]);
     assert!(!ok && err.contains("'nope'"), "{err}");
+    let (ok, err) = run(&["--method", "unical", "--root", "roof"]);
+    assert!(!ok && err.contains("--root: 'roof'"), "{err}");
     let (ok, err) = run(&["--method", "edge", "--segment", "5..1"]);
     assert!(!ok && err.contains("--segment"), "{err}");
     assert_eq!(err.trim().lines().count(), 1, "{err}");

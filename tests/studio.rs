@@ -401,12 +401,12 @@ fn the_demo_is_generated_with_progress_opens_off_and_the_optimiser_brings_it_clo
 }
 
 #[test]
-fn the_unical_lidar_stage_runs_from_the_optimiser_panel() {
+fn unical_with_cameras_runs_from_the_optimiser_panel() {
     use rigcal::app::optimiser::Method;
     let mut h = harness(pandaset());
     h.run_steps(2);
-    h.state_mut().optimiser.method = Method::UnicalLidar;
-    h.state_mut().optimiser.frames = 2;
+    h.state_mut().optimiser.method = Method::Unical;
+    h.state_mut().optimiser.frames = 1;
     // Let the panel lay out with the new method before clicking.
     h.run_steps(2);
     h.get_by_label("Start").click();
@@ -423,12 +423,12 @@ fn the_unical_lidar_stage_runs_from_the_optimiser_panel() {
         s_status(&h)
     );
     let losses = h.state().optimiser.history.last().unwrap().1.clone();
-    assert!(
-        losses
-            .iter()
-            .any(|(n, v)| n == "depth loss" && v.is_finite()),
-        "{losses:?}"
-    );
+    for term in ["depth loss", "colour loss"] {
+        assert!(
+            losses.iter().any(|(n, v)| n == term && v.is_finite()),
+            "{term}: {losses:?}"
+        );
+    }
     h.get_by_label("Stop").click();
     assert!(run_until(&mut h, 120.0, |s| s.optimiser.run.is_none()));
     assert!(h.state().status.iter().all(|s| !s.starts_with("error")));

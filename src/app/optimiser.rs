@@ -20,13 +20,15 @@ pub enum Method {
     #[default]
     EdgeAlign,
     UnicalLidar,
+    Unical,
 }
 
 impl Method {
     fn label(self) -> &'static str {
         match self {
             Method::EdgeAlign => "Edge alignment (cameras vs LiDAR, rotation)",
-            Method::UnicalLidar => "UniCal, LiDAR depth stage (scene + LiDARs; slow on CPU)",
+            Method::UnicalLidar => "UniCal, LiDAR terms (scene + LiDARs; slow on CPU)",
+            Method::Unical => "UniCal, LiDARs + cameras (1/8-size images; slowest)",
         }
     }
 }
@@ -154,19 +156,35 @@ pub fn start(studio: &mut Studio) {
         }
     ));
     studio.optimiser.started_from = Some(rig);
-    if studio.optimiser.method == Method::UnicalLidar {
+    let method = studio.optimiser.method;
+    if matches!(method, Method::UnicalLidar | Method::Unical) {
         studio.optimiser.message = Some(format!(
-            "preparing the neural scene from {frames} sweep(s) per LiDAR…"
+            "preparing the neural scene from {frames} sweep(s) per LiDAR{}…",
+            if method == Method::Unical {
+                " and image(s) per camera"
+            } else {
+                ""
+            }
         ));
+        // The reference LiDAR is the root: its extrinsic stays fixed.
+        let config = crate::unical::depth_calib::DepthCalibConfig {
+            frozen_sensor: Some(lidar),
+            ..Default::default()
+        };
         studio.optimiser.run = Some(Run::spawn_with(move || {
-            crate::unical::calibrator::UnicalLidarStage::from_drive(
+            let stage = crate::unical::calibrator::UnicalLidarStage::from_drive(
                 &drive,
                 &prepare_rig,
                 frames,
                 &segments,
-                Default::default(),
-            )
-            .map(|r| Box::new(r) as Box<dyn Calibrator>)
+                config,
+            )?;
+            let stage = if method == Method::Unical {
+                stage.with_cameras(&drive, frames, &segments, 0.125)?
+            } else {
+                stage
+            };
+            Ok(Box::new(stage) as Box<dyn Calibrator>)
         }));
         return;
     }
@@ -187,7 +205,7 @@ pub fn optimiser_ui(studio: &mut Studio, ui: &mut egui::Ui) {
         egui::ComboBox::from_label("method")
             .selected_text(studio.optimiser.method.label())
             .show_ui(ui, |ui| {
-                for m in [Method::EdgeAlign, Method::UnicalLidar] {
+                for m in [Method::EdgeAlign, Method::UnicalLidar, Method::Unical] {
                     ui.selectable_value(&mut studio.optimiser.method, m, m.label());
                 }
             });

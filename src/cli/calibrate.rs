@@ -2,8 +2,9 @@
 //! calibration file (atomically), with provenance and the final losses as metrics.
 //!
 //! Methods available now: `edge` (cameras against a reference LiDAR by edge alignment,
-//! rotation) and `unical` (UniCal's LiDAR depth stage: the scene and every LiDAR extrinsic;
-//! the camera terms of UniCal are not in this build, so cameras keep their initial guess).
+//! rotation) and `unical` (UniCal: the scene and every LiDAR extrinsic from LiDAR depth,
+//! intensity and the regulariser; with `--camera-frames N` the cameras join through the colour
+//! term; `--root` keeps one sensor fixed).
 //! `icp`, `mi`, `target` and `pose-graph` are named by the contract and refused with a clear
 //! message until they land.
 
@@ -30,6 +31,9 @@ pub struct CalibrateArgs {
     pub seed: u64,
     /// unical: images per camera for the colour term (0: LiDAR depth stage only).
     pub camera_frames: usize,
+    /// unical: the sensor whose extrinsic stays fixed (default: none; the trajectory fixes the
+    /// gauge).
+    pub root: Option<String>,
     pub out: PathBuf,
 }
 
@@ -68,10 +72,11 @@ pub fn calibrate(
             }
         }
     }
-    for s in &args.sensors {
+    let asked = args.sensors.iter().map(|s| ("--sensors", s));
+    for (option, s) in asked.chain(args.root.iter().map(|s| ("--root", s))) {
         if rig.sensor(s).is_none() {
             return Err(format!(
-                "--sensors: '{s}' is not a sensor of {}",
+                "{option}: '{s}' is not a sensor of {}",
                 args.log.display()
             ));
         }
@@ -105,6 +110,7 @@ pub fn calibrate(
                 let config = DepthCalibConfig {
                     iterations: args.iterations.unwrap_or(300),
                     seed: args.seed,
+                    frozen_sensor: args.root.clone(),
                     ..DepthCalibConfig::default()
                 };
                 Box::new(

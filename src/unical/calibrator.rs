@@ -1,5 +1,6 @@
 //! UniCal as a [`Calibrator`] for the studio and the runner: [`DepthCalibration`] (one neural
-//! scene and every LiDAR extrinsic, learned jointly from LiDAR depth) prepared from a drive;
+//! scene and every LiDAR extrinsic, learned jointly from LiDAR depth, intensity and the SDF
+//! regulariser) prepared from a drive;
 //! with [`UnicalLidarStage::with_cameras`] the cameras join through the colour term (their
 //! images downscaled, intrinsics scaled to match).
 //!
@@ -117,9 +118,9 @@ impl UnicalLidarStage {
 impl Calibrator for UnicalLidarStage {
     fn name(&self) -> &str {
         if !self.calib.has_cameras() {
-            "UniCal (LiDAR depth stage)"
+            "UniCal (LiDAR terms)"
         } else {
-            "UniCal (LiDAR depth + camera colour)"
+            "UniCal (LiDAR + camera terms)"
         }
     }
 
@@ -133,6 +134,10 @@ impl Calibrator for UnicalLidarStage {
             ("depth loss".into(), r.loss),
             ("|depth error| m".into(), r.mean_abs_error_m),
         ];
+        if self.calib.has_intensity() {
+            losses.push(("intensity loss".into(), r.intensity_loss));
+        }
+        losses.push(("regulariser".into(), r.regulariser_loss));
         if self.calib.has_cameras() {
             losses.push(("colour loss".into(), r.colour_loss));
         }

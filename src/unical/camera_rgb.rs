@@ -15,7 +15,7 @@
 
 use glam::DVec3;
 
-use super::composite::{alpha_from_sdf, composite, composite_backward};
+use super::composite::{Upstream, alpha_from_sdf, composite, composite_backward};
 use super::field::SceneField;
 use super::hash_grid::SparseGrad;
 use super::mlp::{Mlp, MlpGrad};
@@ -53,7 +53,7 @@ pub fn sh_encoding(d: DVec3) -> [f64; SH_DIM] {
 
 /// `Σ_j g_j ∂SH_j/∂d` by central differences of the (polynomial) encoding in f64: exact to
 /// ~1e-10, and six evaluations of 16 polynomials are nothing next to the field queries.
-fn sh_backward(d: DVec3, g: &[f32]) -> DVec3 {
+pub(super) fn sh_backward(d: DVec3, g: &[f32]) -> DVec3 {
     let h = 1e-6;
     let mut out = DVec3::ZERO;
     for axis in 0..3 {
@@ -127,7 +127,7 @@ pub struct ColourStep {
     pub exposure: [f64; 6],
 }
 
-fn sigmoid(x: f32) -> f32 {
+pub(super) fn sigmoid(x: f32) -> f32 {
     1.0 / (1.0 + (-x).exp())
 }
 
@@ -209,8 +209,12 @@ pub fn colour_step(
             .zip(&d_sh_sky)
             .map(|(a, b)| a + b)
             .collect();
-        let upstream =
-            composite_backward(&alphas, taus, &features, dim, &c, 0.0, -d_t_sky, d_feature);
+        let up = Upstream {
+            accumulation: -d_t_sky,
+            feature: d_feature,
+            ..Upstream::default()
+        };
+        let upstream = composite_backward(&alphas, taus, &features, dim, &c, &up);
         let (d_o, mut d_d, d_beta) =
             field.ray_backward(&samples, taus, beta, &upstream, &mut out.grid, &mut out.geo);
         out.beta_grad += d_beta;

@@ -5,8 +5,8 @@
 //! expected range `D = Σ w_i τ_i` (Eq. 5), accumulated opacity `A = Σ w_i` and feature
 //! `F = Σ w_i f_i` (feature rendering: decoders then run once per ray, §4(a)).
 //!
-//! Backward without dividing by (1 − α): with per-sample scalar `g_i = ∂L/∂D·τ_i + ∂L/∂A +
-//! ∂L/∂F·f_i`, `∂L/∂α_k = T_k (g_k − R_k)` where `R_k = Σ_{i>k} Π_{k<j<i}(1 − α_j) α_i g_i`
+//! Backward without dividing by (1 − α): with per-sample scalar `g_i = ∂L/∂w_i + ∂L/∂D·τ_i +
+//! ∂L/∂A + ∂L/∂F·f_i`, `∂L/∂α_k = T_k (g_k − R_k)` where `R_k = Σ_{i>k} Π_{k<j<i}(1 − α_j) α_i g_i`
 //! is accumulated from the back: `R_k = α_{k+1} g_{k+1} + (1 − α_{k+1}) R_{k+1}`.
 
 /// What one ray renders.
@@ -54,25 +54,35 @@ pub fn composite(alphas: &[f32], taus_m: &[f32], features: &[f32], dim: usize) -
     out
 }
 
-/// Gradients of the composite: ∂L/∂α_i and ∂L/∂f_i (row per sample), given ∂L/∂D, ∂L/∂A and
-/// ∂L/∂F.
+/// What the loss says about one ray's composite: `∂L/∂D`, `∂L/∂A`, `∂L/∂F` (empty when no
+/// feature is rendered) and `∂L/∂w_i` per sample (empty when no loss reads the weights, e.g.
+/// the regulariser's weight suppression does).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Upstream<'a> {
+    pub depth: f32,
+    pub accumulation: f32,
+    pub feature: &'a [f32],
+    pub weights: &'a [f32],
+}
+
+/// Gradients of the composite: ∂L/∂α_i and ∂L/∂f_i (row per sample).
 pub fn composite_backward(
     alphas: &[f32],
     taus_m: &[f32],
     features: &[f32],
     dim: usize,
     forward: &Composite,
-    d_depth: f32,
-    d_accumulation: f32,
-    d_feature: &[f32],
+    up: &Upstream,
 ) -> (Vec<f32>, Vec<f32>) {
     let n = alphas.len();
+    let dim = if up.feature.len() >= dim { dim } else { 0 };
     let g: Vec<f32> = (0..n)
         .map(|i| {
-            d_depth * taus_m[i]
-                + d_accumulation
+            up.depth * taus_m[i]
+                + up.accumulation
+                + up.weights.get(i).copied().unwrap_or(0.0)
                 + (0..dim)
-                    .map(|c| d_feature[c] * features[i * dim + c])
+                    .map(|c| up.feature[c] * features[i * dim + c])
                     .sum::<f32>()
         })
         .collect();
@@ -85,7 +95,7 @@ pub fn composite_backward(
     let mut d_features = vec![0.0; n * dim];
     for i in 0..n {
         for c in 0..dim {
-            d_features[i * dim + c] = forward.weights[i] * d_feature[c];
+            d_features[i * dim + c] = forward.weights[i] * up.feature[c];
         }
     }
     (d_alpha, d_features)
@@ -106,7 +116,10 @@ mod tests {
     fn loss(sdf: &[f32], beta: f32, taus: &[f32], feats: &[f32]) -> f32 {
         let alphas: Vec<f32> = sdf.iter().map(|s| alpha_from_sdf(*s, beta).0).collect();
         let c = composite(&alphas, taus, feats, 3);
-        0.7 * c.depth_m - 1.3 * c.accumulation + c.feature[0] * 0.5 - c.feature[2] * 0.9
+        let weights: f32 = (c.weights.iter().enumerate())
+            .map(|(i, w)| w * 0.3 * (i as f32 * 0.9).cos())
+            .sum();
+        0.7 * c.depth_m - 1.3 * c.accumulation + c.feature[0] * 0.5 - c.feature[2] * 0.9 + weights
     }
 
     #[test]
@@ -128,15 +141,21 @@ mod tests {
         let beta = 8.0;
         let alphas: Vec<f32> = sdf.iter().map(|s| alpha_from_sdf(*s, beta).0).collect();
         let fwd = composite(&alphas, &taus, &feats, 3);
+        let d_w: Vec<f32> = (0..sdf.len())
+            .map(|i| 0.3 * (i as f32 * 0.9).cos())
+            .collect();
         let (d_alpha, d_feat) = composite_backward(
             &alphas,
             &taus,
             &feats,
             3,
             &fwd,
-            0.7,
-            -1.3,
-            &[0.5, 0.0, -0.9],
+            &Upstream {
+                depth: 0.7,
+                accumulation: -1.3,
+                feature: &[0.5, 0.0, -0.9],
+                weights: &d_w,
+            },
         );
         let eps = 1e-3;
         let mut d_beta = 0.0;

@@ -1,13 +1,15 @@
-//! The LiDAR stage of UniCal: one scene field learned jointly with every LiDAR's extrinsic from
-//! depth alone (the `0.1·L_depth` term of method.md §8, rolling shutter per §5), anchored by the
-//! vehicle trajectory. Cameras join when the colour term lands; this is already a complete
-//! target-free LiDAR-to-vehicle calibration.
+//! The UniCal optimisation step: one scene field learned jointly with every sensor's extrinsic,
+//! anchored by the vehicle trajectory (method.md §8): `L_rgb + 0.1·L_depth + 0.1·L_int +
+//! 0.01·L_reg` (the surface-alignment slot comes with the correspondences).
 //!
 //! Each step draws the same number of returns from every LiDAR (§7), builds their rays from the
-//! trajectory at each return's firing time and the current extrinsic, samples them every 10 cm in
-//! the occupancy grid (stratified jitter), and renders depth; gradients go to the hash table
-//! (sparse Adam), the geometry MLP, β (through ln β) and the 6D + translation pose of each
-//! LiDAR (dense Adam), all computed in parallel chunks of rays and summed.
+//! trajectory at each return's firing time and the current extrinsic (rolling shutter, §5),
+//! samples them every 10 cm in the occupancy grid (stratified jitter), and renders depth,
+//! intensity and the regulariser ([`super::lidar_terms`]); cameras add the same number of
+//! pixels each through the colour term ([`super::camera_rgb`]). Gradients go to the hash table
+//! (sparse Adam), the geometry MLP, the decoders, β (through ln β), the per-sensor exposure and
+//! intensity mappings and the 6D + translation pose of each sensor (dense Adam), all computed
+//! in parallel chunks of rays and summed. One sensor can be frozen as the root.
 
 use glam::{DVec2, DVec3};
 use rayon::prelude::*;
@@ -15,8 +17,9 @@ use rayon::prelude::*;
 use super::adam::{AdamConfig, DenseAdam, SparseAdam, decayed_lr};
 use super::camera_rgb::{Appearance, ColourRay, ExposureMap, colour_step};
 use super::field::{FieldConfig, SceneField};
-use super::hash_grid::GradAccumulator;
-use super::lidar_depth::{DepthRay, depth_step};
+use super::hash_grid::{GradAccumulator, HashGridConfig};
+use super::intensity::{IntensityDecoder, IntensityMap, normaliser};
+use super::lidar_terms::{DepthRay, LidarModel, LidarWeights, lidar_step};
 use super::occupancy::OccupancyGrid;
 use super::pose::PoseParams;
 use crate::geometry::camera::CameraIntrinsics;
@@ -36,11 +39,16 @@ pub struct DepthCalibConfig {
     pub seed: u64,
     /// Camera rays per camera and step (the budget is split evenly across sensors, §7).
     pub rays_per_camera: usize,
-    /// Loss weights (§8): colour 1, depth 0.1.
+    /// Loss weights (§8): colour 1, depth 0.1, intensity 0.1, regulariser 0.01.
     pub rgb_weight: f32,
     pub depth_weight: f32,
+    pub intensity_weight: f32,
+    pub regulariser_weight: f32,
     /// Camera rays are sampled up to this distance (the scene box clips them further).
     pub camera_far_m: f64,
+    /// A sensor whose extrinsic stays fixed (the root); `None`: all move, the trajectory fixes
+    /// the gauge (§11).
+    pub frozen_sensor: Option<String>,
 }
 
 impl Default for DepthCalibConfig {
@@ -60,7 +68,43 @@ impl Default for DepthCalibConfig {
             rays_per_camera: 512,
             rgb_weight: 1.0,
             depth_weight: 0.1,
+            intensity_weight: 0.1,
+            regulariser_weight: 0.01,
             camera_far_m: 120.0,
+            frozen_sensor: None,
+        }
+    }
+}
+
+impl DepthCalibConfig {
+    /// The paper's values (method.md §2, §7, §12; supplementary A2): hash table 2^21 per level,
+    /// 16 levels from 16 to 4096, 2^19 samples per step (≈ 5000 rays at 10 cm steps, split
+    /// evenly across sensors: set `rays_per_sensor`/`rays_per_camera` for the rig), pose rate
+    /// 1e-4, 30 000 iterations. Sized for a GPU; [`DepthCalibConfig::default`] is the CPU preset.
+    pub fn paper() -> Self {
+        Self {
+            field: FieldConfig {
+                grid: HashGridConfig {
+                    levels: 16,
+                    log2_table_size: 21,
+                    base_resolution: 16.0,
+                    max_resolution: 4096.0,
+                },
+                ..FieldConfig::default()
+            },
+            rays_per_sensor: 625,
+            rays_per_camera: 625,
+            lr_pose: 1e-4,
+            iterations: 30_000,
+            ..Self::default()
+        }
+    }
+
+    fn lidar_weights(&self) -> LidarWeights {
+        LidarWeights {
+            depth: self.depth_weight,
+            intensity: self.intensity_weight,
+            regulariser: self.regulariser_weight,
         }
     }
 }
@@ -118,6 +162,13 @@ pub struct DepthCalibration {
     mlp_params: Vec<f32>,
     pose_opt: Vec<DenseAdam>,
     beta_opt: DenseAdam,
+    /// Per LiDAR: the factor that normalises its intensities to [0, 1] (`None`: no intensity).
+    intensity_norm: Vec<Option<f32>>,
+    intensity_maps: Vec<IntensityMap>,
+    intensity_map_opt: Vec<DenseAdam>,
+    decoder: IntensityDecoder,
+    decoder_params: Vec<f32>,
+    decoder_opt: DenseAdam,
     pub iteration: usize,
     rng: u64,
     camera: Option<CameraStage>,
@@ -132,6 +183,10 @@ pub struct DepthReport {
     pub beta: f32,
     /// Camera colour loss (mean squared error in [0, 1] units; 0 without cameras).
     pub colour_loss: f64,
+    /// LiDAR intensity loss (normalised intensities; 0 when no LiDAR reports intensity).
+    pub intensity_loss: f64,
+    /// The SDF regulariser (Eikonal near hits + weight suppression away from them).
+    pub regulariser_loss: f64,
 }
 
 fn next(rng: &mut u64) -> u64 {
@@ -236,7 +291,22 @@ impl DepthCalibration {
             .iter()
             .map(|l| PoseParams::from_rigid(l.initial))
             .collect();
+        let intensity_norm: Vec<Option<f32>> = lidars
+            .iter()
+            .map(|l| normaliser(l.sweeps.iter().flat_map(|s| s.intensity.iter())))
+            .collect();
+        let decoder = IntensityDecoder::new(config.field.feature_dim, config.seed);
+        let decoder_params = mlp_flat(&decoder.mlp);
         Self {
+            intensity_maps: vec![IntensityMap::default(); lidars.len()],
+            intensity_map_opt: lidars
+                .iter()
+                .map(|_| DenseAdam::new(2, AdamConfig::STANDARD))
+                .collect(),
+            intensity_norm,
+            decoder_opt: DenseAdam::new(decoder_params.len(), AdamConfig::NGP),
+            decoder_params,
+            decoder,
             grid_opt: SparseAdam::new(field.grid.params.len(), AdamConfig::NGP),
             grid_acc: GradAccumulator::new(field.grid.entry_count()),
             mlp_opt: DenseAdam::new(mlp_params.len(), AdamConfig::NGP),
@@ -313,6 +383,26 @@ impl DepthCalibration {
             );
         }
         out
+    }
+
+    fn is_frozen(&self, name: &str) -> bool {
+        self.config.frozen_sensor.as_deref() == Some(name)
+    }
+
+    /// Current intensity mappings, by LiDAR name (only LiDARs that report intensity).
+    pub fn intensity_maps(&self) -> Vec<(String, IntensityMap)> {
+        self.lidars
+            .iter()
+            .zip(&self.intensity_maps)
+            .zip(&self.intensity_norm)
+            .filter(|(_, norm)| norm.is_some())
+            .map(|((l, m), _)| (l.name.clone(), *m))
+            .collect()
+    }
+
+    /// Whether any LiDAR reports intensity (the intensity term is on).
+    pub fn has_intensity(&self) -> bool {
+        self.intensity_norm.iter().any(Option::is_some)
     }
 
     /// Whether cameras take part (the colour term is on).
@@ -398,6 +488,9 @@ impl DepthCalibration {
             }
             let i = (next(&mut self.rng) % s.points_in_sensor.len() as u64) as usize;
             let p = s.points_in_sensor[i];
+            let intensity = self.intensity_norm[sensor]
+                .zip(s.intensity.get(i))
+                .map(|(k, raw)| (raw * k).clamp(0.0, 1.0));
             let v = DVec3::new(p[0] as f64, p[1] as f64, p[2] as f64);
             let range = v.length();
             let Some(u) = v.try_normalize() else {
@@ -432,6 +525,7 @@ impl DepthCalibration {
                 world_from_vehicle: wv,
                 dir_in_sensor: u,
                 range_m: range as f32,
+                intensity,
                 taus_m: taus,
             });
         }
@@ -447,41 +541,76 @@ impl DepthCalibration {
         let mut geo = self.field.geo.zero_grad();
         let mut beta_grad = 0.0;
         let (mut loss, mut mae, mut colour_loss) = (0.0, 0.0, 0.0);
+        let (mut intensity_loss, mut regulariser_loss) = (0.0, 0.0);
         let lidars = self.lidars.len().max(1) as f64;
         let threads = rayon::current_num_threads().max(1) * 2;
-        let depth_weight = self.config.depth_weight as f64;
+        let weights = self.config.lidar_weights();
+        let mut decoder_grad = self.decoder.mlp.zero_grad();
+        let with_intensity = self.intensity_norm.iter().flatten().count().max(1) as f64;
         for s in 0..self.lidars.len() {
             let rays = self.draw_rays(s);
             if rays.is_empty() {
                 continue;
             }
             let chunk = rays.len().div_ceil(threads).max(1);
-            let (field, beta, pose) = (&self.field, self.beta(), &self.poses[s]);
+            let model = LidarModel {
+                field: &self.field,
+                beta: self.beta(),
+                decoder: self.intensity_norm[s].map(|_| &self.decoder),
+            };
+            let (pose, map) = (&self.poses[s], &self.intensity_maps[s]);
             let parts: Vec<_> = rays
                 .par_chunks(chunk)
-                .map(|c| (c.len(), depth_step(field, beta, pose, c)))
+                .map(|c| (c.len(), lidar_step(model, pose, map, &weights, c)))
                 .collect();
             let mut pose_grad = [0.0f32; 9];
+            let mut map_grad = [0.0f32; 2];
             for (n, part) in parts {
-                // depth_step averages over its chunk: weight chunks by size, sensors equally.
+                // lidar_step averages over its chunk: weight chunks by size, sensors equally.
                 let share = n as f64 / rays.len() as f64 / lidars;
-                let w = share * depth_weight;
-                loss += part.loss * share;
+                loss += part.depth_loss * share;
                 mae += part.mean_abs_error_m * share * lidars;
-                beta_grad += part.beta_grad * w;
-                self.grid_acc.add(&part.grid, w as f32);
-                add_scaled(&mut geo, &part.mlp, w as f32);
-                let g = pose_grad_flat(&part.pose, w);
+                intensity_loss += part.intensity_loss * share * lidars / with_intensity;
+                regulariser_loss += part.regulariser_loss * share;
+                beta_grad += part.beta_grad * share;
+                self.grid_acc.add(&part.grid, share as f32);
+                add_scaled(&mut geo, &part.mlp, share as f32);
+                add_scaled(&mut decoder_grad, &part.decoder, share as f32);
+                let g = pose_grad_flat(&part.pose, share);
                 pose_grad.iter_mut().zip(g).for_each(|(a, b)| *a += b);
+                map_grad[0] += (part.intensity_map[0] * share) as f32;
+                map_grad[1] += (part.intensity_map[1] * share) as f32;
             }
-            pose_step(
-                &mut self.pose_opt[s],
-                &mut self.poses[s],
-                &pose_grad,
-                lr_pose,
+            if !self.is_frozen(&self.lidars[s].name) {
+                pose_step(
+                    &mut self.pose_opt[s],
+                    &mut self.poses[s],
+                    &pose_grad,
+                    lr_pose,
+                );
+            }
+            if self.intensity_norm[s].is_some() {
+                let m = &mut self.intensity_maps[s];
+                let mut flat = [m.scale, m.offset];
+                self.intensity_map_opt[s].step(&mut flat, &map_grad, lr_field);
+                (m.scale, m.offset) = (flat[0], flat[1]);
+            }
+        }
+        if self.intensity_norm.iter().any(Option::is_some) {
+            self.decoder_opt.step(
+                &mut self.decoder_params,
+                &grad_flat(&decoder_grad),
+                lr_field,
             );
+            mlp_set(&mut self.decoder.mlp, &self.decoder_params);
         }
         let cameras = self.camera.as_ref().map_or(0, |c| c.cameras.len());
+        let frozen: Vec<bool> = self.camera.as_ref().map_or_else(Vec::new, |c| {
+            c.cameras
+                .iter()
+                .map(|cam| self.is_frozen(&cam.name))
+                .collect()
+        });
         if let Some(stage) = self.camera.as_ref() {
             let mut colour = stage.appearance.colour.zero_grad();
             let mut sky = stage.appearance.sky.zero_grad();
@@ -524,12 +653,14 @@ impl DepthCalibration {
                         *a += (b * w) as f32;
                     }
                 }
-                pose_step(
-                    &mut stage.pose_opt[k],
-                    &mut stage.poses[k],
-                    &pose_grad,
-                    lr_pose,
-                );
+                if !frozen[k] {
+                    pose_step(
+                        &mut stage.pose_opt[k],
+                        &mut stage.poses[k],
+                        &pose_grad,
+                        lr_pose,
+                    );
+                }
                 let e = &mut stage.exposure[k];
                 let mut flat: Vec<f32> = e.scale.iter().chain(&e.offset).copied().collect();
                 stage.exposure_opt[k].step(&mut flat, &exposure_grad, lr_field);
@@ -566,6 +697,8 @@ impl DepthCalibration {
             mean_abs_error_m: mae / lidars,
             beta: self.beta(),
             colour_loss,
+            intensity_loss,
+            regulariser_loss,
         }
     }
 }
@@ -602,10 +735,24 @@ mod tests {
                         ]
                     })
                     .collect();
+                // Intensity falls with incidence: steep beams (near the car) return brighter,
+                // which the decoder can learn from the view direction before the surface forms
+                // (a release run learns 1 m reflectivity stripes too, once the surface has
+                // formed after ~200 steps).
+                let intensity = points
+                    .iter()
+                    .map(|p| {
+                        if p[2] / p[0].hypot(p[1]) < -0.4 {
+                            200.0
+                        } else {
+                            40.0
+                        }
+                    })
+                    .collect();
                 LidarSweep {
                     stamp_nanos: k * 100_000_000,
                     frame_id: "lidar".into(),
-                    intensity: vec![0.0; points.len()],
+                    intensity,
                     points_in_sensor: points,
                     time_offset_secs: None,
                 }
@@ -745,5 +892,51 @@ mod tests {
         let (b, eb) = run();
         assert_eq!(a.last().map(|r| r.loss), b.last().map(|r| r.loss));
         assert_eq!(ea, eb);
+    }
+
+    /// Two LiDARs with intensity: the intensity loss falls, the regulariser is reported, and a
+    /// frozen root keeps its extrinsic exactly while the other sensor moves.
+    #[test]
+    fn intensity_and_regulariser_join_and_a_frozen_root_stays_put() {
+        let (trajectory, mount, sweeps) = flat_drive();
+        let config = DepthCalibConfig {
+            frozen_sensor: Some("lidar".into()),
+            intensity_weight: 1.0,
+            ..small_config()
+        };
+        // The second LiDAR sees the same returns from the same mount, but starts 5 cm off.
+        let second_initial =
+            Rigid::from_translation(mount.translation + DVec3::new(0.05, 0.0, 0.0));
+        let mut c = DepthCalibration::new(
+            config,
+            trajectory,
+            vec![
+                LidarData {
+                    name: "lidar".into(),
+                    initial: mount,
+                    sweeps: sweeps.clone(),
+                },
+                LidarData {
+                    name: "second".into(),
+                    initial: second_initial,
+                    sweeps,
+                },
+            ],
+        );
+        assert!(c.has_intensity());
+        let reports: Vec<DepthReport> = (0..40).map(|_| c.step()).collect();
+        let first: f64 = reports[..5].iter().map(|r| r.intensity_loss).sum::<f64>() / 5.0;
+        let last: f64 = reports[35..].iter().map(|r| r.intensity_loss).sum::<f64>() / 5.0;
+        assert!(last < 0.5 * first, "intensity loss {first} -> {last}");
+        assert!(reports.iter().all(|r| r.regulariser_loss.is_finite()));
+        assert!(reports.iter().any(|r| r.regulariser_loss > 0.0));
+        let e = c.extrinsics();
+        assert_eq!(e[0].1.translation, mount.translation);
+        assert_eq!(
+            e[0].1.rotation,
+            PoseParams::from_rigid(mount).to_rigid().rotation
+        );
+        assert_ne!(e[1].1.translation, second_initial.translation);
+        assert_eq!(c.intensity_maps().len(), 2);
     }
 }

@@ -140,7 +140,7 @@ impl SceneField {
 #[cfg(test)]
 mod tests {
     use super::super::adam::{AdamConfig, DenseAdam, SparseAdam};
-    use super::super::composite::{alpha_from_sdf, composite, composite_backward};
+    use super::super::composite::{Upstream, alpha_from_sdf, composite, composite_backward};
     use super::*;
 
     fn flat(g: &MlpGrad) -> Vec<f32> {
@@ -221,16 +221,11 @@ mod tests {
                 let c = composite(&alphas, &taus, &[], 0);
                 let r = c.depth_m - target;
                 err += r.abs();
-                let (d_alpha, _) = composite_backward(
-                    &alphas,
-                    &taus,
-                    &[],
-                    0,
-                    &c,
-                    2.0 * r / rays.len() as f32,
-                    0.0,
-                    &[],
-                );
+                let up = Upstream {
+                    depth: 2.0 * r / rays.len() as f32,
+                    ..Upstream::default()
+                };
+                let (d_alpha, _) = composite_backward(&alphas, &taus, &[], 0, &c, &up);
                 for (s, da) in samples.iter().zip(&d_alpha) {
                     let (_, da_ds, _) = alpha_from_sdf(s.sdf(), beta);
                     let zeros = vec![0.0; 3];

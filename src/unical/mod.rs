@@ -9,7 +9,10 @@
 //! - [`field`]: the scene field (Eq. 1): hash encoding + geometry MLP → SDF and feature.
 //! - [`pose`]: extrinsics as 6D rotation + translation (§11) and the ray → pose backward pass.
 //! - [`occupancy`]: the 0.5 m occupancy grid from aggregated LiDAR and 10 cm ray sampling (§7).
-//! - [`lidar_depth`]: the LiDAR depth loss for a batch of rays with scene, β and pose gradients.
+//! - [`lidar_terms`]: the LiDAR terms (depth, intensity, regulariser) for a batch of rays with
+//!   scene, β, decoder, intensity-mapping and pose gradients.
+//! - [`intensity`]: the LiDAR intensity decoder and per-LiDAR intensity mapping.
+//! - [`regulariser`]: Eikonal near LiDAR hits (tetrahedral stencil) and weight suppression.
 //! - [`camera_rgb`]: the camera colour term (feature rendering, sky, colour decoder on SH view
 //!   encoding, per-camera exposure) with scene, decoder, exposure and pose gradients.
 //! - [`depth_calib`]: the LiDAR stage: scene + every LiDAR extrinsic from depth (a full step).
@@ -24,7 +27,9 @@ pub mod composite;
 pub mod depth_calib;
 pub mod field;
 pub mod hash_grid;
-pub mod lidar_depth;
+pub mod intensity;
+pub mod lidar_terms;
 pub mod mlp;
 pub mod occupancy;
 pub mod pose;
+pub mod regulariser;

@@ -1,0 +1,393 @@
+//! The LiDAR terms of the objective (method.md §6 and §8) for a batch of one LiDAR's rays:
+//! depth (`L_depth`, main Eq. 5), intensity (`L_int`) and the SDF regulariser (`L_reg`, see
+//! [`super::regulariser`]), with gradients for the scene, the intensity decoder, the sensor's
+//! intensity mapping and its pose.
+//!
+//! A ray is a return `p` of sensor s fired at time t: `o = P(t)·t_s`, `d = R_P R_s p/|p|` (rolling
+//! shutter: P is the trajectory at each return's own time, §5), target range `|p|` and
+//! normalised intensity. The field is sampled at `x_i = o + τ_i d` (τ from the occupancy grid)
+//! and composited to a range D and a feature F; the intensity decoder reads (F, SH(d)). The
+//! step returns the gradient of `λ_d·L_depth + λ_i·L_int + λ_r·L_reg` (means over the batch)
+//! and each term's value.
+//!
+//! Backward: losses → decoder (∂L/∂F, ∂L/∂SH) and per-sample ∂L/∂w_i (weight suppression) →
+//! compositing → SDF → field (sparse grid + MLP gradients, and ∂L/∂x_i from the encoding's
+//! spatial gradient) → ∂L/∂o = Σ∂L/∂x_i, ∂L/∂d = Σ τ_i ∂L/∂x_i + SH Jacobian → pose. The
+//! Eikonal samples add scene gradients only.
+
+use glam::DVec3;
+
+use super::camera_rgb::{sh_backward, sh_encoding};
+use super::composite::{Upstream, alpha_from_sdf, composite, composite_backward};
+use super::field::SceneField;
+use super::hash_grid::SparseGrad;
+use super::intensity::{IntensityDecoder, IntensityMap};
+use super::mlp::MlpGrad;
+use super::pose::{PoseGrad, PoseParams};
+use super::regulariser::{NEAR_HIT_M, eikonal, weight_suppression};
+use crate::geometry::Rigid;
+
+/// One LiDAR ray ready to render.
+#[derive(Clone, Debug)]
+pub struct DepthRay {
+    /// `world_from_vehicle` at the return's firing time.
+    pub world_from_vehicle: Rigid,
+    /// Unit direction in the sensor frame.
+    pub dir_in_sensor: DVec3,
+    pub range_m: f32,
+    /// Intensity normalised to [0, 1]; `None` when the sensor reports none.
+    pub intensity: Option<f32>,
+    /// Sample distances along the ray.
+    pub taus_m: Vec<f32>,
+}
+
+/// The objective's weights for the LiDAR terms (method.md §8: 0.1, 0.1, 0.01).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LidarWeights {
+    pub depth: f32,
+    pub intensity: f32,
+    pub regulariser: f32,
+}
+
+impl LidarWeights {
+    pub const PAPER: Self = Self {
+        depth: 0.1,
+        intensity: 0.1,
+        regulariser: 0.01,
+    };
+}
+
+/// Term values (unweighted means over the batch) and gradients of their weighted sum.
+#[derive(Debug)]
+pub struct LidarStep {
+    pub depth_loss: f64,
+    pub mean_abs_error_m: f64,
+    pub intensity_loss: f64,
+    pub regulariser_loss: f64,
+    /// Unmerged: repeated entries are summed by the caller (see `GradAccumulator`).
+    pub grid: SparseGrad,
+    pub mlp: MlpGrad,
+    pub decoder: MlpGrad,
+    /// ∂L/∂scale, ∂L/∂offset of the sensor's intensity mapping.
+    pub intensity_map: [f64; 2],
+    pub beta_grad: f64,
+    pub pose: PoseGrad,
+}
+
+/// What a LiDAR batch renders with: the scene, β and the shared intensity decoder (`None`:
+/// no intensity term).
+#[derive(Clone, Copy)]
+pub struct LidarModel<'a> {
+    pub field: &'a SceneField,
+    pub beta: f32,
+    pub decoder: Option<&'a IntensityDecoder>,
+}
+
+/// The LiDAR terms of `rays`, all from one sensor at `pose` with intensity mapping `map`.
+pub fn lidar_step(
+    model: LidarModel,
+    pose: &PoseParams,
+    map: &IntensityMap,
+    weights: &LidarWeights,
+    rays: &[DepthRay],
+) -> LidarStep {
+    let field = model.field;
+    let mut out = LidarStep {
+        depth_loss: 0.0,
+        mean_abs_error_m: 0.0,
+        intensity_loss: 0.0,
+        regulariser_loss: 0.0,
+        grid: SparseGrad::default(),
+        mlp: field.geo.zero_grad(),
+        decoder: model.decoder.map_or_else(
+            || MlpGrad {
+                weights: Vec::new(),
+                bias: Vec::new(),
+            },
+            |d| d.mlp.zero_grad(),
+        ),
+        intensity_map: [0.0; 2],
+        beta_grad: 0.0,
+        pose: PoseGrad::default(),
+    };
+    let n = rays.len().max(1) as f64;
+    let with_intensity = rays.iter().filter(|r| r.intensity.is_some()).count();
+    let n_int = with_intensity.max(1) as f64;
+    let dim = field.geo.output_dim().saturating_sub(1);
+    let reg_weight = (weights.regulariser as f64 / n) as f32;
+    for ray in rays {
+        if ray.taus_m.is_empty() {
+            continue;
+        }
+        let (o, d) = pose.ray(ray.world_from_vehicle, ray.dir_in_sensor);
+        let samples: Vec<_> = ray
+            .taus_m
+            .iter()
+            .map(|t| field.query(o + d * *t as f64))
+            .collect();
+        let alphas: Vec<f32> = samples
+            .iter()
+            .map(|s| alpha_from_sdf(s.sdf(), model.beta).0)
+            .collect();
+        let decode = model.decoder.zip(ray.intensity);
+        let (features, fdim) = if decode.is_some() {
+            let f: Vec<f32> = samples
+                .iter()
+                .flat_map(|s| s.feature().iter().copied())
+                .collect();
+            (f, dim)
+        } else {
+            (Vec::new(), 0)
+        };
+        let c = composite(&alphas, &ray.taus_m, &features, fdim);
+        // Depth.
+        let r = (c.depth_m - ray.range_m) as f64;
+        out.depth_loss += r * r / n;
+        out.mean_abs_error_m += r.abs() / n;
+        let d_depth = (weights.depth as f64 * 2.0 * r / n) as f32;
+        // Intensity.
+        let mut d_feature = Vec::new();
+        let mut d_d_sh = DVec3::ZERO;
+        if let Some((decoder, target)) = decode {
+            let sh: Vec<f32> = sh_encoding(d).iter().map(|v| *v as f32).collect();
+            let (value, trace) = decoder.forward(&c.feature, &sh);
+            let ri = (map.scale * value + map.offset - target) as f64;
+            out.intensity_loss += ri * ri / n_int;
+            let d_pred = weights.intensity as f64 * 2.0 * ri / n_int;
+            out.intensity_map[0] += d_pred * value as f64;
+            out.intensity_map[1] += d_pred;
+            let (d_f, d_sh) = decoder.backward(
+                &trace,
+                value,
+                (d_pred * map.scale as f64) as f32,
+                &mut out.decoder,
+            );
+            d_feature = d_f;
+            d_d_sh = sh_backward(d, &d_sh);
+        }
+        // Regulariser: weight suppression away from the hit, Eikonal near it.
+        let mut d_weights = Vec::new();
+        if weights.regulariser != 0.0 {
+            let (suppression, d_w) =
+                weight_suppression(&c.weights, &ray.taus_m, ray.range_m, reg_weight);
+            out.regulariser_loss += suppression / n;
+            d_weights = d_w;
+            for tau in &ray.taus_m {
+                if (tau - ray.range_m).abs() < NEAR_HIT_M {
+                    let x = o + d * *tau as f64;
+                    out.regulariser_loss +=
+                        eikonal(field, x, reg_weight, &mut out.grid, &mut out.mlp) / n;
+                }
+            }
+        }
+        let up = Upstream {
+            depth: d_depth,
+            accumulation: 0.0,
+            feature: &d_feature,
+            weights: &d_weights,
+        };
+        let upstream = composite_backward(&alphas, &ray.taus_m, &features, fdim, &c, &up);
+        let (d_o, d_d, d_beta) = field.ray_backward(
+            &samples,
+            &ray.taus_m,
+            model.beta,
+            &upstream,
+            &mut out.grid,
+            &mut out.mlp,
+        );
+        out.beta_grad += d_beta;
+        out.pose.add(&pose.ray_backward(
+            ray.world_from_vehicle,
+            ray.dir_in_sensor,
+            d_o,
+            d_d + d_d_sh,
+        ));
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::field::FieldConfig;
+    use super::super::hash_grid::HashGridConfig;
+    use super::*;
+    use glam::DQuat;
+
+    fn setup() -> (SceneField, IntensityDecoder, PoseParams, Vec<DepthRay>) {
+        let config = FieldConfig {
+            grid: HashGridConfig {
+                levels: 4,
+                log2_table_size: 12,
+                base_resolution: 4.0,
+                max_resolution: 32.0,
+            },
+            hidden: 16,
+            feature_dim: 2,
+            initial_sdf_m: 0.2,
+        };
+        let mut field = SceneField::new(DVec3::splat(-20.0), DVec3::splat(20.0), &config, 5);
+        // A non-trivial field: large table values so the SDF varies in space.
+        for (i, p) in field.grid.params.iter_mut().enumerate() {
+            *p = ((i as f32 * 0.7548).fract() - 0.5) * 4.0;
+        }
+        let pose = PoseParams::from_rigid(Rigid::new(
+            DQuat::from_euler(glam::EulerRot::ZYX, 0.2, 0.05, -0.03),
+            DVec3::new(0.9, 0.1, 1.8),
+        ));
+        let rays: Vec<DepthRay> = (0..6)
+            .map(|i| DepthRay {
+                world_from_vehicle: Rigid::new(
+                    DQuat::from_rotation_z(0.1 * i as f64),
+                    DVec3::new(2.0 + i as f64 * 0.3, 1.0, 0.0),
+                ),
+                dir_in_sensor: DVec3::new(1.0, 0.2 * i as f64 - 0.5, -0.3).normalize_or_zero(),
+                range_m: 6.0,
+                // One ray without intensity: it must contribute depth only.
+                intensity: (i != 3).then_some(0.1 + 0.12 * i as f32),
+                taus_m: (1..40).map(|k| k as f32 * 0.2).collect(),
+            })
+            .collect();
+        (field, IntensityDecoder::new(2, 8), pose, rays)
+    }
+
+    fn total(s: &LidarStep, w: &LidarWeights) -> f64 {
+        w.depth as f64 * s.depth_loss
+            + w.intensity as f64 * s.intensity_loss
+            + w.regulariser as f64 * s.regulariser_loss
+    }
+
+    /// End-to-end check of the whole chain (field, compositing, intensity decoder on SH of the
+    /// rolling-shutter ray's direction, 6D pose) against finite differences of the loss in the
+    /// pose parameters, β and the intensity mapping.
+    #[test]
+    fn pose_beta_and_mapping_gradients_match_finite_differences() {
+        let (field, decoder, pose, rays) = setup();
+        let beta = 3.0;
+        let map = IntensityMap {
+            scale: 0.9,
+            offset: 0.05,
+        };
+        // No regulariser: it does not move poses by design.
+        let w = LidarWeights {
+            depth: 1.0,
+            intensity: 2.0,
+            regulariser: 0.0,
+        };
+        let model = |beta| LidarModel {
+            field: &field,
+            beta,
+            decoder: Some(&decoder),
+        };
+        let step = lidar_step(model(beta), &pose, &map, &w, &rays);
+        assert!(step.depth_loss > 0.0 && step.intensity_loss > 0.0);
+        let loss = |p: &PoseParams| total(&lidar_step(model(beta), p, &map, &w, &rays), &w);
+        // f32 fields make the finite differences noisy at the 1e-3 level of the loss: compare
+        // each component against 1 % of the whole gradient's size.
+        let eps = 1e-3;
+        let norm = step.pose.r6.iter().map(|g| g * g).sum::<f64>().sqrt()
+            + step.pose.translation_m.length();
+        assert!(norm > 1e-2, "gradient too small to test: {norm}");
+        let tol = 0.01 * norm;
+        for k in 0..9 {
+            let (mut up, mut down) = (pose, pose);
+            if k < 6 {
+                up.r6[k] += eps;
+                down.r6[k] -= eps;
+            } else {
+                up.translation_m[k - 6] += eps;
+                down.translation_m[k - 6] -= eps;
+            }
+            let fd = (loss(&up) - loss(&down)) / (2.0 * eps);
+            let an = if k < 6 {
+                step.pose.r6[k]
+            } else {
+                step.pose.translation_m[k - 6]
+            };
+            assert!((fd - an).abs() < tol, "pose[{k}]: {fd} vs {an} (tol {tol})");
+        }
+        let at_beta = |b| total(&lidar_step(model(b), &pose, &map, &w, &rays), &w);
+        let fd = (at_beta(beta + 1e-3) - at_beta(beta - 1e-3)) / 2e-3;
+        assert!((fd - step.beta_grad).abs() < 2e-2 * (fd.abs() + step.beta_grad.abs()) + 1e-3);
+        for k in 0..2 {
+            let (mut up, mut down) = (map, map);
+            if k == 0 {
+                up.scale += 1e-3;
+                down.scale -= 1e-3;
+            } else {
+                up.offset += 1e-3;
+                down.offset -= 1e-3;
+            }
+            let l = |m: &IntensityMap| total(&lidar_step(model(beta), &pose, m, &w, &rays), &w);
+            let fd = (l(&up) - l(&down)) / 2e-3;
+            let an = step.intensity_map[k];
+            assert!(
+                (fd - an).abs() < 1e-3 + 0.01 * an.abs(),
+                "map[{k}]: {fd} vs {an}"
+            );
+        }
+    }
+
+    /// All three terms on: the geometry MLP's and the decoder's gradients against finite
+    /// differences (the regulariser's weight suppression goes through the compositing, its
+    /// Eikonal part through the stencil).
+    #[test]
+    fn scene_and_decoder_gradients_of_all_terms_match_finite_differences() {
+        let (field, decoder, pose, mut rays) = setup();
+        // Put the hits inside the sampled range so both regulariser parts are active.
+        for r in &mut rays {
+            r.range_m = 3.05;
+        }
+        let w = LidarWeights {
+            depth: 0.5,
+            intensity: 1.0,
+            regulariser: 2.0,
+        };
+        let map = IntensityMap::default();
+        let run = |f: &SceneField, dec: &IntensityDecoder| {
+            let model = LidarModel {
+                field: f,
+                beta: 3.0,
+                decoder: Some(dec),
+            };
+            lidar_step(model, &pose, &map, &w, &rays)
+        };
+        let step = run(&field, &decoder);
+        assert!(step.regulariser_loss > 0.0);
+        let eps = 1e-3;
+        let mut checked = 0;
+        for layer in 0..field.geo.layers.len() {
+            for k in [1, 4, 9] {
+                let (mut up, mut down) = (field.clone(), field.clone());
+                up.geo.layers[layer].weights[k] += eps;
+                down.geo.layers[layer].weights[k] -= eps;
+                let fd = (total(&run(&up, &decoder), &w) - total(&run(&down, &decoder), &w))
+                    / (2.0 * eps as f64);
+                let an = step.mlp.weights[layer][k] as f64;
+                assert!(
+                    (fd - an).abs() < 0.03 * (fd.abs() + an.abs()) + 2e-3,
+                    "geometry layer {layer} weight {k}: {fd} vs {an}"
+                );
+                checked += usize::from(an.abs() > 2e-3);
+            }
+        }
+        for layer in 0..decoder.mlp.layers.len() {
+            for k in [0, 2, 6] {
+                let (mut up, mut down) = (decoder.clone(), decoder.clone());
+                up.mlp.layers[layer].weights[k] += eps;
+                down.mlp.layers[layer].weights[k] -= eps;
+                let fd = (total(&run(&field, &up), &w) - total(&run(&field, &down), &w))
+                    / (2.0 * eps as f64);
+                let an = step.decoder.weights[layer][k] as f64;
+                assert!(
+                    (fd - an).abs() < 0.03 * (fd.abs() + an.abs()) + 2e-3,
+                    "decoder layer {layer} weight {k}: {fd} vs {an}"
+                );
+                checked += usize::from(an.abs() > 2e-3);
+            }
+        }
+        assert!(
+            checked >= 4,
+            "too few non-zero gradients to test ({checked})"
+        );
+    }
+}
