@@ -79,9 +79,11 @@ fn main() {
                 })
                 .collect();
             eprintln!(
-                "it {it:4} depth loss {:.4} |err| {:.3} m β {:.1} · {} · {:.2} s/it",
+                "it {it:4} depth loss {:.4} |err| {:.3} m int {:.4} reg {:.3} β {:.1} · {} · {:.2} s/it",
                 r.loss,
                 r.mean_abs_error_m,
+                r.intensity_loss,
+                r.regulariser_loss,
                 r.beta,
                 errs.join(" · "),
                 t0.elapsed().as_secs_f64() / (it + 1) as f64

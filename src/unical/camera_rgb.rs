@@ -15,6 +15,7 @@
 
 use glam::DVec3;
 
+use super::background::Background;
 use super::composite::{Upstream, alpha_from_sdf, composite, composite_backward};
 use super::field::SceneField;
 use super::hash_grid::SparseGrad;
@@ -109,8 +110,10 @@ pub struct ColourRay {
     pub dir_in_sensor: DVec3,
     /// Observed colour in [0, 1].
     pub target: [f32; 3],
-    /// Sample distances along the ray (may be empty: the ray sees only sky).
+    /// Sample distances along the ray in the scene box (may be empty).
     pub taus_m: Vec<f32>,
+    /// Sample distances in the background beyond it (empty without a background model).
+    pub background_taus_m: Vec<f32>,
 }
 
 /// Loss and gradients of one batch.
@@ -121,6 +124,9 @@ pub struct ColourStep {
     pub geo: MlpGrad,
     pub colour: MlpGrad,
     pub sky: MlpGrad,
+    /// The background field's gradients (empty without one).
+    pub background_grid: SparseGrad,
+    pub background_mlp: MlpGrad,
     pub beta_grad: f64,
     pub pose: PoseGrad,
     /// ∂L/∂scale then ∂L/∂offset.
@@ -131,21 +137,42 @@ pub(super) fn sigmoid(x: f32) -> f32 {
     1.0 / (1.0 + (-x).exp())
 }
 
+/// What camera rays render with: the scene, its background (optional), β and the decoders.
+#[derive(Clone, Copy)]
+pub struct CameraModel<'a> {
+    pub field: &'a SceneField,
+    pub background: Option<&'a Background>,
+    pub appearance: &'a Appearance,
+    pub beta: f32,
+}
+
 /// Mean squared colour error of `rays` seen from `pose` and its gradients.
 pub fn colour_step(
-    field: &SceneField,
-    appearance: &Appearance,
-    beta: f32,
+    model: CameraModel,
     pose: &PoseParams,
     exposure: &ExposureMap,
     rays: &[ColourRay],
 ) -> ColourStep {
+    let CameraModel {
+        field,
+        background,
+        appearance,
+        beta,
+    } = model;
     let mut out = ColourStep {
         loss: 0.0,
         grid: SparseGrad::default(),
         geo: field.geo.zero_grad(),
         colour: appearance.colour.zero_grad(),
         sky: appearance.sky.zero_grad(),
+        background_grid: SparseGrad::default(),
+        background_mlp: background.map_or_else(
+            || MlpGrad {
+                weights: Vec::new(),
+                bias: Vec::new(),
+            },
+            |b| b.geo.zero_grad(),
+        ),
         beta_grad: 0.0,
         pose: PoseGrad::default(),
         exposure: [0.0; 6],
@@ -168,12 +195,29 @@ pub fn colour_step(
                 break;
             }
         }
-        let taus = &ray.taus_m[..samples.len()];
+        let in_box = samples.len();
+        // Then the background, for the light that got through.
+        let mut far_samples = Vec::new();
+        if let Some(bg) = background.filter(|_| transmittance >= MIN_TRANSMITTANCE) {
+            for tau in &ray.background_taus_m {
+                let s = bg.query(o + d * *tau as f64);
+                let a = alpha_from_sdf(s.sdf(), beta).0;
+                far_samples.push(s);
+                alphas.push(a);
+                transmittance *= 1.0 - a;
+                if transmittance < MIN_TRANSMITTANCE {
+                    break;
+                }
+            }
+        }
+        let mut taus = ray.taus_m[..in_box].to_vec();
+        taus.extend_from_slice(&ray.background_taus_m[..far_samples.len()]);
         let features: Vec<f32> = samples
             .iter()
+            .chain(&far_samples)
             .flat_map(|s| s.feature().iter().copied())
             .collect();
-        let c = composite(&alphas, taus, &features, dim);
+        let c = composite(&alphas, &taus, &features, dim);
         let sh64 = sh_encoding(d);
         let sh: Vec<f32> = sh64.iter().map(|v| *v as f32).collect();
         let sky = appearance.sky.forward(&sh);
@@ -214,10 +258,31 @@ pub fn colour_step(
             feature: d_feature,
             ..Upstream::default()
         };
-        let upstream = composite_backward(&alphas, taus, &features, dim, &c, &up);
-        let (d_o, mut d_d, d_beta) =
-            field.ray_backward(&samples, taus, beta, &upstream, &mut out.grid, &mut out.geo);
+        let (d_alpha, d_features) = composite_backward(&alphas, &taus, &features, dim, &c, &up);
+        let split = (in_box, in_box * dim);
+        let (mut d_o, mut d_d, d_beta) = field.ray_backward(
+            &samples,
+            &taus[..in_box],
+            beta,
+            (&d_alpha[..split.0], &d_features[..split.1]),
+            &mut out.grid,
+            &mut out.geo,
+        );
         out.beta_grad += d_beta;
+        if let Some(bg) = background.filter(|_| !far_samples.is_empty()) {
+            let (far_o, far_d, far_beta) = bg.ray_backward(
+                (o, d),
+                &far_samples,
+                &taus[in_box..],
+                beta,
+                (&d_alpha[split.0..], &d_features[split.1..]),
+                &mut out.background_grid,
+                &mut out.background_mlp,
+            );
+            d_o += far_o;
+            d_d += far_d;
+            out.beta_grad += far_beta;
+        }
         d_d += sh_backward(d, &d_sh);
         out.pose
             .add(&pose.ray_backward(ray.world_from_vehicle, ray.dir_in_sensor, d_o, d_d));
@@ -232,7 +297,13 @@ mod tests {
     use super::*;
     use glam::DQuat;
 
-    fn setup() -> (SceneField, Appearance, PoseParams, Vec<ColourRay>) {
+    fn setup() -> (
+        SceneField,
+        Background,
+        Appearance,
+        PoseParams,
+        Vec<ColourRay>,
+    ) {
         let config = FieldConfig {
             grid: HashGridConfig {
                 levels: 4,
@@ -248,23 +319,47 @@ mod tests {
         for (i, p) in field.grid.params.iter_mut().enumerate() {
             *p = ((i as f32 * 0.7548).fract() - 0.5) * 4.0;
         }
+        // A smooth background (coarse levels): its unit coordinates are f32, so at hundreds of
+        // metres finite differences in the pose only resolve slowly varying fields.
+        let smooth = super::super::background::BackgroundConfig {
+            grid: HashGridConfig {
+                levels: 2,
+                log2_table_size: 10,
+                base_resolution: 4.0,
+                max_resolution: 16.0,
+            },
+            ..Default::default()
+        };
+        let mut background =
+            Background::new(DVec3::splat(-20.0), DVec3::splat(20.0), 3, &smooth, 6);
+        for (i, p) in background.grid.params.iter_mut().enumerate() {
+            *p = ((i as f32 * 0.5698).fract() - 0.5) * 2.0;
+        }
         let appearance = Appearance::new(3, 9);
         let pose = PoseParams::from_rigid(Rigid::new(
             DQuat::from_euler(glam::EulerRot::ZYX, -1.4, 0.03, -1.6),
             DVec3::new(1.5, -0.2, 1.6),
         ));
         let rays = (0..8)
-            .map(|i| ColourRay {
-                world_from_vehicle: Rigid::new(
+            .map(|i| {
+                let world_from_vehicle = Rigid::new(
                     DQuat::from_rotation_z(0.05 * i as f64),
                     DVec3::new(1.0 + i as f64 * 0.2, 0.5, 0.0),
-                ),
-                dir_in_sensor: DVec3::new(0.1 * i as f64 - 0.4, 0.2, 1.0).normalize_or_zero(),
-                target: [0.2 + 0.05 * i as f32, 0.5, 0.7 - 0.04 * i as f32],
-                taus_m: (1..50).map(|k| k as f32 * 0.2).collect(),
+                );
+                let dir_in_sensor = DVec3::new(0.1 * i as f64 - 0.4, 0.2, 1.0).normalize_or_zero();
+                let (o, d) = pose.ray(world_from_vehicle, dir_in_sensor);
+                // Odd rays cross little of the box, so the background shows through.
+                let in_box = if i % 2 == 0 { 50 } else { 2 };
+                ColourRay {
+                    world_from_vehicle,
+                    dir_in_sensor,
+                    target: [0.2 + 0.05 * i as f32, 0.5, 0.7 - 0.04 * i as f32],
+                    taus_m: (1..in_box).map(|k| k as f32 * 0.2).collect(),
+                    background_taus_m: background.taus(o, d, 0.3),
+                }
             })
             .collect();
-        (field, appearance, pose, rays)
+        (field, background, appearance, pose, rays)
     }
 
     #[test]
@@ -296,17 +391,25 @@ mod tests {
     /// exposure gradients likewise.
     #[test]
     fn pose_and_exposure_gradients_match_finite_differences() {
-        let (field, appearance, pose, rays) = setup();
+        let (field, background, appearance, pose, rays) = setup();
         let beta = 3.0;
+        let model = CameraModel {
+            field: &field,
+            background: Some(&background),
+            appearance: &appearance,
+            beta,
+        };
         let exposure = ExposureMap {
             scale: [0.9, 1.1, 1.0],
             offset: [0.02, -0.01, 0.0],
         };
-        let step = colour_step(&field, &appearance, beta, &pose, &exposure, &rays);
+        let step = colour_step(model, &pose, &exposure, &rays);
+        assert!(
+            step.background_grid.entries.iter().any(|e| e.1 != [0.0; 2]),
+            "the background was not reached"
+        );
         assert!(step.loss > 0.0);
-        let loss = |p: &PoseParams, e: &ExposureMap| {
-            colour_step(&field, &appearance, beta, p, e, &rays).loss
-        };
+        let loss = |p: &PoseParams, e: &ExposureMap| colour_step(model, p, e, &rays).loss;
         let norm = step.pose.r6.iter().map(|g| g * g).sum::<f64>().sqrt()
             + step.pose.translation_m.length();
         assert!(norm > 1e-3, "gradient too small to test: {norm}");
@@ -346,6 +449,34 @@ mod tests {
                 (fd - an).abs() < 1e-3 + 0.01 * an.abs(),
                 "exposure[{k}]: {fd} vs {an}"
             );
+        }
+        // The background field's parameters: its MLP's largest gradients per layer.
+        for layer in 0..background.geo.layers.len() {
+            let g = &step.background_mlp.weights[layer];
+            let mut order: Vec<usize> = (0..g.len()).collect();
+            order.sort_by(|a, b| g[*b].abs().total_cmp(&g[*a].abs()));
+            assert!(
+                g[order[0]].abs() > 1e-4,
+                "no background gradient: {}",
+                g[order[0]]
+            );
+            for &k in order.iter().take(3) {
+                let at = |delta: f32| {
+                    let mut bg = background.clone();
+                    bg.geo.layers[layer].weights[k] += delta;
+                    let m = CameraModel {
+                        background: Some(&bg),
+                        ..model
+                    };
+                    colour_step(m, &pose, &exposure, &rays).loss
+                };
+                let fd = (at(1e-3) - at(-1e-3)) / 2e-3;
+                let an = g[k] as f64;
+                assert!(
+                    (fd - an).abs() < 2e-4 + 0.02 * an.abs(),
+                    "background layer {layer} weight {k}: {fd} vs {an}"
+                );
+            }
         }
     }
 }

@@ -15,7 +15,8 @@ use glam::{DVec2, DVec3};
 use rayon::prelude::*;
 
 use super::adam::{AdamConfig, DenseAdam, SparseAdam, decayed_lr};
-use super::camera_rgb::{Appearance, ColourRay, ExposureMap, colour_step};
+use super::background::{Background, BackgroundConfig};
+use super::camera_rgb::{Appearance, CameraModel, ColourRay, ExposureMap, colour_step};
 use super::field::{FieldConfig, SceneField};
 use super::hash_grid::{GradAccumulator, HashGridConfig};
 use super::intensity::{IntensityDecoder, IntensityMap, normaliser};
@@ -46,6 +47,9 @@ pub struct DepthCalibConfig {
     pub regulariser_weight: f32,
     /// Camera rays are sampled up to this distance (the scene box clips them further).
     pub camera_far_m: f64,
+    /// The background model beyond the scene box for camera rays (`None`: the sky feature
+    /// takes whatever light leaves the box).
+    pub background: Option<BackgroundConfig>,
     /// A sensor whose extrinsic stays fixed (the root); `None`: all move, the trajectory fixes
     /// the gauge (§11).
     pub frozen_sensor: Option<String>,
@@ -71,6 +75,7 @@ impl Default for DepthCalibConfig {
             intensity_weight: 0.1,
             regulariser_weight: 0.01,
             camera_far_m: 120.0,
+            background: Some(BackgroundConfig::default()),
             frozen_sensor: None,
         }
     }
@@ -146,6 +151,16 @@ struct CameraStage {
     colour_opt: DenseAdam,
     sky_params: Vec<f32>,
     sky_opt: DenseAdam,
+    background: Option<BackgroundStage>,
+}
+
+/// The background field and its optimisers.
+struct BackgroundStage {
+    field: Background,
+    grid_opt: SparseAdam,
+    grid_acc: GradAccumulator,
+    mlp_params: Vec<f32>,
+    mlp_opt: DenseAdam,
 }
 
 pub struct DepthCalibration {
@@ -345,7 +360,25 @@ impl DepthCalibration {
             .iter()
             .map(|c| PoseParams::from_rigid(c.initial))
             .collect();
+        let background = self.config.background.as_ref().map(|config| {
+            let field = Background::new(
+                self.occupancy.box_min,
+                self.occupancy.box_max(),
+                self.config.field.feature_dim,
+                config,
+                self.config.seed,
+            );
+            let mlp_params = mlp_flat(&field.geo);
+            BackgroundStage {
+                grid_opt: SparseAdam::new(field.grid.params.len(), AdamConfig::NGP),
+                grid_acc: GradAccumulator::new(field.grid.entry_count()),
+                mlp_opt: DenseAdam::new(mlp_params.len(), AdamConfig::NGP),
+                mlp_params,
+                field,
+            }
+        });
         self.camera = Some(CameraStage {
+            background,
             pose_opt: poses
                 .iter()
                 .map(|_| DenseAdam::new(9, AdamConfig::STANDARD))
@@ -461,11 +494,16 @@ impl DepthCalibration {
                 jitter,
                 self.config.max_samples_per_ray,
             );
+            let background_taus_m = stage.background.as_ref().map_or_else(Vec::new, |b| {
+                let jitter = (next(&mut self.rng) >> 11) as f64 / (1u64 << 53) as f64;
+                b.field.taus(o, d, jitter)
+            });
             rays.push(ColourRay {
                 world_from_vehicle: wv,
                 dir_in_sensor: u,
                 target: [px[0], px[1], px[2]].map(|v| v as f32 / 255.0),
                 taus_m: taus,
+                background_taus_m,
             });
         }
         rays
@@ -509,7 +547,7 @@ impl DepthCalibration {
             };
             let (o, d) = pose.ray(wv, u);
             let jitter = (next(&mut self.rng) >> 11) as f64 / (1u64 << 53) as f64;
-            let taus = self.occupancy.sample(
+            let taus = self.occupancy.sample_towards(
                 o,
                 d,
                 0.5,
@@ -614,6 +652,10 @@ impl DepthCalibration {
         if let Some(stage) = self.camera.as_ref() {
             let mut colour = stage.appearance.colour.zero_grad();
             let mut sky = stage.appearance.sky.zero_grad();
+            let mut background_mlp = stage
+                .background
+                .as_ref()
+                .map_or_else(|| sky.clone(), |b| b.field.geo.zero_grad());
             let rgb_weight = self.config.rgb_weight as f64;
             for k in 0..cameras {
                 let rays = self.draw_camera_rays(k);
@@ -624,17 +666,16 @@ impl DepthCalibration {
                     continue;
                 }
                 let chunk = rays.len().div_ceil(threads).max(1);
-                let (field, beta) = (&self.field, self.ln_beta.exp());
-                let (appearance, pose, exposure) =
-                    (&stage.appearance, &stage.poses[k], &stage.exposure[k]);
+                let model = CameraModel {
+                    field: &self.field,
+                    background: stage.background.as_ref().map(|b| &b.field),
+                    appearance: &stage.appearance,
+                    beta: self.ln_beta.exp(),
+                };
+                let (pose, exposure) = (&stage.poses[k], &stage.exposure[k]);
                 let parts: Vec<_> = rays
                     .par_chunks(chunk)
-                    .map(|c| {
-                        (
-                            c.len(),
-                            colour_step(field, appearance, beta, pose, exposure, c),
-                        )
-                    })
+                    .map(|c| (c.len(), colour_step(model, pose, exposure, c)))
                     .collect();
                 let mut pose_grad = [0.0f32; 9];
                 let mut exposure_grad = [0.0f32; 6];
@@ -647,6 +688,10 @@ impl DepthCalibration {
                     add_scaled(&mut geo, &part.geo, w as f32);
                     add_scaled(&mut colour, &part.colour, w as f32);
                     add_scaled(&mut sky, &part.sky, w as f32);
+                    if let Some(b) = stage.background.as_mut() {
+                        b.grid_acc.add(&part.background_grid, w as f32);
+                        add_scaled(&mut background_mlp, &part.background_mlp, w as f32);
+                    }
                     let g = pose_grad_flat(&part.pose, w);
                     pose_grad.iter_mut().zip(g).for_each(|(a, b)| *a += b);
                     for (a, b) in exposure_grad.iter_mut().zip(part.exposure) {
@@ -672,6 +717,13 @@ impl DepthCalibration {
                     .colour_opt
                     .step(&mut stage.colour_params, &grad_flat(&colour), lr_field);
                 mlp_set(&mut stage.appearance.colour, &stage.colour_params);
+                if let Some(b) = stage.background.as_mut() {
+                    let grid = b.grid_acc.drain();
+                    b.grid_opt.step(&mut b.field.grid.params, &grid, lr_field);
+                    b.mlp_opt
+                        .step(&mut b.mlp_params, &grad_flat(&background_mlp), lr_field);
+                    mlp_set(&mut b.field.geo, &b.mlp_params);
+                }
                 stage
                     .sky_opt
                     .step(&mut stage.sky_params, &grad_flat(&sky), lr_field);

@@ -117,11 +117,10 @@ impl SceneField {
         samples: &[FieldSample],
         taus_m: &[f32],
         beta: f32,
-        upstream: &(Vec<f32>, Vec<f32>),
+        (d_alpha, d_features): (&[f32], &[f32]),
         grid_grad: &mut SparseGrad,
         mlp_grad: &mut MlpGrad,
     ) -> (DVec3, DVec3, f64) {
-        let (d_alpha, d_features) = upstream;
         let dim = self.geo.output_dim().saturating_sub(1);
         let zeros = vec![0.0; dim];
         let (mut d_o, mut d_d, mut d_beta) = (DVec3::ZERO, DVec3::ZERO, 0.0);

@@ -191,7 +191,7 @@ pub fn lidar_step(
             &samples,
             &ray.taus_m,
             model.beta,
-            &upstream,
+            (&upstream.0, &upstream.1),
             &mut out.grid,
             &mut out.mlp,
         );

@@ -15,12 +15,15 @@
 //! - [`regulariser`]: Eikonal near LiDAR hits (tetrahedral stencil) and weight suppression.
 //! - [`camera_rgb`]: the camera colour term (feature rendering, sky, colour decoder on SH view
 //!   encoding, per-camera exposure) with scene, decoder, exposure and pose gradients.
+//! - [`background`]: the inverted-sphere background field beyond the scene box (16 samples per
+//!   camera ray, uniform in disparity).
 //! - [`depth_calib`]: the LiDAR stage: scene + every LiDAR extrinsic from depth (a full step).
 //! - [`calibrator`]: that stage prepared from a drive as an `optim::runner::Calibrator`.
 //! - [`composite`]: SDF → opacity and front-to-back compositing of depth, opacity and features
 //!   (Eq. 2), with a division-free backward pass.
 
 pub mod adam;
+pub mod background;
 pub mod calibrator;
 pub mod camera_rgb;
 pub mod composite;

@@ -144,6 +144,28 @@ impl OccupancyGrid {
         }
         out
     }
+
+    /// Like [`OccupancyGrid::sample`] up to `far_m`, but when more than `max` samples fall in
+    /// occupied space, keeps the *last* `max`: for a LiDAR return at `far_m − margin` the
+    /// samples around the hit matter most, and a long grazing ray over the ground must not
+    /// lose its hit to the sample cap.
+    #[allow(clippy::too_many_arguments)]
+    pub fn sample_towards(
+        &self,
+        origin: DVec3,
+        dir: DVec3,
+        near_m: f64,
+        far_m: f64,
+        step_m: f64,
+        jitter: f64,
+        max: usize,
+    ) -> Vec<f32> {
+        let mut out = self.sample(origin, dir, near_m, far_m, step_m, jitter, usize::MAX);
+        if out.len() > max {
+            out.drain(..out.len() - max);
+        }
+        out
+    }
 }
 
 #[cfg(test)]
@@ -208,5 +230,18 @@ mod tests {
             )
             .is_empty()
         );
+    }
+
+    #[test]
+    fn a_long_grazing_ray_keeps_the_samples_at_its_end() {
+        let g = grid();
+        // Along the ground patch (occupied for 10 m): the cap keeps the far end.
+        let o = DVec3::new(0.0, 0.0, 0.2);
+        let all = g.sample(o, DVec3::X, 0.0, 9.0, 0.1, 0.0, usize::MAX);
+        assert!(all.len() > 50, "{}", all.len());
+        let head = g.sample(o, DVec3::X, 0.0, 9.0, 0.1, 0.0, 20);
+        let tail = g.sample_towards(o, DVec3::X, 0.0, 9.0, 0.1, 0.0, 20);
+        assert_eq!(head[..], all[..20]);
+        assert_eq!(tail[..], all[all.len() - 20..]);
     }
 }
