@@ -133,8 +133,9 @@ impl Background {
         d_out.push(d_sdf);
         d_out.extend_from_slice(d_feature);
         let d_h = self.geo.backward(&sample.trace, &d_out, mlp_grad);
-        self.grid.backward(sample.unit, &d_h, grid_grad);
-        let g = self.grid.grad_x(sample.unit, &d_h);
+        let g = self
+            .grid
+            .backward_and_grad_x(sample.unit, &d_h, Some(grid_grad));
         let d_unit = DVec3::new(g[0] as f64, g[1] as f64, g[2] as f64);
         // Jᵀ·d_unit = ∇_x (d_unit · unit(x)), by central differences.
         let h = 1e-6 * (x - self.centre).length().max(1.0);

@@ -235,7 +235,17 @@ impl HashGrid {
                     ^ c[1].wrapping_mul(PRIMES[1])
                     ^ c[2].wrapping_mul(PRIMES[2])
             };
-            entry[k] = (level.offset + index as usize % level.size) as u32;
+            // Same as `index % size`, without a division on the hot path: dense indices are
+            // in range except the clamped far corner, hashed levels have power-of-two sizes.
+            let index = index as usize;
+            let slot = if index < level.size {
+                index
+            } else if level.size.is_power_of_two() {
+                index & (level.size - 1)
+            } else {
+                index % level.size
+            };
+            entry[k] = (level.offset + slot) as u32;
             weight[k] = w;
         }
         Corners {
@@ -281,10 +291,33 @@ impl HashGrid {
     /// d(loss)/dx for one point given d(loss)/d(encoding): the spatial gradient through the
     /// trilinear weights (zero across cell boundaries' kinks, as for any trilinear field).
     pub fn grad_x(&self, x: [f32; 3], d_out: &[f32]) -> [f32; 3] {
+        self.backward_and_grad_x(x, d_out, None)
+    }
+
+    /// [`HashGrid::backward`] and [`HashGrid::grad_x`] in one pass over the corners (the hot
+    /// path of every ray sample's backward pass).
+    pub fn backward_and_grad_x(
+        &self,
+        x: [f32; 3],
+        d_out: &[f32],
+        mut grad: Option<&mut SparseGrad>,
+    ) -> [f32; 3] {
         let mut gx = [0f32; 3];
         for (l, level) in self.levels.iter().enumerate() {
             let g = &d_out[l * F..(l + 1) * F];
+            if g.iter().all(|v| *v == 0.0) {
+                continue;
+            }
             let c = self.corners(level, x);
+            if let Some(grad) = grad.as_deref_mut() {
+                for k in 0..8 {
+                    let mut e = [0f32; F];
+                    for f in 0..F {
+                        e[f] = c.weight[k] * g[f];
+                    }
+                    grad.entries.push((c.entry[k], e));
+                }
+            }
             for k in 0..8 {
                 let base = c.entry[k] as usize * F;
                 let mut dot = 0.0;

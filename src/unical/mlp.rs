@@ -95,9 +95,8 @@ impl Mlp {
         for (k, layer) in self.layers.iter().enumerate() {
             let x = &acts[k];
             let mut y = layer.bias.clone();
-            for (o, yo) in y.iter_mut().enumerate() {
-                let row = &layer.weights[o * layer.inputs..(o + 1) * layer.inputs];
-                *yo += row.iter().zip(x).map(|(w, v)| w * v).sum::<f32>();
+            for (yo, row) in y.iter_mut().zip(layer.weights.chunks_exact(layer.inputs)) {
+                *yo += dot(row, x);
                 if k < last {
                     *yo = yo.max(0.0);
                 }
@@ -121,23 +120,49 @@ impl Mlp {
                     }
                 }
             }
-            let x = &trace.acts[k];
+            let x = &trace.acts[k][..layer.inputs];
             let mut d_in = vec![0.0; layer.inputs];
-            for (o, &d) in delta.iter().enumerate() {
+            let rows = layer.weights.chunks_exact(layer.inputs);
+            let grad_rows = grad.weights[k].chunks_exact_mut(layer.inputs);
+            for (((&d, w), g), b) in delta.iter().zip(rows).zip(grad_rows).zip(&mut grad.bias[k]) {
                 if d == 0.0 {
                     continue;
                 }
-                grad.bias[k][o] += d;
-                let row = o * layer.inputs;
-                for i in 0..layer.inputs {
-                    grad.weights[k][row + i] += d * x[i];
-                    d_in[i] += d * layer.weights[row + i];
+                *b += d;
+                // Element-wise (no reductions), so these vectorise.
+                for (gi, xi) in g.iter_mut().zip(x) {
+                    *gi += d * xi;
+                }
+                for (di, wi) in d_in.iter_mut().zip(w) {
+                    *di += d * wi;
                 }
             }
             delta = d_in;
         }
         delta
     }
+}
+
+/// Dot product with eight independent partial sums: a single running sum is a chain of
+/// dependent adds the compiler may not reorder (and so cannot vectorise).
+#[inline]
+fn dot(a: &[f32], b: &[f32]) -> f32 {
+    let n = a.len().min(b.len());
+    let (a, b) = (&a[..n], &b[..n]);
+    let mut acc = [0f32; 8];
+    let (ca, cb) = (a.chunks_exact(8), b.chunks_exact(8));
+    let tail: f32 = ca
+        .remainder()
+        .iter()
+        .zip(cb.remainder())
+        .map(|(x, y)| x * y)
+        .sum();
+    for (x, y) in ca.zip(cb) {
+        for i in 0..8 {
+            acc[i] += x[i] * y[i];
+        }
+    }
+    acc.iter().sum::<f32>() + tail
 }
 
 impl MlpGrad {
