@@ -15,7 +15,7 @@ use glam::DVec3;
 
 use super::composite::alpha_from_sdf;
 use super::field::FieldSample;
-use super::hash_grid::{HashGrid, HashGridConfig, SparseGrad};
+use super::hash_grid::{GradSink, HashGrid, HashGridConfig};
 use super::mlp::{Mlp, MlpGrad};
 
 #[derive(Clone, Debug, PartialEq)]
@@ -126,7 +126,7 @@ impl Background {
         sample: &FieldSample,
         d_sdf: f32,
         d_feature: &[f32],
-        grid_grad: &mut SparseGrad,
+        grid_grad: &mut impl GradSink,
         mlp_grad: &mut MlpGrad,
     ) -> DVec3 {
         let mut d_out = Vec::with_capacity(1 + d_feature.len());
@@ -158,7 +158,7 @@ impl Background {
         taus_m: &[f32],
         beta: f32,
         (d_alpha, d_features): (&[f32], &[f32]),
-        grid_grad: &mut SparseGrad,
+        grid_grad: &mut impl GradSink,
         mlp_grad: &mut MlpGrad,
     ) -> (DVec3, DVec3, f64) {
         let dim = self.geo.output_dim().saturating_sub(1);
@@ -180,6 +180,7 @@ impl Background {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::unical::hash_grid::SparseGrad;
 
     fn background() -> Background {
         Background::new(

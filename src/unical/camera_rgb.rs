@@ -18,7 +18,7 @@ use glam::DVec3;
 use super::background::Background;
 use super::composite::{Upstream, alpha_from_sdf, composite, composite_backward};
 use super::field::SceneField;
-use super::hash_grid::SparseGrad;
+use super::hash_grid::GradSink;
 use super::mlp::{Mlp, MlpGrad};
 use super::pose::{PoseGrad, PoseParams};
 use crate::geometry::Rigid;
@@ -120,12 +120,10 @@ pub struct ColourRay {
 #[derive(Debug)]
 pub struct ColourStep {
     pub loss: f64,
-    pub grid: SparseGrad,
     pub geo: MlpGrad,
     pub colour: MlpGrad,
     pub sky: MlpGrad,
-    /// The background field's gradients (empty without one).
-    pub background_grid: SparseGrad,
+    /// The background MLP's gradients (empty without a background).
     pub background_mlp: MlpGrad,
     pub beta_grad: f64,
     pub pose: PoseGrad,
@@ -146,12 +144,15 @@ pub struct CameraModel<'a> {
     pub beta: f32,
 }
 
-/// Mean squared colour error of `rays` seen from `pose` and its gradients.
+/// Mean squared colour error of `rays` seen from `pose` and its gradients; the hash tables'
+/// gradients go to `grid` (scene) and `background_grid`.
 pub fn colour_step(
     model: CameraModel,
     pose: &PoseParams,
     exposure: &ExposureMap,
     rays: &[ColourRay],
+    grid: &mut impl GradSink,
+    background_grid: &mut impl GradSink,
 ) -> ColourStep {
     let CameraModel {
         field,
@@ -161,11 +162,9 @@ pub fn colour_step(
     } = model;
     let mut out = ColourStep {
         loss: 0.0,
-        grid: SparseGrad::default(),
         geo: field.geo.zero_grad(),
         colour: appearance.colour.zero_grad(),
         sky: appearance.sky.zero_grad(),
-        background_grid: SparseGrad::default(),
         background_mlp: background.map_or_else(
             || MlpGrad {
                 weights: Vec::new(),
@@ -265,7 +264,7 @@ pub fn colour_step(
             &taus[..in_box],
             beta,
             (&d_alpha[..split.0], &d_features[..split.1]),
-            &mut out.grid,
+            grid,
             &mut out.geo,
         );
         out.beta_grad += d_beta;
@@ -276,7 +275,7 @@ pub fn colour_step(
                 &taus[in_box..],
                 beta,
                 (&d_alpha[split.0..], &d_features[split.1..]),
-                &mut out.background_grid,
+                background_grid,
                 &mut out.background_mlp,
             );
             d_o += far_o;
@@ -295,6 +294,7 @@ mod tests {
     use super::super::field::FieldConfig;
     use super::super::hash_grid::HashGridConfig;
     use super::*;
+    use crate::unical::hash_grid::SparseGrad;
     use glam::DQuat;
 
     fn setup() -> (
@@ -403,13 +403,31 @@ mod tests {
             scale: [0.9, 1.1, 1.0],
             offset: [0.02, -0.01, 0.0],
         };
-        let step = colour_step(model, &pose, &exposure, &rays);
+        let mut background_grid = SparseGrad::default();
+        let step = colour_step(
+            model,
+            &pose,
+            &exposure,
+            &rays,
+            &mut SparseGrad::default(),
+            &mut background_grid,
+        );
         assert!(
-            step.background_grid.entries.iter().any(|e| e.1 != [0.0; 2]),
+            background_grid.entries.iter().any(|e| e.1 != [0.0; 2]),
             "the background was not reached"
         );
         assert!(step.loss > 0.0);
-        let loss = |p: &PoseParams, e: &ExposureMap| colour_step(model, p, e, &rays).loss;
+        let loss = |p: &PoseParams, e: &ExposureMap| {
+            colour_step(
+                model,
+                p,
+                e,
+                &rays,
+                &mut SparseGrad::default(),
+                &mut SparseGrad::default(),
+            )
+            .loss
+        };
         let norm = step.pose.r6.iter().map(|g| g * g).sum::<f64>().sqrt()
             + step.pose.translation_m.length();
         assert!(norm > 1e-3, "gradient too small to test: {norm}");
@@ -468,7 +486,15 @@ mod tests {
                         background: Some(&bg),
                         ..model
                     };
-                    colour_step(m, &pose, &exposure, &rays).loss
+                    colour_step(
+                        m,
+                        &pose,
+                        &exposure,
+                        &rays,
+                        &mut SparseGrad::default(),
+                        &mut SparseGrad::default(),
+                    )
+                    .loss
                 };
                 let fd = (at(1e-3) - at(-1e-3)) / 2e-3;
                 let an = g[k] as f64;

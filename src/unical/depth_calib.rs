@@ -18,7 +18,7 @@ use super::adam::{AdamConfig, DenseAdam, SparseAdam, decayed_lr};
 use super::background::{Background, BackgroundConfig};
 use super::camera_rgb::{Appearance, CameraModel, ColourRay, ExposureMap, colour_step};
 use super::field::{FieldConfig, SceneField};
-use super::hash_grid::{GradAccumulator, HashGridConfig};
+use super::hash_grid::{GradAccumulator, HashGridConfig, Scaled};
 use super::intensity::{IntensityDecoder, IntensityMap, normaliser};
 use super::lidar_terms::{DepthRay, LidarModel, LidarWeights, lidar_step};
 use super::occupancy::OccupancyGrid;
@@ -36,6 +36,9 @@ pub struct DepthCalibConfig {
     pub beta_init: f32,
     pub lr_field: f32,
     pub lr_pose: f32,
+    /// Poses stay fixed for this many iterations while the scene forms from the initial
+    /// calibration (a scene that is still mostly empty gives poses misleading gradients).
+    pub pose_warmup: usize,
     pub iterations: usize,
     pub seed: u64,
     /// Camera rays per camera and step (the budget is split evenly across sensors, §7).
@@ -67,6 +70,7 @@ impl Default for DepthCalibConfig {
             beta_init: 20.0,
             lr_field: 1e-2,
             lr_pose: 1e-3,
+            pose_warmup: 100,
             iterations: 2000,
             seed: 1,
             rays_per_camera: 512,
@@ -100,6 +104,7 @@ impl DepthCalibConfig {
             rays_per_sensor: 625,
             rays_per_camera: 625,
             lr_pose: 1e-4,
+            pose_warmup: 0,
             iterations: 30_000,
             ..Self::default()
         }
@@ -158,7 +163,8 @@ struct CameraStage {
 struct BackgroundStage {
     field: Background,
     grid_opt: SparseAdam,
-    grid_acc: GradAccumulator,
+    /// One per parallel chunk of rays (chunk i always sums into accumulator i: deterministic).
+    grid_accs: Vec<GradAccumulator>,
     mlp_params: Vec<f32>,
     mlp_opt: DenseAdam,
 }
@@ -172,7 +178,8 @@ pub struct DepthCalibration {
     pub poses: Vec<PoseParams>,
     ln_beta: f32,
     grid_opt: SparseAdam,
-    grid_acc: GradAccumulator,
+    /// One per parallel chunk of rays (chunk i always sums into accumulator i: deterministic).
+    grid_accs: Vec<GradAccumulator>,
     mlp_opt: DenseAdam,
     mlp_params: Vec<f32>,
     pose_opt: Vec<DenseAdam>,
@@ -202,6 +209,12 @@ pub struct DepthReport {
     pub intensity_loss: f64,
     /// The SDF regulariser (Eikonal near hits + weight suppression away from them).
     pub regulariser_loss: f64,
+}
+
+/// One gradient accumulator per parallel chunk of rays: two chunks per thread.
+fn accumulators(entries: usize) -> Vec<GradAccumulator> {
+    let chunks = rayon::current_num_threads().max(1) * 2;
+    (0..chunks).map(|_| GradAccumulator::new(entries)).collect()
 }
 
 fn next(rng: &mut u64) -> u64 {
@@ -249,6 +262,9 @@ fn grad_flat(g: &super::mlp::MlpGrad) -> Vec<f32> {
 /// One Adam step of a pose from its 9 gradients, applied as a delta so the f64 pose keeps its
 /// precision.
 fn pose_step(opt: &mut DenseAdam, p: &mut PoseParams, grad: &[f32; 9], lr: f32) {
+    if lr == 0.0 {
+        return;
+    }
     let mut flat: Vec<f32> =
         p.r6.iter()
             .map(|v| *v as f32)
@@ -323,7 +339,7 @@ impl DepthCalibration {
             decoder_params,
             decoder,
             grid_opt: SparseAdam::new(field.grid.params.len(), AdamConfig::NGP),
-            grid_acc: GradAccumulator::new(field.grid.entry_count()),
+            grid_accs: accumulators(field.grid.entry_count()),
             mlp_opt: DenseAdam::new(mlp_params.len(), AdamConfig::NGP),
             pose_opt: poses
                 .iter()
@@ -371,7 +387,7 @@ impl DepthCalibration {
             let mlp_params = mlp_flat(&field.geo);
             BackgroundStage {
                 grid_opt: SparseAdam::new(field.grid.params.len(), AdamConfig::NGP),
-                grid_acc: GradAccumulator::new(field.grid.entry_count()),
+                grid_accs: accumulators(field.grid.entry_count()),
                 mlp_opt: DenseAdam::new(mlp_params.len(), AdamConfig::NGP),
                 mlp_params,
                 field,
@@ -575,13 +591,16 @@ impl DepthCalibration {
     pub fn step(&mut self) -> DepthReport {
         let total = self.config.iterations;
         let lr_field = decayed_lr(self.config.lr_field, 0.1, self.iteration, total);
-        let lr_pose = decayed_lr(self.config.lr_pose, 0.01, self.iteration, total);
+        let lr_pose = if self.iteration < self.config.pose_warmup {
+            0.0
+        } else {
+            decayed_lr(self.config.lr_pose, 0.01, self.iteration, total)
+        };
         let mut geo = self.field.geo.zero_grad();
         let mut beta_grad = 0.0;
         let (mut loss, mut mae, mut colour_loss) = (0.0, 0.0, 0.0);
         let (mut intensity_loss, mut regulariser_loss) = (0.0, 0.0);
         let lidars = self.lidars.len().max(1) as f64;
-        let threads = rayon::current_num_threads().max(1) * 2;
         let weights = self.config.lidar_weights();
         let mut decoder_grad = self.decoder.mlp.zero_grad();
         let with_intensity = self.intensity_norm.iter().flatten().count().max(1) as f64;
@@ -590,28 +609,38 @@ impl DepthCalibration {
             if rays.is_empty() {
                 continue;
             }
-            let chunk = rays.len().div_ceil(threads).max(1);
+            let chunk = rays.len().div_ceil(self.grid_accs.len()).max(1);
             let model = LidarModel {
                 field: &self.field,
                 beta: self.beta(),
                 decoder: self.intensity_norm[s].map(|_| &self.decoder),
             };
             let (pose, map) = (&self.poses[s], &self.intensity_maps[s]);
+            let total_rays = rays.len() as f64;
             let parts: Vec<_> = rays
                 .par_chunks(chunk)
-                .map(|c| (c.len(), lidar_step(model, pose, map, &weights, c)))
+                .zip(self.grid_accs.par_iter_mut())
+                .map(|(c, acc)| {
+                    // lidar_step averages over its chunk: weight chunks by size, sensors
+                    // equally.
+                    let share = c.len() as f64 / total_rays / lidars;
+                    let mut sink = Scaled {
+                        acc,
+                        scale: share as f32,
+                    };
+                    let part = lidar_step(model, pose, map, &weights, c, &mut sink);
+                    (c.len(), part)
+                })
                 .collect();
             let mut pose_grad = [0.0f32; 9];
             let mut map_grad = [0.0f32; 2];
             for (n, part) in parts {
-                // lidar_step averages over its chunk: weight chunks by size, sensors equally.
-                let share = n as f64 / rays.len() as f64 / lidars;
+                let share = n as f64 / total_rays / lidars;
                 loss += part.depth_loss * share;
                 mae += part.mean_abs_error_m * share * lidars;
                 intensity_loss += part.intensity_loss * share * lidars / with_intensity;
                 regulariser_loss += part.regulariser_loss * share;
                 beta_grad += part.beta_grad * share;
-                self.grid_acc.add(&part.grid, share as f32);
                 add_scaled(&mut geo, &part.mlp, share as f32);
                 add_scaled(&mut decoder_grad, &part.decoder, share as f32);
                 let g = pose_grad_flat(&part.pose, share);
@@ -665,33 +694,47 @@ impl DepthCalibration {
                 if rays.is_empty() {
                     continue;
                 }
-                let chunk = rays.len().div_ceil(threads).max(1);
+                let chunk = rays.len().div_ceil(self.grid_accs.len()).max(1);
+                let (background, mut background_accs) = match stage.background.as_mut() {
+                    Some(b) => (Some(&b.field), Some(b.grid_accs.iter_mut())),
+                    None => (None, None),
+                };
                 let model = CameraModel {
                     field: &self.field,
-                    background: stage.background.as_ref().map(|b| &b.field),
+                    background,
                     appearance: &stage.appearance,
                     beta: self.ln_beta.exp(),
                 };
                 let (pose, exposure) = (&stage.poses[k], &stage.exposure[k]);
-                let parts: Vec<_> = rays
-                    .par_chunks(chunk)
-                    .map(|c| (c.len(), colour_step(model, pose, exposure, c)))
+                let total_rays = rays.len() as f64;
+                let jobs: Vec<_> = rays
+                    .chunks(chunk)
+                    .zip(self.grid_accs.iter_mut())
+                    .map(|(c, acc)| (c, acc, background_accs.as_mut().and_then(|a| a.next())))
+                    .collect();
+                let parts: Vec<_> = jobs
+                    .into_par_iter()
+                    .map(|(c, acc, background_acc)| {
+                        let w = (c.len() as f64 / total_rays / cameras as f64 * rgb_weight) as f32;
+                        let mut sink = Scaled { acc, scale: w };
+                        let mut background_sink =
+                            background_acc.map(|acc| Scaled { acc, scale: w });
+                        let part =
+                            colour_step(model, pose, exposure, c, &mut sink, &mut background_sink);
+                        (c.len(), part)
+                    })
                     .collect();
                 let mut pose_grad = [0.0f32; 9];
                 let mut exposure_grad = [0.0f32; 6];
                 for (n, part) in parts {
-                    let share = n as f64 / rays.len() as f64 / cameras as f64;
+                    let share = n as f64 / total_rays / cameras as f64;
                     let w = share * rgb_weight;
                     colour_loss += part.loss * share;
                     beta_grad += part.beta_grad * w;
-                    self.grid_acc.add(&part.grid, w as f32);
                     add_scaled(&mut geo, &part.geo, w as f32);
                     add_scaled(&mut colour, &part.colour, w as f32);
                     add_scaled(&mut sky, &part.sky, w as f32);
-                    if let Some(b) = stage.background.as_mut() {
-                        b.grid_acc.add(&part.background_grid, w as f32);
-                        add_scaled(&mut background_mlp, &part.background_mlp, w as f32);
-                    }
+                    add_scaled(&mut background_mlp, &part.background_mlp, w as f32);
                     let g = pose_grad_flat(&part.pose, w);
                     pose_grad.iter_mut().zip(g).for_each(|(a, b)| *a += b);
                     for (a, b) in exposure_grad.iter_mut().zip(part.exposure) {
@@ -718,7 +761,7 @@ impl DepthCalibration {
                     .step(&mut stage.colour_params, &grad_flat(&colour), lr_field);
                 mlp_set(&mut stage.appearance.colour, &stage.colour_params);
                 if let Some(b) = stage.background.as_mut() {
-                    let grid = b.grid_acc.drain();
+                    let grid = GradAccumulator::drain_all(&mut b.grid_accs);
                     b.grid_opt.step(&mut b.field.grid.params, &grid, lr_field);
                     b.mlp_opt
                         .step(&mut b.mlp_params, &grad_flat(&background_mlp), lr_field);
@@ -730,7 +773,7 @@ impl DepthCalibration {
                 mlp_set(&mut stage.appearance.sky, &stage.sky_params);
             }
         }
-        let grid = self.grid_acc.drain();
+        let grid = GradAccumulator::drain_all(&mut self.grid_accs);
         self.grid_opt
             .step(&mut self.field.grid.params, &grid, lr_field);
         self.mlp_opt
@@ -829,6 +872,7 @@ mod tests {
             rays_per_sensor: 128,
             rays_per_camera: 128,
             iterations: 40,
+            pose_warmup: 0,
             ..DepthCalibConfig::default()
         }
     }

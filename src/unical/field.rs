@@ -9,7 +9,7 @@
 use glam::DVec3;
 
 use super::composite::alpha_from_sdf;
-use super::hash_grid::{HashGrid, HashGridConfig, SparseGrad};
+use super::hash_grid::{GradSink, HashGrid, HashGridConfig};
 use super::mlp::{Mlp, MlpGrad, Trace};
 
 #[derive(Clone, Debug, PartialEq)]
@@ -97,7 +97,7 @@ impl SceneField {
         sample: &FieldSample,
         d_sdf: f32,
         d_feature: &[f32],
-        grid_grad: &mut SparseGrad,
+        grid_grad: &mut impl GradSink,
         mlp_grad: &mut MlpGrad,
     ) -> DVec3 {
         let mut d_out = Vec::with_capacity(1 + d_feature.len());
@@ -119,7 +119,7 @@ impl SceneField {
         taus_m: &[f32],
         beta: f32,
         (d_alpha, d_features): (&[f32], &[f32]),
-        grid_grad: &mut SparseGrad,
+        grid_grad: &mut impl GradSink,
         mlp_grad: &mut MlpGrad,
     ) -> (DVec3, DVec3, f64) {
         let dim = self.geo.output_dim().saturating_sub(1);
@@ -142,6 +142,7 @@ mod tests {
     use super::super::adam::{AdamConfig, DenseAdam, SparseAdam};
     use super::super::composite::{Upstream, alpha_from_sdf, composite, composite_backward};
     use super::*;
+    use crate::unical::hash_grid::SparseGrad;
 
     fn flat(g: &MlpGrad) -> Vec<f32> {
         g.weights

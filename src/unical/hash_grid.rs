@@ -88,6 +88,43 @@ impl SparseGrad {
     }
 }
 
+/// Where a backward pass puts hash-table gradients: a list of (entry, gradient) pairs
+/// ([`SparseGrad`]) or, on the hot path, straight into a dense accumulator ([`Scaled`]).
+pub trait GradSink {
+    fn add(&mut self, entry: u32, g: [f32; F]);
+}
+
+impl GradSink for SparseGrad {
+    #[inline]
+    fn add(&mut self, entry: u32, g: [f32; F]) {
+        self.entries.push((entry, g));
+    }
+}
+
+/// `None` discards (e.g. no background field to train).
+impl<G: GradSink> GradSink for Option<G> {
+    #[inline]
+    fn add(&mut self, entry: u32, g: [f32; F]) {
+        if let Some(sink) = self {
+            sink.add(entry, g);
+        }
+    }
+}
+
+/// Adds `scale ×` each gradient into a [`GradAccumulator`] as it is produced (one accumulator
+/// per parallel chunk of rays, so no list of millions of pairs is built and re-read).
+pub struct Scaled<'a> {
+    pub acc: &'a mut GradAccumulator,
+    pub scale: f32,
+}
+
+impl GradSink for Scaled<'_> {
+    #[inline]
+    fn add(&mut self, entry: u32, g: [f32; F]) {
+        self.acc.add_one(entry, g.map(|v| v * self.scale));
+    }
+}
+
 /// Sums sparse gradients by scattering into a dense buffer (O(n), where sorting the millions of
 /// (entry, gradient) pairs of a step was the step's largest cost), remembering which entries
 /// were touched so only they are read back and cleared. Allocated once per optimisation.
@@ -110,18 +147,36 @@ impl GradAccumulator {
     /// Add `scale · g`.
     pub fn add(&mut self, g: &SparseGrad, scale: f32) {
         for &(entry, v) in &g.entries {
-            let e = entry as usize;
-            if e >= self.is_touched.len() {
-                continue;
-            }
-            if !self.is_touched[e] {
-                self.is_touched[e] = true;
-                self.touched.push(entry);
-            }
-            for f in 0..F {
-                self.grad[e * F + f] += scale * v[f];
-            }
+            self.add_one(entry, v.map(|x| x * scale));
         }
+    }
+
+    /// Add one entry's gradient.
+    #[inline]
+    pub fn add_one(&mut self, entry: u32, v: [f32; F]) {
+        let e = entry as usize;
+        if e >= self.is_touched.len() {
+            return;
+        }
+        if !self.is_touched[e] {
+            self.is_touched[e] = true;
+            self.touched.push(entry);
+        }
+        for f in 0..F {
+            self.grad[e * F + f] += v[f];
+        }
+    }
+
+    /// Sum several accumulators (in order, so the result is deterministic) and empty them.
+    pub fn drain_all(accs: &mut [GradAccumulator]) -> SparseGrad {
+        let Some((first, rest)) = accs.split_first_mut() else {
+            return SparseGrad::default();
+        };
+        for acc in rest {
+            let g = acc.drain();
+            first.add(&g, 1.0);
+        }
+        first.drain()
     }
 
     /// The summed gradient (one item per touched entry, in first-touch order); the
@@ -291,7 +346,7 @@ impl HashGrid {
     /// d(loss)/dx for one point given d(loss)/d(encoding): the spatial gradient through the
     /// trilinear weights (zero across cell boundaries' kinks, as for any trilinear field).
     pub fn grad_x(&self, x: [f32; 3], d_out: &[f32]) -> [f32; 3] {
-        self.backward_and_grad_x(x, d_out, None)
+        self.backward_and_grad_x(x, d_out, None::<&mut SparseGrad>)
     }
 
     /// [`HashGrid::backward`] and [`HashGrid::grad_x`] in one pass over the corners (the hot
@@ -300,7 +355,7 @@ impl HashGrid {
         &self,
         x: [f32; 3],
         d_out: &[f32],
-        mut grad: Option<&mut SparseGrad>,
+        mut grad: Option<&mut impl GradSink>,
     ) -> [f32; 3] {
         let mut gx = [0f32; 3];
         for (l, level) in self.levels.iter().enumerate() {
@@ -315,7 +370,7 @@ impl HashGrid {
                     for f in 0..F {
                         e[f] = c.weight[k] * g[f];
                     }
-                    grad.entries.push((c.entry[k], e));
+                    grad.add(c.entry[k], e);
                 }
             }
             for k in 0..8 {

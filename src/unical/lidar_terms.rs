@@ -20,7 +20,7 @@ use glam::DVec3;
 use super::camera_rgb::{sh_backward, sh_encoding};
 use super::composite::{Upstream, alpha_from_sdf, composite, composite_backward};
 use super::field::SceneField;
-use super::hash_grid::SparseGrad;
+use super::hash_grid::GradSink;
 use super::intensity::{IntensityDecoder, IntensityMap};
 use super::mlp::MlpGrad;
 use super::pose::{PoseGrad, PoseParams};
@@ -64,8 +64,6 @@ pub struct LidarStep {
     pub mean_abs_error_m: f64,
     pub intensity_loss: f64,
     pub regulariser_loss: f64,
-    /// Unmerged: repeated entries are summed by the caller (see `GradAccumulator`).
-    pub grid: SparseGrad,
     pub mlp: MlpGrad,
     pub decoder: MlpGrad,
     /// ∂L/∂scale, ∂L/∂offset of the sensor's intensity mapping.
@@ -83,13 +81,15 @@ pub struct LidarModel<'a> {
     pub decoder: Option<&'a IntensityDecoder>,
 }
 
-/// The LiDAR terms of `rays`, all from one sensor at `pose` with intensity mapping `map`.
+/// The LiDAR terms of `rays`, all from one sensor at `pose` with intensity mapping `map`; the
+/// hash table's gradients go to `grid`.
 pub fn lidar_step(
     model: LidarModel,
     pose: &PoseParams,
     map: &IntensityMap,
     weights: &LidarWeights,
     rays: &[DepthRay],
+    grid: &mut impl GradSink,
 ) -> LidarStep {
     let field = model.field;
     let mut out = LidarStep {
@@ -97,7 +97,6 @@ pub fn lidar_step(
         mean_abs_error_m: 0.0,
         intensity_loss: 0.0,
         regulariser_loss: 0.0,
-        grid: SparseGrad::default(),
         mlp: field.geo.zero_grad(),
         decoder: model.decoder.map_or_else(
             || MlpGrad {
@@ -175,8 +174,7 @@ pub fn lidar_step(
             for tau in &ray.taus_m {
                 if (tau - ray.range_m).abs() < NEAR_HIT_M {
                     let x = o + d * *tau as f64;
-                    out.regulariser_loss +=
-                        eikonal(field, x, reg_weight, &mut out.grid, &mut out.mlp) / n;
+                    out.regulariser_loss += eikonal(field, x, reg_weight, grid, &mut out.mlp) / n;
                 }
             }
         }
@@ -192,7 +190,7 @@ pub fn lidar_step(
             &ray.taus_m,
             model.beta,
             (&upstream.0, &upstream.1),
-            &mut out.grid,
+            grid,
             &mut out.mlp,
         );
         out.beta_grad += d_beta;
@@ -211,6 +209,7 @@ mod tests {
     use super::super::field::FieldConfig;
     use super::super::hash_grid::HashGridConfig;
     use super::*;
+    use crate::unical::hash_grid::SparseGrad;
     use glam::DQuat;
 
     fn setup() -> (SceneField, IntensityDecoder, PoseParams, Vec<DepthRay>) {
@@ -278,9 +277,21 @@ mod tests {
             beta,
             decoder: Some(&decoder),
         };
-        let step = lidar_step(model(beta), &pose, &map, &w, &rays);
+        let step = lidar_step(
+            model(beta),
+            &pose,
+            &map,
+            &w,
+            &rays,
+            &mut SparseGrad::default(),
+        );
         assert!(step.depth_loss > 0.0 && step.intensity_loss > 0.0);
-        let loss = |p: &PoseParams| total(&lidar_step(model(beta), p, &map, &w, &rays), &w);
+        let loss = |p: &PoseParams| {
+            total(
+                &lidar_step(model(beta), p, &map, &w, &rays, &mut SparseGrad::default()),
+                &w,
+            )
+        };
         // f32 fields make the finite differences noisy at the 1e-3 level of the loss: compare
         // each component against 1 % of the whole gradient's size.
         let eps = 1e-3;
@@ -305,7 +316,12 @@ mod tests {
             };
             assert!((fd - an).abs() < tol, "pose[{k}]: {fd} vs {an} (tol {tol})");
         }
-        let at_beta = |b| total(&lidar_step(model(b), &pose, &map, &w, &rays), &w);
+        let at_beta = |b| {
+            total(
+                &lidar_step(model(b), &pose, &map, &w, &rays, &mut SparseGrad::default()),
+                &w,
+            )
+        };
         let fd = (at_beta(beta + 1e-3) - at_beta(beta - 1e-3)) / 2e-3;
         assert!((fd - step.beta_grad).abs() < 2e-2 * (fd.abs() + step.beta_grad.abs()) + 1e-3);
         for k in 0..2 {
@@ -317,7 +333,12 @@ mod tests {
                 up.offset += 1e-3;
                 down.offset -= 1e-3;
             }
-            let l = |m: &IntensityMap| total(&lidar_step(model(beta), &pose, m, &w, &rays), &w);
+            let l = |m: &IntensityMap| {
+                total(
+                    &lidar_step(model(beta), &pose, m, &w, &rays, &mut SparseGrad::default()),
+                    &w,
+                )
+            };
             let fd = (l(&up) - l(&down)) / 2e-3;
             let an = step.intensity_map[k];
             assert!(
@@ -349,7 +370,7 @@ mod tests {
                 beta: 3.0,
                 decoder: Some(dec),
             };
-            lidar_step(model, &pose, &map, &w, &rays)
+            lidar_step(model, &pose, &map, &w, &rays, &mut SparseGrad::default())
         };
         let step = run(&field, &decoder);
         assert!(step.regulariser_loss > 0.0);

@@ -15,7 +15,7 @@
 use glam::DVec3;
 
 use super::field::SceneField;
-use super::hash_grid::SparseGrad;
+use super::hash_grid::GradSink;
 use super::mlp::MlpGrad;
 
 /// Half-width of the band around a LiDAR hit where the Eikonal term applies (method.md §8).
@@ -55,7 +55,7 @@ pub fn eikonal(
     field: &SceneField,
     x: DVec3,
     weight: f32,
-    grid_grad: &mut SparseGrad,
+    grid_grad: &mut impl GradSink,
     mlp_grad: &mut MlpGrad,
 ) -> f64 {
     let (g, samples) = stencil(field, x);
@@ -101,6 +101,7 @@ mod tests {
     use super::super::field::FieldConfig;
     use super::super::hash_grid::HashGridConfig;
     use super::*;
+    use crate::unical::hash_grid::SparseGrad;
 
     fn field() -> SceneField {
         let config = FieldConfig {
