@@ -46,6 +46,10 @@ fn calibrate_recovers_a_rotated_camera_and_writes_the_native_file() {
     assert!(status.success());
     let doc = CalibrationFile::load(&out).unwrap();
     assert!(doc.provenance.contains_key("method") && doc.provenance.contains_key("input"));
+    assert_eq!(
+        doc.provenance.get("status").and_then(|v| v.as_str()),
+        Some("complete")
+    );
     let rig = doc.to_rig(&out).unwrap();
     let (before, _) = gt.difference(init.sensor("front_camera").unwrap().vehicle_from_sensor);
     let (after, _) = gt.difference(rig.sensor("front_camera").unwrap().vehicle_from_sensor);
@@ -87,6 +91,9 @@ fn bad_arguments_fail_with_one_line() {
     assert!(!ok && err.contains("'nope'"), "{err}");
     let (ok, err) = run(&["--method", "unical", "--root", "roof"]);
     assert!(!ok && err.contains("--root: 'roof'"), "{err}");
+    // A valid run with an unwritable output fails before calibrating, naming the path.
+    let (ok, err) = run(&["--method", "edge", "--iterations", "1"]);
+    assert!(!ok && err.contains("/nonexistent-dir/out.yaml"), "{err}");
     let (ok, err) = run(&["--method", "edge", "--segment", "5..1"]);
     assert!(!ok && err.contains("--segment"), "{err}");
     assert_eq!(err.trim().lines().count(), 1, "{err}");

@@ -133,7 +133,21 @@ pub fn calibrate(
         ("edge", Some(n)) => n.min(calibrator.max_steps()),
         _ => calibrator.max_steps(),
     };
+    // The output is written before the first step (an unwritable path fails now, not after
+    // the run) and again every CHECKPOINT_SECS, atomically: a run that is killed or crashes
+    // leaves its latest result, marked as unfinished.
     let mut last = Vec::new();
+    let checkpoint = |calibrator: &dyn Calibrator, last: &[(String, f64)], status: String| {
+        document(args, &rig, calibrator, last, status)
+            .save(&args.out)
+            .map_err(|e| e.to_string())
+    };
+    checkpoint(
+        calibrator.as_ref(),
+        &last,
+        format!("running: step 0 of {max_steps}"),
+    )?;
+    let mut saved_at = std::time::Instant::now();
     for step in 1..=max_steps {
         let r = calibrator.step();
         last = r.losses;
@@ -141,13 +155,38 @@ pub fn calibrate(
         if r.done {
             break;
         }
+        if saved_at.elapsed().as_secs_f64() >= CHECKPOINT_SECS {
+            checkpoint(
+                calibrator.as_ref(),
+                &last,
+                format!("running: step {step} of {max_steps}"),
+            )?;
+            saved_at = std::time::Instant::now();
+        }
     }
+    let doc = document(args, &rig, calibrator.as_ref(), &last, "complete".into());
+    doc.save(&args.out).map_err(|e| e.to_string())?;
+    Ok(doc)
+}
+
+/// Seconds between checkpoints of a running calibration.
+const CHECKPOINT_SECS: f64 = 30.0;
+
+/// The native file for the calibrator's best rig: sensors not asked for keep their initial
+/// extrinsics; provenance (input, method, time range, init, version, status) and the latest
+/// losses as metrics.
+fn document(
+    args: &CalibrateArgs,
+    initial: &Rig,
+    calibrator: &dyn Calibrator,
+    losses: &[(String, f64)],
+    status: String,
+) -> CalibrationFile {
     let mut result: Rig = calibrator.best();
-    // Sensors not asked for keep their initial extrinsics.
     if !args.sensors.is_empty() {
         for s in &mut result.sensors {
             if !args.sensors.contains(&s.name)
-                && let Some(r) = rig.sensor(&s.name)
+                && let Some(r) = initial.sensor(&s.name)
             {
                 s.vehicle_from_sensor = r.vehicle_from_sensor;
             }
@@ -171,11 +210,12 @@ pub fn calibrate(
         "version".into(),
         v(format!("rigcal {}", env!("CARGO_PKG_VERSION"))),
     );
-    for (name, value) in last {
-        doc.metrics.insert(name, serde_yaml::Value::from(value));
+    doc.provenance.insert("status".into(), v(status));
+    for (name, value) in losses {
+        doc.metrics
+            .insert(name.clone(), serde_yaml::Value::from(*value));
     }
-    doc.save(&args.out).map_err(|e| e.to_string())?;
-    Ok(doc)
+    doc
 }
 
 #[cfg(test)]
