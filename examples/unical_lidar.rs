@@ -1,7 +1,7 @@
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 //! UniCal's LiDAR stage on a simulated drive: perturb every LiDAR, learn the scene and the
 //! extrinsics from depth, print the error against the ground truth as it goes.
-//! `cargo run --release --example unical_lidar -- [ITERATIONS] [SECONDS]`
+//! `cargo run --release --example unical_lidar -- [ITERATIONS] [SECONDS] [PERTURBATION_SCALE]`
 
 use glam::DVec3;
 use rigcal::geometry::Trajectory;
@@ -15,6 +15,9 @@ fn main() {
     let args: Vec<String> = std::env::args().collect();
     let iterations: usize = args.get(1).and_then(|s| s.parse().ok()).unwrap_or(300);
     let seconds: f64 = args.get(2).and_then(|s| s.parse().ok()).unwrap_or(3.0);
+    // Scale of the initial perturbation (0: start at the ground truth, to see the scene's own
+    // rendering error).
+    let perturbation: f64 = args.get(3).and_then(|s| s.parse().ok()).unwrap_or(1.0);
     let rig = SimRig::preset(RigPreset::Pandaset);
     let tcfg = TrajectoryConfig {
         kind: TrajectoryKind::Figure8,
@@ -38,7 +41,7 @@ fn main() {
             let sweeps = (1..(seconds * 10.0) as i64)
                 .map(|i| lidar_sim::simulate_sweep(&world, l, &traj, i * 100_000_000, 5).unwrap())
                 .collect();
-            let sign = if k == 0 { 1.0 } else { -1.0 };
+            let sign = if k == 0 { perturbation } else { -perturbation };
             LidarData {
                 name: l.name.clone(),
                 initial: l.vehicle_from_lidar.perturbed_right(
@@ -68,6 +71,15 @@ fn main() {
     let t0 = std::time::Instant::now();
     for it in 0..iterations {
         let r = calib.step();
+        if let Some(loss) = r.geometry_init_loss {
+            if it % 25 == 0 {
+                eprintln!(
+                    "it {it:4} geometry init loss {loss:.4} · {:.2} s/it",
+                    t0.elapsed().as_secs_f64() / (it + 1) as f64
+                );
+            }
+            continue;
+        }
         if it % 25 == 0 || it + 1 == iterations {
             let errs: Vec<String> = calib
                 .extrinsics()

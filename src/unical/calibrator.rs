@@ -130,6 +130,12 @@ impl Calibrator for UnicalLidarStage {
 
     fn step(&mut self) -> StepReport {
         let r = self.calib.step();
+        if let Some(loss) = r.geometry_init_loss {
+            return StepReport {
+                losses: vec![("geometry init loss".into(), loss)],
+                done: self.calib.iteration >= self.calib.config.iterations,
+            };
+        }
         let mut losses = vec![
             ("depth loss".into(), r.loss),
             ("|depth error| m".into(), r.mean_abs_error_m),

@@ -23,6 +23,7 @@ use super::intensity::{IntensityDecoder, IntensityMap, normaliser};
 use super::lidar_terms::{DepthRay, LidarModel, LidarWeights, lidar_step};
 use super::occupancy::OccupancyGrid;
 use super::pose::PoseParams;
+use super::sdf_init::{PointIndex, SdfRay, sdf_fit_step};
 use crate::geometry::camera::CameraIntrinsics;
 use crate::geometry::{Rigid, Trajectory};
 use crate::log::LidarSweep;
@@ -36,6 +37,10 @@ pub struct DepthCalibConfig {
     pub beta_init: f32,
     pub lr_field: f32,
     pub lr_pose: f32,
+    /// The first iterations fit the SDF directly to the LiDAR returns ([`super::sdf_init`])
+    /// with this many rays each (split evenly across LiDARs); poses stay fixed.
+    pub geometry_init_steps: usize,
+    pub geometry_init_rays: usize,
     /// Poses stay fixed for this many iterations while the scene forms from the initial
     /// calibration (a scene that is still mostly empty gives poses misleading gradients).
     pub pose_warmup: usize,
@@ -70,7 +75,9 @@ impl Default for DepthCalibConfig {
             beta_init: 20.0,
             lr_field: 1e-2,
             lr_pose: 1e-3,
-            pose_warmup: 100,
+            geometry_init_steps: 150,
+            geometry_init_rays: 8192,
+            pose_warmup: 200,
             iterations: 2000,
             seed: 1,
             rays_per_camera: 512,
@@ -104,6 +111,7 @@ impl DepthCalibConfig {
             rays_per_sensor: 625,
             rays_per_camera: 625,
             lr_pose: 1e-4,
+            geometry_init_steps: 0,
             pose_warmup: 0,
             iterations: 30_000,
             ..Self::default()
@@ -184,6 +192,10 @@ pub struct DepthCalibration {
     mlp_params: Vec<f32>,
     pose_opt: Vec<DenseAdam>,
     beta_opt: DenseAdam,
+    /// The aggregated returns under the initial calibration (for the geometry initialisation,
+    /// indexed on first use and dropped after it).
+    aggregated: Vec<DVec3>,
+    point_index: Option<PointIndex>,
     /// Per LiDAR: the factor that normalises its intensities to [0, 1] (`None`: no intensity).
     intensity_norm: Vec<Option<f32>>,
     intensity_maps: Vec<IntensityMap>,
@@ -209,6 +221,8 @@ pub struct DepthReport {
     pub intensity_loss: f64,
     /// The SDF regulariser (Eikonal near hits + weight suppression away from them).
     pub regulariser_loss: f64,
+    /// During the geometry initialisation: its loss (the other terms are 0 then).
+    pub geometry_init_loss: Option<f64>,
 }
 
 /// One gradient accumulator per parallel chunk of rays: two chunks per thread.
@@ -328,7 +342,14 @@ impl DepthCalibration {
             .collect();
         let decoder = IntensityDecoder::new(config.field.feature_dim, config.seed);
         let decoder_params = mlp_flat(&decoder.mlp);
+        let aggregated = if config.geometry_init_steps > 0 {
+            points
+        } else {
+            Vec::new()
+        };
         Self {
+            aggregated,
+            point_index: None,
             intensity_maps: vec![IntensityMap::default(); lidars.len()],
             intensity_map_opt: lidars
                 .iter()
@@ -525,40 +546,48 @@ impl DepthCalibration {
         rays
     }
 
+    /// A random return of `sensor`: `world_from_vehicle` at its firing time, its direction
+    /// in the sensor frame, range and normalised intensity (`None` if unusable).
+    fn draw_return(&mut self, sensor: usize) -> Option<(Rigid, DVec3, f64, Option<f32>)> {
+        let sweeps = &self.lidars[sensor].sweeps;
+        if sweeps.is_empty() {
+            return None;
+        }
+        let s = &sweeps[(next(&mut self.rng) % sweeps.len() as u64) as usize];
+        if s.points_in_sensor.is_empty() {
+            return None;
+        }
+        let i = (next(&mut self.rng) % s.points_in_sensor.len() as u64) as usize;
+        let p = s.points_in_sensor[i];
+        let intensity = self.intensity_norm[sensor]
+            .zip(s.intensity.get(i))
+            .map(|(k, raw)| (raw * k).clamp(0.0, 1.0));
+        let v = DVec3::new(p[0] as f64, p[1] as f64, p[2] as f64);
+        let range = v.length();
+        let u = v.try_normalize()?;
+        if range < 1.0 {
+            return None;
+        }
+        let t = s.stamp_nanos
+            + s.time_offset_secs
+                .as_ref()
+                .and_then(|t| t.get(i))
+                .map_or(0, |x| (*x as f64 * 1e9) as i64);
+        let wv = self.trajectory.world_from_vehicle(t).ok()?;
+        Some((wv, u, range, intensity))
+    }
+
     fn draw_rays(&mut self, sensor: usize) -> Vec<DepthRay> {
         let pose = self.poses[sensor];
         let mut rays = Vec::with_capacity(self.config.rays_per_sensor);
-        let sweeps = &self.lidars[sensor].sweeps;
-        if sweeps.is_empty() {
+        if self.lidars[sensor].sweeps.is_empty() {
             return rays;
         }
         let mut attempts = 0;
         while rays.len() < self.config.rays_per_sensor && attempts < 4 * self.config.rays_per_sensor
         {
             attempts += 1;
-            let s = &sweeps[(next(&mut self.rng) % sweeps.len() as u64) as usize];
-            if s.points_in_sensor.is_empty() {
-                continue;
-            }
-            let i = (next(&mut self.rng) % s.points_in_sensor.len() as u64) as usize;
-            let p = s.points_in_sensor[i];
-            let intensity = self.intensity_norm[sensor]
-                .zip(s.intensity.get(i))
-                .map(|(k, raw)| (raw * k).clamp(0.0, 1.0));
-            let v = DVec3::new(p[0] as f64, p[1] as f64, p[2] as f64);
-            let range = v.length();
-            let Some(u) = v.try_normalize() else {
-                continue;
-            };
-            if range < 1.0 {
-                continue;
-            }
-            let t = s.stamp_nanos
-                + s.time_offset_secs
-                    .as_ref()
-                    .and_then(|t| t.get(i))
-                    .map_or(0, |x| (*x as f64 * 1e9) as i64);
-            let Ok(wv) = self.trajectory.world_from_vehicle(t) else {
+            let Some((wv, u, range, intensity)) = self.draw_return(sensor) else {
                 continue;
             };
             let (o, d) = pose.ray(wv, u);
@@ -586,9 +615,96 @@ impl DepthCalibration {
         rays
     }
 
+    /// One iteration of the geometry initialisation: the SDF fitted to LiDAR returns under the
+    /// current (initial) extrinsics, in parallel chunks, Adam on the grid and geometry MLP.
+    fn geometry_init_step(&mut self) -> DepthReport {
+        let lidars = self.lidars.len().max(1);
+        let per_sensor = self.config.geometry_init_rays.div_ceil(lidars);
+        let mut rays = Vec::with_capacity(per_sensor * lidars);
+        for s in 0..self.lidars.len() {
+            let pose = self.poses[s];
+            let mut drawn = 0;
+            for _ in 0..2 * per_sensor {
+                if drawn == per_sensor {
+                    break;
+                }
+                let Some((wv, u, range, _)) = self.draw_return(s) else {
+                    continue;
+                };
+                let (origin, dir) = pose.ray(wv, u);
+                let uniform = |rng: &mut u64| (next(rng) >> 11) as f64 / (1u64 << 53) as f64;
+                let (u_front, u_behind) = (uniform(&mut self.rng), uniform(&mut self.rng));
+                rays.push((origin, dir, range, u_front, u_behind));
+                drawn += 1;
+            }
+        }
+        let index = self
+            .point_index
+            .get_or_insert_with(|| PointIndex::new(&self.aggregated));
+        let rays: Vec<SdfRay> = rays
+            .into_par_iter()
+            .map(|(o, d, range, u_front, u_behind)| {
+                SdfRay::new(o, d, range, u_front, u_behind, index)
+            })
+            .collect();
+        let chunk = rays.len().div_ceil(self.grid_accs.len()).max(1);
+        let total = rays.len().max(1) as f64;
+        let field = &self.field;
+        let parts: Vec<(f64, super::mlp::MlpGrad)> = rays
+            .par_chunks(chunk)
+            .zip(self.grid_accs.par_iter_mut())
+            .map(|(c, acc)| {
+                let share = c.len() as f64 / total;
+                let mut sink = Scaled { acc, scale: 1.0 };
+                let mut mlp = field.geo.zero_grad();
+                let loss = sdf_fit_step(field, c, share as f32, &mut sink, &mut mlp);
+                (loss * share, mlp)
+            })
+            .collect();
+        let mut geo = self.field.geo.zero_grad();
+        let mut loss = 0.0;
+        for (l, g) in parts {
+            loss += l;
+            add_scaled(&mut geo, &g, 1.0);
+        }
+        let lr = decayed_lr(
+            self.config.lr_field,
+            0.1,
+            self.iteration,
+            self.config.iterations,
+        );
+        let grid = GradAccumulator::drain_all(&mut self.grid_accs);
+        self.grid_opt.step(&mut self.field.grid.params, &grid, lr);
+        self.mlp_opt
+            .step(&mut self.mlp_params, &grad_flat(&geo), lr);
+        mlp_set(&mut self.field.geo, &self.mlp_params);
+        self.iteration += 1;
+        DepthReport {
+            loss: 0.0,
+            mean_abs_error_m: 0.0,
+            beta: self.beta(),
+            colour_loss: 0.0,
+            intensity_loss: 0.0,
+            regulariser_loss: 0.0,
+            geometry_init_loss: Some(loss),
+        }
+    }
+
+    /// Whether the next step is still part of the geometry initialisation.
+    pub fn initialising_geometry(&self) -> bool {
+        self.iteration < self.config.geometry_init_steps
+    }
+
     /// One optimisation step over every sensor: the same number of rays from each LiDAR (depth)
     /// and each camera (colour), gradients weighted by the objective's λs (§8).
     pub fn step(&mut self) -> DepthReport {
+        if self.initialising_geometry() {
+            return self.geometry_init_step();
+        }
+        if self.point_index.is_some() || !self.aggregated.is_empty() {
+            self.point_index = None;
+            self.aggregated = Vec::new();
+        }
         let total = self.config.iterations;
         let lr_field = decayed_lr(self.config.lr_field, 0.1, self.iteration, total);
         let lr_pose = if self.iteration < self.config.pose_warmup {
@@ -794,6 +910,7 @@ impl DepthCalibration {
             colour_loss,
             intensity_loss,
             regulariser_loss,
+            geometry_init_loss: None,
         }
     }
 }
@@ -872,6 +989,7 @@ mod tests {
             rays_per_sensor: 128,
             rays_per_camera: 128,
             iterations: 40,
+            geometry_init_steps: 0,
             pose_warmup: 0,
             ..DepthCalibConfig::default()
         }
@@ -1034,5 +1152,39 @@ mod tests {
         );
         assert_ne!(e[1].1.translation, second_initial.translation);
         assert_eq!(c.intensity_maps().len(), 2);
+    }
+
+    /// The geometry initialisation puts the surface where the returns are: the first rendered
+    /// depth after it is far closer than from the empty initial scene, and poses stay fixed.
+    #[test]
+    fn geometry_initialisation_places_the_surface_before_rendering() {
+        let (trajectory, mount, sweeps) = flat_drive();
+        let lidar = LidarData {
+            name: "lidar".into(),
+            initial: mount,
+            sweeps,
+        };
+        let first_render_error = |init_steps: usize| {
+            let config = DepthCalibConfig {
+                geometry_init_steps: init_steps,
+                geometry_init_rays: 1024,
+                ..small_config()
+            };
+            let mut c = DepthCalibration::new(config, trajectory.clone(), vec![lidar.clone()]);
+            for _ in 0..init_steps {
+                let r = c.step();
+                assert!(r.geometry_init_loss.is_some_and(f64::is_finite));
+            }
+            assert!(!c.initialising_geometry());
+            assert_eq!(
+                c.extrinsics()[0].1,
+                PoseParams::from_rigid(mount).to_rigid()
+            );
+            let r = c.step();
+            assert!(r.geometry_init_loss.is_none());
+            r.mean_abs_error_m
+        };
+        let (cold, warm) = (first_render_error(0), first_render_error(30));
+        assert!(warm < 0.15 * cold && warm < 1.0, "{cold} m -> {warm} m");
     }
 }

@@ -12,6 +12,7 @@
 //! - [`lidar_terms`]: the LiDAR terms (depth, intensity, regulariser) for a batch of rays with
 //!   scene, β, decoder, intensity-mapping and pose gradients.
 //! - [`intensity`]: the LiDAR intensity decoder and per-LiDAR intensity mapping.
+//! - [`sdf_init`]: geometry initialisation: the SDF fitted directly to the LiDAR returns.
 //! - [`regulariser`]: Eikonal near LiDAR hits (tetrahedral stencil) and weight suppression.
 //! - [`camera_rgb`]: the camera colour term (feature rendering, sky, colour decoder on SH view
 //!   encoding, per-camera exposure) with scene, decoder, exposure and pose gradients.
@@ -36,3 +37,4 @@ pub mod mlp;
 pub mod occupancy;
 pub mod pose;
 pub mod regulariser;
+pub mod sdf_init;

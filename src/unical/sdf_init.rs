@@ -1,0 +1,234 @@
+//! Geometry initialisation from the LiDAR returns (an engineering step for the CPU, method.md
+//! §18; the objective of §8 is unchanged): before rendering, the scene's SDF is fitted directly
+//! to a truncated distance field of the aggregated returns under the initial calibration, so
+//! volume rendering starts from surfaces in the right places instead of spending hundreds of
+//! slow iterations growing them from empty space, and the pose gradients are meaningful early.
+//!
+//! Per LiDAR ray with origin o, direction d and range R (the same rays as the depth term):
+//! - at the hit `o + R d` the SDF is zero;
+//! - at a random point in front of it the SDF is the distance to the nearest return, truncated
+//!   at [`TRUNCATION_M`] (free space: the opacity `sigmoid(−β s)` must be small there, which a
+//!   mere `s > 0` would not give);
+//! - just behind it (5–20 cm) the SDF is minus that distance (inside);
+//! - at the hit the SDF is a distance function, `(‖∇s‖ − 1)²` (the Eikonal stencil of
+//!   [`super::regulariser`]).
+//!
+//! Distances come from [`PointIndex`], a hash of 0.5 m cells over the returns thinned to one per
+//! 5 cm; every supervision point costs one field query and one backward pass, about a hundredth
+//! of rendering the ray.
+
+use std::collections::HashMap;
+
+use glam::DVec3;
+
+use super::field::SceneField;
+use super::hash_grid::GradSink;
+use super::mlp::MlpGrad;
+use super::regulariser::eikonal;
+
+/// The distance field is truncated here (the scene field starts at +0.5 m everywhere).
+pub const TRUNCATION_M: f64 = 0.5;
+
+/// Nearest-return distances up to [`TRUNCATION_M`].
+pub struct PointIndex {
+    cells: HashMap<[i32; 3], Vec<DVec3>>,
+}
+
+impl PointIndex {
+    const CELL_M: f64 = TRUNCATION_M;
+    const THIN_M: f64 = 0.05;
+
+    fn key(p: DVec3, size: f64) -> [i32; 3] {
+        (p / size).floor().to_array().map(|v| v as i32)
+    }
+
+    /// Index `points`, keeping one per 5 cm cell.
+    pub fn new(points: &[DVec3]) -> Self {
+        let mut seen = std::collections::HashSet::new();
+        let mut cells: HashMap<[i32; 3], Vec<DVec3>> = HashMap::new();
+        for p in points {
+            if p.is_finite() && seen.insert(Self::key(*p, Self::THIN_M)) {
+                cells
+                    .entry(Self::key(*p, Self::CELL_M))
+                    .or_default()
+                    .push(*p);
+            }
+        }
+        Self { cells }
+    }
+
+    /// Distance from `x` to the nearest indexed point, at most [`TRUNCATION_M`].
+    pub fn distance(&self, x: DVec3) -> f64 {
+        let [cx, cy, cz] = Self::key(x, Self::CELL_M);
+        let mut best = TRUNCATION_M * TRUNCATION_M;
+        for dz in -1..=1 {
+            for dy in -1..=1 {
+                for dx in -1..=1 {
+                    if let Some(points) = self.cells.get(&[cx + dx, cy + dy, cz + dz]) {
+                        for p in points {
+                            best = best.min(p.distance_squared(x));
+                        }
+                    }
+                }
+            }
+        }
+        best.sqrt()
+    }
+}
+
+/// One ray's supervision points and their target distances.
+#[derive(Clone, Copy, Debug)]
+pub struct SdfRay {
+    pub origin: DVec3,
+    pub dir: DVec3,
+    pub range_m: f64,
+    /// Where the free-space point is, as a fraction of the way to 5 cm before the hit, and
+    /// its target SDF.
+    pub u_front: f64,
+    pub front_sdf_m: f64,
+    /// How far behind the hit (5–20 cm) the inside point is, in [0, 1], and its target SDF.
+    pub u_behind: f64,
+    pub behind_sdf_m: f64,
+}
+
+impl SdfRay {
+    pub fn front(&self) -> DVec3 {
+        self.origin + self.dir * (self.range_m - 0.05) * self.u_front.clamp(0.0, 1.0)
+    }
+
+    pub fn behind(&self) -> DVec3 {
+        self.origin + self.dir * (self.range_m + 0.05 + 0.15 * self.u_behind.clamp(0.0, 1.0))
+    }
+
+    /// A ray with its targets from the index.
+    pub fn new(
+        origin: DVec3,
+        dir: DVec3,
+        range_m: f64,
+        u_front: f64,
+        u_behind: f64,
+        index: &PointIndex,
+    ) -> Self {
+        let mut ray = Self {
+            origin,
+            dir,
+            range_m,
+            u_front,
+            front_sdf_m: 0.0,
+            u_behind,
+            behind_sdf_m: 0.0,
+        };
+        ray.front_sdf_m = index.distance(ray.front());
+        ray.behind_sdf_m = -index.distance(ray.behind());
+        ray
+    }
+}
+
+/// Weight of the Eikonal constraint at the hit.
+const EIKONAL_WEIGHT: f64 = 0.1;
+
+/// Mean loss over `rays` and its gradients (scaled by `weight`) into the field.
+pub fn sdf_fit_step(
+    field: &SceneField,
+    rays: &[SdfRay],
+    weight: f32,
+    grid: &mut impl GradSink,
+    mlp: &mut MlpGrad,
+) -> f64 {
+    let n = rays.len().max(1) as f64;
+    let w = weight as f64 / n;
+    let zeros = vec![0.0; field.geo.output_dim().saturating_sub(1)];
+    let mut loss = 0.0;
+    for ray in rays {
+        let hit = ray.origin + ray.dir * ray.range_m;
+        let targets = [
+            (hit, 0.0),
+            (ray.front(), ray.front_sdf_m),
+            (ray.behind(), ray.behind_sdf_m),
+        ];
+        for (x, target) in targets {
+            let sample = field.query(x);
+            let r = sample.sdf() as f64 - target;
+            loss += r * r / n;
+            field.backward(&sample, (2.0 * r * w) as f32, &zeros, grid, mlp);
+        }
+        let eik_weight = (EIKONAL_WEIGHT * w) as f32;
+        loss += EIKONAL_WEIGHT * eikonal(field, hit, eik_weight, grid, mlp) / n;
+    }
+    loss
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::field::FieldConfig;
+    use super::super::hash_grid::{HashGridConfig, SparseGrad};
+    use super::*;
+
+    #[test]
+    fn gradient_matches_finite_differences() {
+        let config = FieldConfig {
+            grid: HashGridConfig {
+                levels: 4,
+                log2_table_size: 12,
+                base_resolution: 4.0,
+                max_resolution: 32.0,
+            },
+            hidden: 16,
+            feature_dim: 2,
+            initial_sdf_m: 0.2,
+        };
+        let mut field = SceneField::new(DVec3::splat(-20.0), DVec3::splat(20.0), &config, 5);
+        for (i, p) in field.grid.params.iter_mut().enumerate() {
+            *p = ((i as f32 * 0.7548).fract() - 0.5) * 2.0;
+        }
+        let rays: Vec<SdfRay> = (0..8)
+            .map(|i| SdfRay {
+                origin: DVec3::new(0.5 * i as f64, -1.0, 1.8),
+                dir: DVec3::new(1.0, 0.1 * i as f64, -0.3).normalize_or_zero(),
+                range_m: 4.0 + 0.7 * i as f64,
+                u_front: (i as f64 * 0.37).fract(),
+                front_sdf_m: 0.3,
+                u_behind: (i as f64 * 0.61).fract(),
+                behind_sdf_m: -0.1,
+            })
+            .collect();
+        let (mut g, mut m) = (SparseGrad::default(), field.geo.zero_grad());
+        let loss = sdf_fit_step(&field, &rays, 1.0, &mut g, &mut m);
+        assert!(loss > 0.0);
+        let total = |f: &SceneField| {
+            let (mut g, mut m) = (SparseGrad::default(), f.geo.zero_grad());
+            sdf_fit_step(f, &rays, 0.0, &mut g, &mut m)
+        };
+        let mut checked = 0;
+        for layer in 0..field.geo.layers.len() {
+            let grads = &m.weights[layer];
+            let mut order: Vec<usize> = (0..grads.len()).collect();
+            order.sort_by(|a, b| grads[*b].abs().total_cmp(&grads[*a].abs()));
+            for &k in order.iter().take(3) {
+                let (mut up, mut down) = (field.clone(), field.clone());
+                up.geo.layers[layer].weights[k] += 1e-3;
+                down.geo.layers[layer].weights[k] -= 1e-3;
+                let fd = (total(&up) - total(&down)) / 2e-3;
+                let an = grads[k] as f64;
+                assert!(
+                    (fd - an).abs() < 0.03 * (fd.abs() + an.abs()) + 2e-3,
+                    "layer {layer} weight {k}: {fd} vs {an}"
+                );
+                checked += usize::from(an.abs() > 1e-2);
+            }
+        }
+        assert!(checked >= 3, "too few non-zero gradients ({checked})");
+    }
+
+    #[test]
+    fn the_index_gives_truncated_nearest_distances() {
+        let points: Vec<DVec3> = (0..200)
+            .map(|i| DVec3::new(i as f64 * 0.02, 0.0, 0.0))
+            .collect();
+        let index = PointIndex::new(&points);
+        assert!((index.distance(DVec3::new(1.0, 0.3, 0.0)) - 0.3).abs() < 0.03);
+        assert!(index.distance(DVec3::new(1.0, 0.0, 0.0)) < 0.03);
+        assert_eq!(index.distance(DVec3::new(1.0, 2.0, 0.0)), TRUNCATION_M);
+        assert_eq!(index.distance(DVec3::new(-3.0, 0.0, 0.0)), TRUNCATION_M);
+    }
+}
