@@ -13,8 +13,7 @@
 
 use glam::DVec3;
 
-use super::composite::alpha_from_sdf;
-use super::field::FieldSample;
+use super::field::{FieldSample, samples_backward};
 use super::hash_grid::{GradSink, HashGrid, HashGridConfig};
 use super::mlp::{Mlp, MlpGrad};
 
@@ -162,18 +161,17 @@ impl Background {
         mlp_grad: &mut MlpGrad,
     ) -> (DVec3, DVec3, f64) {
         let dim = self.geo.output_dim().saturating_sub(1);
-        let zeros = vec![0.0; dim];
-        let (mut d_o, mut d_d, mut d_beta) = (DVec3::ZERO, DVec3::ZERO, 0.0);
-        for (i, (s, tau)) in samples.iter().zip(taus_m).enumerate() {
-            let (_, da_ds, da_db) = alpha_from_sdf(s.sdf(), beta);
-            d_beta += (d_alpha[i] * da_db) as f64;
-            let d_f = d_features.get(i * dim..(i + 1) * dim).unwrap_or(&zeros);
-            let x = origin + dir * *tau as f64;
-            let d_x = self.backward(x, s, d_alpha[i] * da_ds, d_f, grid_grad, mlp_grad);
-            d_o += d_x;
-            d_d += d_x * *tau as f64;
-        }
-        (d_o, d_d, d_beta)
+        samples_backward(
+            samples,
+            taus_m,
+            beta,
+            (d_alpha, d_features),
+            dim,
+            |i, s, d_s, d_f| {
+                let x = origin + dir * taus_m[i] as f64;
+                self.backward(x, s, d_s, d_f, grid_grad, mlp_grad)
+            },
+        )
     }
 }
 

@@ -291,7 +291,7 @@ pub fn colour_step(
 
 #[cfg(test)]
 mod tests {
-    use super::super::field::FieldConfig;
+    use super::super::field::tiny_field;
     use super::super::hash_grid::HashGridConfig;
     use super::*;
     use crate::unical::hash_grid::SparseGrad;
@@ -304,21 +304,7 @@ mod tests {
         PoseParams,
         Vec<ColourRay>,
     ) {
-        let config = FieldConfig {
-            grid: HashGridConfig {
-                levels: 4,
-                log2_table_size: 12,
-                base_resolution: 4.0,
-                max_resolution: 32.0,
-            },
-            hidden: 16,
-            feature_dim: 3,
-            initial_sdf_m: 0.2,
-        };
-        let mut field = SceneField::new(DVec3::splat(-20.0), DVec3::splat(20.0), &config, 5);
-        for (i, p) in field.grid.params.iter_mut().enumerate() {
-            *p = ((i as f32 * 0.7548).fract() - 0.5) * 4.0;
-        }
+        let field = tiny_field(3, 4.0, 20.0);
         // A smooth background (coarse levels): its unit coordinates are f32, so at hundreds of
         // metres finite differences in the pose only resolve slowly varying fields.
         let smooth = super::super::background::BackgroundConfig {

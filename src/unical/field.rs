@@ -123,18 +123,70 @@ impl SceneField {
         mlp_grad: &mut MlpGrad,
     ) -> (DVec3, DVec3, f64) {
         let dim = self.geo.output_dim().saturating_sub(1);
-        let zeros = vec![0.0; dim];
-        let (mut d_o, mut d_d, mut d_beta) = (DVec3::ZERO, DVec3::ZERO, 0.0);
-        for (i, (s, tau)) in samples.iter().zip(taus_m).enumerate() {
-            let (_, da_ds, da_db) = alpha_from_sdf(s.sdf(), beta);
-            d_beta += (d_alpha[i] * da_db) as f64;
-            let d_f = d_features.get(i * dim..(i + 1) * dim).unwrap_or(&zeros);
-            let d_x = self.backward(s, d_alpha[i] * da_ds, d_f, grid_grad, mlp_grad);
-            d_o += d_x;
-            d_d += d_x * *tau as f64;
-        }
-        (d_o, d_d, d_beta)
+        samples_backward(
+            samples,
+            taus_m,
+            beta,
+            (d_alpha, d_features),
+            dim,
+            |_, s, d_s, d_f| self.backward(s, d_s, d_f, grid_grad, mlp_grad),
+        )
     }
+}
+
+/// The part of a ray's backward pass every field shares: per sample, `∂L/∂s = ∂L/∂α·∂α/∂s`
+/// and the feature rows go to `point_backward(i, sample, ∂L/∂s, ∂L/∂f)`, which returns
+/// `∂L/∂x_i`; sums `(∂L/∂o, ∂L/∂d, ∂L/∂β)` over `x_i = o + τ_i d`.
+pub fn samples_backward(
+    samples: &[FieldSample],
+    taus_m: &[f32],
+    beta: f32,
+    (d_alpha, d_features): (&[f32], &[f32]),
+    feature_dim: usize,
+    mut point_backward: impl FnMut(usize, &FieldSample, f32, &[f32]) -> DVec3,
+) -> (DVec3, DVec3, f64) {
+    let zeros = vec![0.0; feature_dim];
+    let (mut d_o, mut d_d, mut d_beta) = (DVec3::ZERO, DVec3::ZERO, 0.0);
+    for (i, (s, tau)) in samples.iter().zip(taus_m).enumerate() {
+        let (_, da_ds, da_db) = alpha_from_sdf(s.sdf(), beta);
+        d_beta += (d_alpha[i] * da_db) as f64;
+        let d_f = d_features
+            .get(i * feature_dim..(i + 1) * feature_dim)
+            .unwrap_or(&zeros);
+        let d_x = point_backward(i, s, d_alpha[i] * da_ds, d_f);
+        d_o += d_x;
+        d_d += d_x * *tau as f64;
+    }
+    (d_o, d_d, d_beta)
+}
+
+/// The field configuration of gradient tests: 4 levels of 2^12 up to 32 cells, 16 hidden.
+#[cfg(test)]
+pub(crate) fn tiny_config(feature_dim: usize) -> FieldConfig {
+    FieldConfig {
+        grid: HashGridConfig {
+            levels: 4,
+            log2_table_size: 12,
+            base_resolution: 4.0,
+            max_resolution: 32.0,
+        },
+        hidden: 16,
+        feature_dim,
+        initial_sdf_m: 0.2,
+    }
+}
+
+/// A [`tiny_config`] field in the box ±`half_size_m` with large pseudo-random table values (so
+/// the SDF varies in space).
+#[cfg(test)]
+pub(crate) fn tiny_field(feature_dim: usize, amplitude: f32, half_size_m: f64) -> SceneField {
+    let config = tiny_config(feature_dim);
+    let (lo, hi) = (DVec3::splat(-half_size_m), DVec3::splat(half_size_m));
+    let mut field = SceneField::new(lo, hi, &config, 5);
+    for (i, p) in field.grid.params.iter_mut().enumerate() {
+        *p = ((i as f32 * 0.7548).fract() - 0.5) * amplitude;
+    }
+    field
 }
 
 #[cfg(test)]

@@ -206,29 +206,13 @@ pub fn lidar_step(
 
 #[cfg(test)]
 mod tests {
-    use super::super::field::FieldConfig;
-    use super::super::hash_grid::HashGridConfig;
+    use super::super::field::tiny_field;
     use super::*;
     use crate::unical::hash_grid::SparseGrad;
     use glam::DQuat;
 
     fn setup() -> (SceneField, IntensityDecoder, PoseParams, Vec<DepthRay>) {
-        let config = FieldConfig {
-            grid: HashGridConfig {
-                levels: 4,
-                log2_table_size: 12,
-                base_resolution: 4.0,
-                max_resolution: 32.0,
-            },
-            hidden: 16,
-            feature_dim: 2,
-            initial_sdf_m: 0.2,
-        };
-        let mut field = SceneField::new(DVec3::splat(-20.0), DVec3::splat(20.0), &config, 5);
-        // A non-trivial field: large table values so the SDF varies in space.
-        for (i, p) in field.grid.params.iter_mut().enumerate() {
-            *p = ((i as f32 * 0.7548).fract() - 0.5) * 4.0;
-        }
+        let field = tiny_field(2, 4.0, 20.0);
         let pose = PoseParams::from_rigid(Rigid::new(
             DQuat::from_euler(glam::EulerRot::ZYX, 0.2, 0.05, -0.03),
             DVec3::new(0.9, 0.1, 1.8),

@@ -98,24 +98,15 @@ pub fn weight_suppression(
 
 #[cfg(test)]
 mod tests {
-    use super::super::field::FieldConfig;
-    use super::super::hash_grid::HashGridConfig;
+    use super::super::field::tiny_config;
     use super::*;
     use crate::unical::hash_grid::SparseGrad;
 
+    /// A tiny field with its own table pattern: the Eikonal check differentiates a 1 cm
+    /// stencil, so it needs a field without ReLU or cell kinks near its points.
     fn field() -> SceneField {
-        let config = FieldConfig {
-            grid: HashGridConfig {
-                levels: 4,
-                log2_table_size: 12,
-                base_resolution: 4.0,
-                max_resolution: 32.0,
-            },
-            hidden: 16,
-            feature_dim: 2,
-            initial_sdf_m: 0.2,
-        };
-        let mut field = SceneField::new(DVec3::splat(-10.0), DVec3::splat(10.0), &config, 3);
+        let (lo, hi) = (DVec3::splat(-10.0), DVec3::splat(10.0));
+        let mut field = SceneField::new(lo, hi, &tiny_config(2), 3);
         for (i, p) in field.grid.params.iter_mut().enumerate() {
             *p = ((i as f32 * 0.618_034).fract() - 0.5) * 2.0;
         }

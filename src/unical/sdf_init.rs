@@ -160,27 +160,13 @@ pub fn sdf_fit_step(
 
 #[cfg(test)]
 mod tests {
-    use super::super::field::FieldConfig;
-    use super::super::hash_grid::{HashGridConfig, SparseGrad};
+    use super::super::field::tiny_field;
+    use super::super::hash_grid::SparseGrad;
     use super::*;
 
     #[test]
     fn gradient_matches_finite_differences() {
-        let config = FieldConfig {
-            grid: HashGridConfig {
-                levels: 4,
-                log2_table_size: 12,
-                base_resolution: 4.0,
-                max_resolution: 32.0,
-            },
-            hidden: 16,
-            feature_dim: 2,
-            initial_sdf_m: 0.2,
-        };
-        let mut field = SceneField::new(DVec3::splat(-20.0), DVec3::splat(20.0), &config, 5);
-        for (i, p) in field.grid.params.iter_mut().enumerate() {
-            *p = ((i as f32 * 0.7548).fract() - 0.5) * 2.0;
-        }
+        let field = tiny_field(2, 2.0, 20.0);
         let rays: Vec<SdfRay> = (0..8)
             .map(|i| SdfRay {
                 origin: DVec3::new(0.5 * i as f64, -1.0, 1.8),
