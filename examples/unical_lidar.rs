@@ -1,7 +1,7 @@
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 //! UniCal's LiDAR stage on a simulated drive: perturb every LiDAR, learn the scene and the
 //! extrinsics from depth, print the error against the ground truth as it goes.
-//! `cargo run --release --example unical_lidar -- [ITERATIONS] [SECONDS] [PERTURBATION_SCALE]`
+//! `cargo run --release --example unical_lidar -- [ITERATIONS] [SECONDS] [PERTURBATION_SCALE] [BETA_INIT]`
 
 use glam::DVec3;
 use rigcal::geometry::Trajectory;
@@ -18,6 +18,11 @@ fn main() {
     // Scale of the initial perturbation (0: start at the ground truth, to see the scene's own
     // rendering error).
     let perturbation: f64 = args.get(3).and_then(|s| s.parse().ok()).unwrap_or(1.0);
+    let defaults = DepthCalibConfig::default();
+    let beta_init: f32 = args
+        .get(4)
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(defaults.beta_init);
     let rig = SimRig::preset(RigPreset::Pandaset);
     let tcfg = TrajectoryConfig {
         kind: TrajectoryKind::Figure8,
@@ -60,7 +65,8 @@ fn main() {
     let truth: Vec<_> = rig.lidars.iter().map(|l| l.vehicle_from_lidar).collect();
     let config = DepthCalibConfig {
         iterations,
-        ..DepthCalibConfig::default()
+        beta_init,
+        ..defaults
     };
     let mut calib = DepthCalibration::new(config, traj, lidars);
     eprintln!(
@@ -102,4 +108,49 @@ fn main() {
             );
         }
     }
+    // Where the rendered depth error is: quantiles of |rendered − true| by range and by the
+    // ray's elevation (grazing returns from the ground have small negative elevations).
+    let mut residuals = Vec::new();
+    for s in 0..calib.lidars.len() {
+        residuals.extend(calib.depth_residuals(s, 4000));
+    }
+    let quantiles = |mut v: Vec<f32>| -> String {
+        if v.is_empty() {
+            return "-".into();
+        }
+        v.sort_by(f32::total_cmp);
+        let q = |p: f64| v[((v.len() - 1) as f64 * p) as usize];
+        format!(
+            "n {:5} median {:.2} p90 {:.2} p99 {:.2} m",
+            v.len(),
+            q(0.5),
+            q(0.9),
+            q(0.99)
+        )
+    };
+    for (lo, hi) in [
+        (0.0, 10.0),
+        (10.0, 20.0),
+        (20.0, 40.0),
+        (40.0, 80.0),
+        (80.0, 1e9),
+    ] {
+        let v = residuals
+            .iter()
+            .filter(|(r, _, _)| *r >= lo && *r < hi)
+            .map(|(_, e, _)| e.abs())
+            .collect();
+        eprintln!("range {lo:>3}..{hi:<4} m: {}", quantiles(v));
+    }
+    for (lo, hi) in [(-90.0, -10.0), (-10.0, -3.0), (-3.0, 0.0), (0.0, 90.0)] {
+        let v = residuals
+            .iter()
+            .filter(|(_, _, el)| el.to_degrees() >= lo && el.to_degrees() < hi)
+            .map(|(_, e, _)| e.abs())
+            .collect();
+        eprintln!("elevation {lo:>4}..{hi:<3}°: {}", quantiles(v));
+    }
+    let signed: f32 =
+        residuals.iter().map(|(_, e, _)| *e).sum::<f32>() / residuals.len().max(1) as f32;
+    eprintln!("mean signed error {signed:.3} m (negative: rendered too short)");
 }

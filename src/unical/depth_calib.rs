@@ -690,6 +690,23 @@ impl DepthCalibration {
         }
     }
 
+    /// Diagnostics: `(true range, rendered − true range, elevation of the ray in the world,
+    /// rad)` for `count` random returns of LiDAR `sensor` under the current state.
+    pub fn depth_residuals(&mut self, sensor: usize, count: usize) -> Vec<(f32, f32, f32)> {
+        let saved = self.config.rays_per_sensor;
+        self.config.rays_per_sensor = count;
+        let rays = self.draw_rays(sensor);
+        self.config.rays_per_sensor = saved;
+        let (field, beta, pose) = (&self.field, self.beta(), self.poses[sensor]);
+        rays.par_iter()
+            .map(|r| {
+                let depth = super::lidar_terms::render_depth(field, beta, &pose, r);
+                let (_, d) = pose.ray(r.world_from_vehicle, r.dir_in_sensor);
+                (r.range_m, depth - r.range_m, d.z.asin() as f32)
+            })
+            .collect()
+    }
+
     /// Whether the next step is still part of the geometry initialisation.
     pub fn initialising_geometry(&self) -> bool {
         self.iteration < self.config.geometry_init_steps

@@ -81,6 +81,17 @@ pub struct LidarModel<'a> {
     pub decoder: Option<&'a IntensityDecoder>,
 }
 
+/// The rendered range of one ray (forward only, for diagnostics).
+pub fn render_depth(field: &SceneField, beta: f32, pose: &PoseParams, ray: &DepthRay) -> f32 {
+    let (o, d) = pose.ray(ray.world_from_vehicle, ray.dir_in_sensor);
+    let alphas: Vec<f32> = ray
+        .taus_m
+        .iter()
+        .map(|t| alpha_from_sdf(field.query(o + d * *t as f64).sdf(), beta).0)
+        .collect();
+    composite(&alphas, &ray.taus_m, &[], 0).depth_m
+}
+
 /// The LiDAR terms of `rays`, all from one sensor at `pose` with intensity mapping `map`; the
 /// hash table's gradients go to `grid`.
 pub fn lidar_step(
@@ -394,5 +405,33 @@ mod tests {
             checked >= 4,
             "too few non-zero gradients to test ({checked})"
         );
+    }
+
+    #[test]
+    fn render_depth_is_the_depth_term_forward() {
+        let (field, _, pose, rays) = setup();
+        let w = LidarWeights {
+            depth: 1.0,
+            intensity: 0.0,
+            regulariser: 0.0,
+        };
+        let model = LidarModel {
+            field: &field,
+            beta: 3.0,
+            decoder: None,
+        };
+        for ray in &rays {
+            let step = lidar_step(
+                model,
+                &pose,
+                &IntensityMap::default(),
+                &w,
+                std::slice::from_ref(ray),
+                &mut SparseGrad::default(),
+            );
+            let rendered = render_depth(&field, 3.0, &pose, ray);
+            let error = (rendered - ray.range_m).abs() as f64;
+            assert!((error - step.mean_abs_error_m).abs() < 1e-5, "{error}");
+        }
     }
 }
