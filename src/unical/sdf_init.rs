@@ -6,7 +6,8 @@
 //!
 //! Per LiDAR ray with origin o, direction d and range R (the same rays as the depth term):
 //! - at the hit `o + R d` the SDF is zero;
-//! - at a random point in front of it the SDF is the distance to the nearest return, truncated
+//! - at [`FRONT_POINTS`] stratified random points in front of it the SDF is the distance to
+//!   the nearest return, truncated
 //!   at [`TRUNCATION_M`] (free space: the opacity `sigmoid(−β s)` must be small there, which a
 //!   mere `s > 0` would not give);
 //! - just behind it (5–20 cm) the SDF is minus that distance (inside);
@@ -76,31 +77,33 @@ impl PointIndex {
     }
 }
 
+/// Free-space points per ray (stratified between the sensor and the hit).
+pub const FRONT_POINTS: usize = 3;
+
 /// One ray's supervision points and their target distances.
 #[derive(Clone, Copy, Debug)]
 pub struct SdfRay {
     pub origin: DVec3,
     pub dir: DVec3,
     pub range_m: f64,
-    /// Where the free-space point is, as a fraction of the way to 5 cm before the hit, and
-    /// its target SDF.
-    pub u_front: f64,
-    pub front_sdf_m: f64,
+    /// The free-space points, as fractions of the way to 5 cm before the hit, and their
+    /// target SDFs.
+    pub fronts: [(f64, f64); FRONT_POINTS],
     /// How far behind the hit (5–20 cm) the inside point is, in [0, 1], and its target SDF.
     pub u_behind: f64,
     pub behind_sdf_m: f64,
 }
 
 impl SdfRay {
-    pub fn front(&self) -> DVec3 {
-        self.origin + self.dir * (self.range_m - 0.05) * self.u_front.clamp(0.0, 1.0)
+    fn front(&self, u: f64) -> DVec3 {
+        self.origin + self.dir * (self.range_m - 0.05) * u.clamp(0.0, 1.0)
     }
 
     pub fn behind(&self) -> DVec3 {
         self.origin + self.dir * (self.range_m + 0.05 + 0.15 * self.u_behind.clamp(0.0, 1.0))
     }
 
-    /// A ray with its targets from the index.
+    /// A ray with its targets from the index; `u_front` ∈ [0, 1) jitters the strata.
     pub fn new(
         origin: DVec3,
         dir: DVec3,
@@ -113,12 +116,14 @@ impl SdfRay {
             origin,
             dir,
             range_m,
-            u_front,
-            front_sdf_m: 0.0,
+            fronts: [(0.0, 0.0); FRONT_POINTS],
             u_behind,
             behind_sdf_m: 0.0,
         };
-        ray.front_sdf_m = index.distance(ray.front());
+        for k in 0..FRONT_POINTS {
+            let u = (k as f64 + u_front) / FRONT_POINTS as f64;
+            ray.fronts[k] = (u, index.distance(ray.front(u)));
+        }
         ray.behind_sdf_m = -index.distance(ray.behind());
         ray
     }
@@ -141,12 +146,9 @@ pub fn sdf_fit_step(
     let mut loss = 0.0;
     for ray in rays {
         let hit = ray.origin + ray.dir * ray.range_m;
-        let targets = [
-            (hit, 0.0),
-            (ray.front(), ray.front_sdf_m),
-            (ray.behind(), ray.behind_sdf_m),
-        ];
-        for (x, target) in targets {
+        let fronts = ray.fronts.map(|(u, target)| (ray.front(u), target));
+        let targets = [(hit, 0.0), (ray.behind(), ray.behind_sdf_m)];
+        for (x, target) in targets.into_iter().chain(fronts) {
             let sample = field.query(x);
             let r = sample.sdf() as f64 - target;
             loss += r * r / n;
@@ -172,8 +174,7 @@ mod tests {
                 origin: DVec3::new(0.5 * i as f64, -1.0, 1.8),
                 dir: DVec3::new(1.0, 0.1 * i as f64, -0.3).normalize_or_zero(),
                 range_m: 4.0 + 0.7 * i as f64,
-                u_front: (i as f64 * 0.37).fract(),
-                front_sdf_m: 0.3,
+                fronts: [0.2, 0.5, 0.9].map(|u| (u * (i as f64 * 0.37).fract(), 0.3)),
                 u_behind: (i as f64 * 0.61).fract(),
                 behind_sdf_m: -0.1,
             })
