@@ -1,7 +1,7 @@
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 //! UniCal's LiDAR stage on a simulated drive: perturb every LiDAR, learn the scene and the
 //! extrinsics from depth, print the error against the ground truth as it goes.
-//! `cargo run --release --example unical_lidar -- [ITERATIONS] [SECONDS] [PERTURBATION_SCALE] [BETA_INIT]`
+//! `cargo run --release --example unical_lidar -- [ITERATIONS] [SECONDS] [PERTURBATION_SCALE] [BETA_INIT] [REGULARISER_WEIGHT]`
 
 use glam::DVec3;
 use rigcal::geometry::Trajectory;
@@ -23,6 +23,10 @@ fn main() {
         .get(4)
         .and_then(|s| s.parse().ok())
         .unwrap_or(defaults.beta_init);
+    let regulariser_weight: f32 = args
+        .get(5)
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(defaults.regulariser_weight);
     let rig = SimRig::preset(RigPreset::Pandaset);
     let tcfg = TrajectoryConfig {
         kind: TrajectoryKind::Figure8,
@@ -66,6 +70,7 @@ fn main() {
     let config = DepthCalibConfig {
         iterations,
         beta_init,
+        regulariser_weight,
         ..defaults
     };
     let mut calib = DepthCalibration::new(config, traj, lidars);
