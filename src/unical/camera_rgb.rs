@@ -17,7 +17,7 @@ use glam::DVec3;
 
 use super::background::Background;
 use super::composite::{Upstream, alpha_from_sdf, composite, composite_backward};
-use super::field::SceneField;
+use super::field::{FieldSample, SceneField};
 use super::hash_grid::GradSink;
 use super::mlp::{Mlp, MlpGrad};
 use super::pose::{PoseGrad, PoseParams};
@@ -135,6 +135,30 @@ pub(super) fn sigmoid(x: f32) -> f32 {
     1.0 / (1.0 + (-x).exp())
 }
 
+/// Query the samples `o + τ d` front to back until the ray is opaque (`transmittance` below
+/// [`MIN_TRANSMITTANCE`], carried over between calls); appends their opacities to `alphas`.
+fn march(
+    query: &dyn Fn(DVec3) -> FieldSample,
+    (o, d): (DVec3, DVec3),
+    taus_m: &[f32],
+    beta: f32,
+    alphas: &mut Vec<f32>,
+    transmittance: &mut f32,
+) -> Vec<FieldSample> {
+    let mut samples = Vec::new();
+    for tau in taus_m {
+        if *transmittance < MIN_TRANSMITTANCE {
+            break;
+        }
+        let s = query(o + d * *tau as f64);
+        let a = alpha_from_sdf(s.sdf(), beta).0;
+        samples.push(s);
+        alphas.push(a);
+        *transmittance *= 1.0 - a;
+    }
+    samples
+}
+
 /// What camera rays render with: the scene, its background (optional), β and the decoders.
 #[derive(Clone, Copy)]
 pub struct CameraModel<'a> {
@@ -165,13 +189,7 @@ pub fn colour_step(
         geo: field.geo.zero_grad(),
         colour: appearance.colour.zero_grad(),
         sky: appearance.sky.zero_grad(),
-        background_mlp: background.map_or_else(
-            || MlpGrad {
-                weights: Vec::new(),
-                bias: Vec::new(),
-            },
-            |b| b.geo.zero_grad(),
-        ),
+        background_mlp: background.map_or_else(MlpGrad::default, |b| b.geo.zero_grad()),
         beta_grad: 0.0,
         pose: PoseGrad::default(),
         exposure: [0.0; 6],
@@ -180,35 +198,17 @@ pub fn colour_step(
     let dim = field.geo.output_dim().saturating_sub(1);
     for ray in rays {
         let (o, d) = pose.ray(ray.world_from_vehicle, ray.dir_in_sensor);
-        // Forward, stopping where the ray is opaque.
-        let mut samples = Vec::new();
-        let mut alphas = Vec::new();
-        let mut transmittance = 1.0f32;
-        for tau in &ray.taus_m {
-            let s = field.query(o + d * *tau as f64);
-            let a = alpha_from_sdf(s.sdf(), beta).0;
-            samples.push(s);
-            alphas.push(a);
-            transmittance *= 1.0 - a;
-            if transmittance < MIN_TRANSMITTANCE {
-                break;
-            }
-        }
+        // Forward through the box, then the background for the light that got through.
+        let (mut alphas, mut transmittance) = (Vec::new(), 1.0f32);
+        let mut march_along = |query: &dyn Fn(DVec3) -> FieldSample, taus: &[f32]| {
+            march(query, (o, d), taus, beta, &mut alphas, &mut transmittance)
+        };
+        let samples = march_along(&|x| field.query(x), &ray.taus_m);
         let in_box = samples.len();
-        // Then the background, for the light that got through.
-        let mut far_samples = Vec::new();
-        if let Some(bg) = background.filter(|_| transmittance >= MIN_TRANSMITTANCE) {
-            for tau in &ray.background_taus_m {
-                let s = bg.query(o + d * *tau as f64);
-                let a = alpha_from_sdf(s.sdf(), beta).0;
-                far_samples.push(s);
-                alphas.push(a);
-                transmittance *= 1.0 - a;
-                if transmittance < MIN_TRANSMITTANCE {
-                    break;
-                }
-            }
-        }
+        let far_samples = match background {
+            Some(bg) => march_along(&|x| bg.query(x), &ray.background_taus_m),
+            None => Vec::new(),
+        };
         let mut taus = ray.taus_m[..in_box].to_vec();
         taus.extend_from_slice(&ray.background_taus_m[..far_samples.len()]);
         let features: Vec<f32> = samples
@@ -293,6 +293,7 @@ pub fn colour_step(
 mod tests {
     use super::super::field::tiny_field;
     use super::super::hash_grid::HashGridConfig;
+    use super::super::pose::assert_pose_gradient;
     use super::*;
     use crate::unical::hash_grid::SparseGrad;
     use glam::DQuat;
@@ -421,23 +422,7 @@ mod tests {
         // Small steps: hash-grid cells, ReLUs and the early stop make the loss only piecewise
         // smooth, so wide central differences straddle kinks.
         let eps = 3e-4;
-        for k in 0..9 {
-            let (mut up, mut down) = (pose, pose);
-            if k < 6 {
-                up.r6[k] += eps;
-                down.r6[k] -= eps;
-            } else {
-                up.translation_m[k - 6] += eps;
-                down.translation_m[k - 6] -= eps;
-            }
-            let fd = (loss(&up, &exposure) - loss(&down, &exposure)) / (2.0 * eps);
-            let an = if k < 6 {
-                step.pose.r6[k]
-            } else {
-                step.pose.translation_m[k - 6]
-            };
-            assert!((fd - an).abs() < tol, "pose[{k}]: {fd} vs {an} (tol {tol})");
-        }
+        assert_pose_gradient(pose, &step.pose, eps, tol, |p| loss(p, &exposure));
         for k in 0..6 {
             let (mut up, mut down) = (exposure, exposure);
             if k < 3 {

@@ -577,15 +577,14 @@ impl DepthCalibration {
         Some((wv, u, range, intensity))
     }
 
-    fn draw_rays(&mut self, sensor: usize) -> Vec<DepthRay> {
+    fn draw_rays(&mut self, sensor: usize, count: usize) -> Vec<DepthRay> {
         let pose = self.poses[sensor];
-        let mut rays = Vec::with_capacity(self.config.rays_per_sensor);
+        let mut rays = Vec::with_capacity(count);
         if self.lidars[sensor].sweeps.is_empty() {
             return rays;
         }
         let mut attempts = 0;
-        while rays.len() < self.config.rays_per_sensor && attempts < 4 * self.config.rays_per_sensor
-        {
+        while rays.len() < count && attempts < 4 * count {
             attempts += 1;
             let Some((wv, u, range, intensity)) = self.draw_return(sensor) else {
                 continue;
@@ -693,10 +692,7 @@ impl DepthCalibration {
     /// Diagnostics: `(true range, rendered − true range, elevation of the ray in the world,
     /// rad)` for `count` random returns of LiDAR `sensor` under the current state.
     pub fn depth_residuals(&mut self, sensor: usize, count: usize) -> Vec<(f32, f32, f32)> {
-        let saved = self.config.rays_per_sensor;
-        self.config.rays_per_sensor = count;
-        let rays = self.draw_rays(sensor);
-        self.config.rays_per_sensor = saved;
+        let rays = self.draw_rays(sensor, count);
         let (field, beta, pose) = (&self.field, self.beta(), self.poses[sensor]);
         rays.par_iter()
             .map(|r| {
@@ -738,7 +734,7 @@ impl DepthCalibration {
         let mut decoder_grad = self.decoder.mlp.zero_grad();
         let with_intensity = self.intensity_norm.iter().flatten().count().max(1) as f64;
         for s in 0..self.lidars.len() {
-            let rays = self.draw_rays(s);
+            let rays = self.draw_rays(s, self.config.rays_per_sensor);
             if rays.is_empty() {
                 continue;
             }
@@ -817,7 +813,7 @@ impl DepthCalibration {
             let mut background_mlp = stage
                 .background
                 .as_ref()
-                .map_or_else(|| sky.clone(), |b| b.field.geo.zero_grad());
+                .map_or_else(super::mlp::MlpGrad::default, |b| b.field.geo.zero_grad());
             let rgb_weight = self.config.rgb_weight as f64;
             for k in 0..cameras {
                 let rays = self.draw_camera_rays(k);

@@ -109,13 +109,9 @@ pub fn lidar_step(
         intensity_loss: 0.0,
         regulariser_loss: 0.0,
         mlp: field.geo.zero_grad(),
-        decoder: model.decoder.map_or_else(
-            || MlpGrad {
-                weights: Vec::new(),
-                bias: Vec::new(),
-            },
-            |d| d.mlp.zero_grad(),
-        ),
+        decoder: model
+            .decoder
+            .map_or_else(MlpGrad::default, |d| d.mlp.zero_grad()),
         intensity_map: [0.0; 2],
         beta_grad: 0.0,
         pose: PoseGrad::default(),
@@ -218,6 +214,7 @@ pub fn lidar_step(
 #[cfg(test)]
 mod tests {
     use super::super::field::tiny_field;
+    use super::super::pose::assert_pose_gradient;
     use super::*;
     use crate::unical::hash_grid::SparseGrad;
     use glam::DQuat;
@@ -294,23 +291,7 @@ mod tests {
             + step.pose.translation_m.length();
         assert!(norm > 1e-2, "gradient too small to test: {norm}");
         let tol = 0.01 * norm;
-        for k in 0..9 {
-            let (mut up, mut down) = (pose, pose);
-            if k < 6 {
-                up.r6[k] += eps;
-                down.r6[k] -= eps;
-            } else {
-                up.translation_m[k - 6] += eps;
-                down.translation_m[k - 6] -= eps;
-            }
-            let fd = (loss(&up) - loss(&down)) / (2.0 * eps);
-            let an = if k < 6 {
-                step.pose.r6[k]
-            } else {
-                step.pose.translation_m[k - 6]
-            };
-            assert!((fd - an).abs() < tol, "pose[{k}]: {fd} vs {an} (tol {tol})");
-        }
+        assert_pose_gradient(pose, &step.pose, eps, tol, loss);
         let at_beta = |b| {
             total(
                 &lidar_step(model(b), &pose, &map, &w, &rays, &mut SparseGrad::default()),

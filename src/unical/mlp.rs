@@ -17,8 +17,9 @@ pub struct Mlp {
     pub layers: Vec<Layer>,
 }
 
-/// Gradients with the same shapes as the network's parameters.
-#[derive(Clone, Debug, PartialEq)]
+/// Gradients with the same shapes as the network's parameters (`default()`: no network, for
+/// a decoder that is absent).
+#[derive(Clone, Debug, Default, PartialEq)]
 pub struct MlpGrad {
     pub weights: Vec<Vec<f32>>,
     pub bias: Vec<Vec<f32>>,

@@ -108,6 +108,35 @@ pub fn rot6d_backward(r6: [f64; 6], d_rotation: DMat3) -> [f64; 6] {
     [ga1.x, ga1.y, ga1.z, ga2.x, ga2.y, ga2.z]
 }
 
+/// Test support: `analytic` against central differences of `loss` in each of the nine pose
+/// parameters (6D rotation, then translation), within `tol`.
+#[cfg(test)]
+pub(crate) fn assert_pose_gradient(
+    pose: PoseParams,
+    analytic: &PoseGrad,
+    eps: f64,
+    tol: f64,
+    loss: impl Fn(&PoseParams) -> f64,
+) {
+    for k in 0..9 {
+        let (mut up, mut down) = (pose, pose);
+        if k < 6 {
+            up.r6[k] += eps;
+            down.r6[k] -= eps;
+        } else {
+            up.translation_m[k - 6] += eps;
+            down.translation_m[k - 6] -= eps;
+        }
+        let fd = (loss(&up) - loss(&down)) / (2.0 * eps);
+        let an = if k < 6 {
+            analytic.r6[k]
+        } else {
+            analytic.translation_m[k - 6]
+        };
+        assert!((fd - an).abs() < tol, "pose[{k}]: {fd} vs {an} (tol {tol})");
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
