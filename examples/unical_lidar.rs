@@ -142,20 +142,38 @@ fn main() {
     ] {
         let v = residuals
             .iter()
-            .filter(|(r, _, _)| *r >= lo && *r < hi)
-            .map(|(_, e, _)| e.abs())
+            .filter(|r| r.range_m >= lo && r.range_m < hi)
+            .map(|r| r.error_m.abs())
             .collect();
         eprintln!("range {lo:>3}..{hi:<4} m: {}", quantiles(v));
     }
     for (lo, hi) in [(-90.0, -10.0), (-10.0, -3.0), (-3.0, 0.0), (0.0, 90.0)] {
         let v = residuals
             .iter()
-            .filter(|(_, _, el)| el.to_degrees() >= lo && el.to_degrees() < hi)
-            .map(|(_, e, _)| e.abs())
+            .filter(|r| r.elevation_rad.to_degrees() >= lo && r.elevation_rad.to_degrees() < hi)
+            .map(|r| r.error_m.abs())
             .collect();
         eprintln!("elevation {lo:>4}..{hi:<3}°: {}", quantiles(v));
     }
     let signed: f32 =
-        residuals.iter().map(|(_, e, _)| *e).sum::<f32>() / residuals.len().max(1) as f32;
+        residuals.iter().map(|r| r.error_m).sum::<f32>() / residuals.len().max(1) as f32;
     eprintln!("mean signed error {signed:.3} m (negative: rendered too short)");
+    // Is the tail incomplete accumulation (D = Σ w τ short by (1 − A)·range) or opacity in
+    // front of the return? Compare the error of D with that of D / A on the worst rays.
+    let bad: Vec<_> = residuals.iter().filter(|r| r.error_m.abs() > 1.0).collect();
+    let low_a = bad.iter().filter(|r| r.accumulation < 0.95).count();
+    eprintln!(
+        "{} rays err > 1 m: {} with A < 0.95; |D/A − range| {}",
+        bad.len(),
+        low_a,
+        quantiles(
+            bad.iter()
+                .map(|r| ((r.error_m + r.range_m) / r.accumulation.max(1e-3) - r.range_m).abs())
+                .collect()
+        )
+    );
+    eprintln!(
+        "accumulation over all rays: {}",
+        quantiles(residuals.iter().map(|r| r.accumulation).collect())
+    );
 }

@@ -68,6 +68,30 @@ enum Command {
         #[arg(long)]
         out: PathBuf,
     },
+    /// Measure a calibration against a reference: pose errors after root alignment, and with a
+    /// log the LiDAR–LiDAR, edge-alignment (and checkerboard) metrics on the data.
+    Eval {
+        /// The reference: a native calibration file or a dataset's ground_truth.json.
+        #[arg(long)]
+        ground_truth: PathBuf,
+        /// The calibration to measure (native file).
+        #[arg(long)]
+        calibration: PathBuf,
+        /// A log to measure the alignment on.
+        log: Option<PathBuf>,
+        /// Root sensor for the alignment (default: the reference's first LiDAR).
+        #[arg(long)]
+        root: Option<String>,
+        /// Frames per sensor pair for the data metrics.
+        #[arg(long, default_value_t = 3)]
+        frames: usize,
+        /// Also measure the checkerboard corner re-projection error (logs with boards).
+        #[arg(long)]
+        checkerboard: bool,
+        /// Also write the report as JSON.
+        #[arg(long)]
+        json: Option<PathBuf>,
+    },
     /// Simulate a drive with known ground truth and write it as a ROS 2 MCAP.
     Synth {
         /// urban | parking-lot | featureless | checkerboard
@@ -174,6 +198,39 @@ fn run() -> Result<()> {
                 out.display(),
                 started.elapsed().as_secs_f64()
             );
+            Ok(())
+        }
+        Some(Command::Eval {
+            ground_truth,
+            calibration,
+            log,
+            root,
+            frames,
+            checkerboard,
+            json,
+        }) => {
+            let args = rigcal::cli::eval::EvalArgs {
+                ground_truth,
+                calibration,
+                log,
+                root,
+                frames,
+                checkerboard,
+            };
+            let mut bar = rigcal::cli::progress::Progress::new("eval", 1);
+            let report = rigcal::cli::eval::evaluate(&args, &mut |done, total| {
+                bar.set_total(total as u64);
+                bar.set(done as u64);
+            })
+            .map_err(anyhow::Error::msg)
+            .context("cannot evaluate")?;
+            bar.finish();
+            print!("{}", report.to_markdown());
+            if let Some(path) = json {
+                let text = serde_json::to_string_pretty(&report)?;
+                rigcal::util::write_atomic(&path, text.as_bytes())
+                    .with_context(|| format!("cannot write {}", path.display()))?;
+            }
             Ok(())
         }
         Some(Command::Synth {

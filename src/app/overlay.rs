@@ -18,8 +18,7 @@ use super::state::{ColorBy, ExtrinsicsView, HoverReadout, Studio};
 use crate::calib::{Rig, SensorKind};
 use crate::geometry::Rigid;
 use crate::geometry::projection::{
-    ProjectedPoint, SweepView, camera_from_lidar_buckets, point_buckets, project_sweep,
-    visible_points,
+    ProjectedPoint, camera_from_lidar_buckets, point_buckets, project_sweep, visible_points,
 };
 use crate::log::{Drive, LidarSweep};
 
@@ -663,7 +662,7 @@ fn refresh(
     let lidars: Vec<_> = rig.lidars().collect();
     let mut transforms = Vec::with_capacity(sweeps.len());
     for (li, s) in &sweeps {
-        let view = sweep_view(s);
+        let view = LidarSweep::view(s);
         let t = camera_from_lidar_buckets(
             &view,
             &drive.trajectory,
@@ -682,15 +681,6 @@ fn refresh(
     cache.key = Some(key);
     cache.rig = Some(rig);
     Ok(())
-}
-
-fn sweep_view(s: &LidarSweep) -> SweepView<'_> {
-    SweepView {
-        points_in_lidar: &s.points_in_sensor,
-        intensity: &s.intensity,
-        time_offset_secs: s.time_offset_secs.as_deref(),
-        stamp_nanos: s.stamp_nanos,
-    }
 }
 
 /// Rebuild the GPU point list when the set of sweeps changed; always refresh the transforms.
@@ -764,7 +754,7 @@ fn upload_gpu_points(
         for (((li, s), t), (origin, axis)) in
             cache.sweeps.iter().zip(transforms).zip(&cameras_in_lidar)
         {
-            let buckets = point_buckets(&sweep_view(s));
+            let buckets = point_buckets(&LidarSweep::view(s));
             for i in (0..s.points_in_sensor.len()).step_by(stride.max(1)) {
                 let p = s.points_in_sensor[i];
                 if cone_cos > -1.0 {
@@ -879,7 +869,7 @@ fn ensure_cpu(
     for (li, s) in &cache.sweeps {
         let lidar = lidars[*li];
         let projected = project_sweep(
-            &sweep_view(s),
+            &LidarSweep::view(s),
             &drive.trajectory,
             lidar.vehicle_from_sensor,
             cam.vehicle_from_sensor,

@@ -14,7 +14,7 @@ use super::Studio;
 use super::overlay::colormap;
 use crate::calib::Rig;
 use crate::geometry::motion::MotionSummary;
-use crate::geometry::projection::{SweepView, world_points};
+use crate::geometry::projection::world_points;
 use crate::log::Drive;
 
 /// The top-down map: aggregated LiDAR points rasterised into a density image (drawn as one
@@ -112,12 +112,7 @@ pub fn build_map(drive: &Drive, rig: &Rig) -> Result<MapData, String> {
                 continue;
             };
             let stride = (s.points_in_sensor.len() / per_sweep.max(1)).max(1);
-            let view = SweepView {
-                points_in_lidar: &s.points_in_sensor,
-                intensity: &s.intensity,
-                time_offset_secs: s.time_offset_secs.as_deref(),
-                stamp_nanos: s.stamp_nanos,
-            };
+            let view = s.view();
             if let Ok(pts) =
                 world_points(&view, &drive.trajectory, lidar.vehicle_from_sensor, stride)
             {

@@ -4,6 +4,7 @@
 //! what every calibrator reads as its initial guess and writes as its answer. [`file`] reads and
 //! writes it as the `rigcal_calibration: 1` YAML of `docs/interfaces.md`.
 
+pub mod dataset_json;
 pub mod file;
 pub mod rig;
 pub mod transform_text;

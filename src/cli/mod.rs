@@ -2,5 +2,6 @@
 //! progress output. The binary in `main.rs` only parses arguments and dispatches.
 
 pub mod calibrate;
+pub mod eval;
 pub mod inspect;
 pub mod progress;

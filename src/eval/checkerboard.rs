@@ -588,7 +588,7 @@ pub fn pair_corner_error(
     frames: usize,
     spec: &BoardSpec,
 ) -> Result<Option<CornerError>, String> {
-    use crate::geometry::projection::{SweepView, world_points};
+    use crate::geometry::projection::world_points;
     let cam = rig.sensor(camera).ok_or(format!("no sensor '{camera}'"))?;
     let intr = cam
         .camera
@@ -621,12 +621,7 @@ pub fn pair_corner_error(
             continue;
         };
         let sweep = drive.load_sweep(lidar, j).map_err(|e| e.to_string())?;
-        let view = SweepView {
-            points_in_lidar: &sweep.points_in_sensor,
-            intensity: &sweep.intensity,
-            time_offset_secs: sweep.time_offset_secs.as_deref(),
-            stamp_nanos: sweep.stamp_nanos,
-        };
+        let view = sweep.view();
         let Ok(points) = world_points(&view, &drive.trajectory, vehicle_from_lidar, 1) else {
             continue;
         };

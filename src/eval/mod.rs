@@ -3,3 +3,4 @@
 pub mod checkerboard;
 pub mod edges;
 pub mod fast;
+pub mod registration;

@@ -30,6 +30,16 @@ impl LidarSweep {
     pub fn is_empty(&self) -> bool {
         self.points_in_sensor.is_empty()
     }
+
+    /// What projections need of this sweep.
+    pub fn view(&self) -> crate::geometry::projection::SweepView<'_> {
+        crate::geometry::projection::SweepView {
+            points_in_lidar: &self.points_in_sensor,
+            intensity: &self.intensity,
+            time_offset_secs: self.time_offset_secs.as_deref(),
+            stamp_nanos: self.stamp_nanos,
+        }
+    }
 }
 
 const INTENSITY_NAMES: [&str; 3] = ["intensity", "reflectivity", "i"];

@@ -53,6 +53,13 @@ pub struct DepthCalibConfig {
     pub depth_weight: f32,
     pub intensity_weight: f32,
     pub regulariser_weight: f32,
+    /// Rays whose depth residual is above this quantile of the previous step's residuals (per
+    /// LiDAR) still train the scene but do not steer the pose. Returns at depth
+    /// discontinuities the scene cannot resolve yet render metres off, and squared they would
+    /// dominate the pose gradient (method.md §8: neurad-unisim drops the worst 5 % of depth
+    /// residuals altogether; dropping them from the scene too leaves its free space
+    /// uncorrected, see BENCHMARKS.md). 1.0 keeps every ray.
+    pub pose_trim_quantile: f32,
     /// Camera rays are sampled up to this distance (the scene box clips them further).
     pub camera_far_m: f64,
     /// The background model beyond the scene box for camera rays (`None`: the sky feature
@@ -85,6 +92,7 @@ impl Default for DepthCalibConfig {
             depth_weight: 0.1,
             intensity_weight: 0.1,
             regulariser_weight: 0.01,
+            pose_trim_quantile: 0.95,
             camera_far_m: 120.0,
             background: Some(BackgroundConfig::default()),
             frozen_sensor: None,
@@ -120,11 +128,21 @@ impl DepthCalibConfig {
 
     fn lidar_weights(&self) -> LidarWeights {
         LidarWeights {
+            pose_trim_m: f32::INFINITY,
             depth: self.depth_weight,
             intensity: self.intensity_weight,
             regulariser: self.regulariser_weight,
         }
     }
+}
+
+/// The `q`-quantile of `values` (`INFINITY` for q ≥ 1 or no values).
+fn quantile(mut values: Vec<f32>, q: f32) -> f32 {
+    if q >= 1.0 || values.is_empty() {
+        return f32::INFINITY;
+    }
+    let k = ((values.len() - 1) as f32 * q.max(0.0)).round() as usize;
+    *values.select_nth_unstable_by(k, f32::total_cmp).1
 }
 
 /// One LiDAR's data.
@@ -199,6 +217,9 @@ pub struct DepthCalibration {
     /// Per LiDAR: the factor that normalises its intensities to [0, 1] (`None`: no intensity).
     intensity_norm: Vec<Option<f32>>,
     intensity_maps: Vec<IntensityMap>,
+    /// Per LiDAR: the depth residual above which rays leave the depth term (from the previous
+    /// step's residuals, [`DepthCalibConfig::pose_trim_quantile`]).
+    pose_trim_m: Vec<f32>,
     intensity_map_opt: Vec<DenseAdam>,
     decoder: IntensityDecoder,
     decoder_params: Vec<f32>,
@@ -206,6 +227,17 @@ pub struct DepthCalibration {
     pub iteration: usize,
     rng: u64,
     camera: Option<CameraStage>,
+}
+
+/// One LiDAR return rendered by the current scene (diagnostics).
+#[derive(Clone, Copy, Debug)]
+pub struct DepthResidual {
+    pub range_m: f32,
+    /// Rendered expected range minus the measured range (negative: rendered too short).
+    pub error_m: f32,
+    pub elevation_rad: f32,
+    /// Accumulated opacity A of the ray's samples.
+    pub accumulation: f32,
 }
 
 /// Report of one step.
@@ -351,6 +383,7 @@ impl DepthCalibration {
             aggregated,
             point_index: None,
             intensity_maps: vec![IntensityMap::default(); lidars.len()],
+            pose_trim_m: vec![f32::INFINITY; lidars.len()],
             intensity_map_opt: lidars
                 .iter()
                 .map(|_| DenseAdam::new(2, AdamConfig::STANDARD))
@@ -691,14 +724,19 @@ impl DepthCalibration {
 
     /// Diagnostics: `(true range, rendered − true range, elevation of the ray in the world,
     /// rad)` for `count` random returns of LiDAR `sensor` under the current state.
-    pub fn depth_residuals(&mut self, sensor: usize, count: usize) -> Vec<(f32, f32, f32)> {
+    pub fn depth_residuals(&mut self, sensor: usize, count: usize) -> Vec<DepthResidual> {
         let rays = self.draw_rays(sensor, count);
         let (field, beta, pose) = (&self.field, self.beta(), self.poses[sensor]);
         rays.par_iter()
             .map(|r| {
-                let depth = super::lidar_terms::render_depth(field, beta, &pose, r);
+                let c = super::lidar_terms::render_composite(field, beta, &pose, r);
                 let (_, d) = pose.ray(r.world_from_vehicle, r.dir_in_sensor);
-                (r.range_m, depth - r.range_m, d.z.asin() as f32)
+                DepthResidual {
+                    range_m: r.range_m,
+                    error_m: c.depth_m - r.range_m,
+                    elevation_rad: d.z.asin() as f32,
+                    accumulation: c.accumulation,
+                }
             })
             .collect()
     }
@@ -730,7 +768,7 @@ impl DepthCalibration {
         let (mut loss, mut mae, mut colour_loss) = (0.0, 0.0, 0.0);
         let (mut intensity_loss, mut regulariser_loss) = (0.0, 0.0);
         let lidars = self.lidars.len().max(1) as f64;
-        let weights = self.config.lidar_weights();
+        let base_weights = self.config.lidar_weights();
         let mut decoder_grad = self.decoder.mlp.zero_grad();
         let with_intensity = self.intensity_norm.iter().flatten().count().max(1) as f64;
         for s in 0..self.lidars.len() {
@@ -745,6 +783,10 @@ impl DepthCalibration {
                 decoder: self.intensity_norm[s].map(|_| &self.decoder),
             };
             let (pose, map) = (&self.poses[s], &self.intensity_maps[s]);
+            let weights = LidarWeights {
+                pose_trim_m: self.pose_trim_m[s],
+                ..base_weights
+            };
             let total_rays = rays.len() as f64;
             let parts: Vec<_> = rays
                 .par_chunks(chunk)
@@ -763,7 +805,9 @@ impl DepthCalibration {
                 .collect();
             let mut pose_grad = [0.0f32; 9];
             let mut map_grad = [0.0f32; 2];
+            let mut abs_errors = Vec::with_capacity(rays.len());
             for (n, part) in parts {
+                abs_errors.extend_from_slice(&part.abs_errors_m);
                 let share = n as f64 / total_rays / lidars;
                 loss += part.depth_loss * share;
                 mae += part.mean_abs_error_m * share * lidars;
@@ -777,6 +821,7 @@ impl DepthCalibration {
                 map_grad[0] += (part.intensity_map[0] * share) as f32;
                 map_grad[1] += (part.intensity_map[1] * share) as f32;
             }
+            self.pose_trim_m[s] = quantile(abs_errors, self.config.pose_trim_quantile);
             if !self.is_frozen(&self.lidars[s].name) {
                 pose_step(
                     &mut self.pose_opt[s],

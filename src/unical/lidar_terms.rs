@@ -18,7 +18,7 @@
 use glam::DVec3;
 
 use super::camera_rgb::{sh_backward, sh_encoding};
-use super::composite::{Upstream, alpha_from_sdf, composite, composite_backward};
+use super::composite::{Composite, Upstream, alpha_from_sdf, composite, composite_backward};
 use super::field::SceneField;
 use super::hash_grid::GradSink;
 use super::intensity::{IntensityDecoder, IntensityMap};
@@ -47,6 +47,11 @@ pub struct LidarWeights {
     pub depth: f32,
     pub intensity: f32,
     pub regulariser: f32,
+    /// Rays whose |rendered − measured range| exceeds this still shape the scene but do not
+    /// steer the pose (a robust cut in the spirit of neurad-unisim's dropping the worst 5 % of
+    /// depth residuals, method.md §8; the caller passes a batch quantile, `INFINITY` keeps
+    /// every ray).
+    pub pose_trim_m: f32,
 }
 
 impl LidarWeights {
@@ -54,6 +59,7 @@ impl LidarWeights {
         depth: 0.1,
         intensity: 0.1,
         regulariser: 0.01,
+        pose_trim_m: f32::INFINITY,
     };
 }
 
@@ -70,6 +76,8 @@ pub struct LidarStep {
     pub intensity_map: [f64; 2],
     pub beta_grad: f64,
     pub pose: PoseGrad,
+    /// |rendered − measured range| of every ray, in batch order (for the next trim).
+    pub abs_errors_m: Vec<f32>,
 }
 
 /// What a LiDAR batch renders with: the scene, β and the shared intensity decoder (`None`:
@@ -83,13 +91,23 @@ pub struct LidarModel<'a> {
 
 /// The rendered range of one ray (forward only, for diagnostics).
 pub fn render_depth(field: &SceneField, beta: f32, pose: &PoseParams, ray: &DepthRay) -> f32 {
+    render_composite(field, beta, pose, ray).depth_m
+}
+
+/// The composite (depth, accumulation, weights) of one LiDAR ray, forward only.
+pub fn render_composite(
+    field: &SceneField,
+    beta: f32,
+    pose: &PoseParams,
+    ray: &DepthRay,
+) -> Composite {
     let (o, d) = pose.ray(ray.world_from_vehicle, ray.dir_in_sensor);
     let alphas: Vec<f32> = ray
         .taus_m
         .iter()
         .map(|t| alpha_from_sdf(field.query(o + d * *t as f64).sdf(), beta).0)
         .collect();
-    composite(&alphas, &ray.taus_m, &[], 0).depth_m
+    composite(&alphas, &ray.taus_m, &[], 0)
 }
 
 /// The LiDAR terms of `rays`, all from one sensor at `pose` with intensity mapping `map`; the
@@ -115,6 +133,7 @@ pub fn lidar_step(
         intensity_map: [0.0; 2],
         beta_grad: 0.0,
         pose: PoseGrad::default(),
+        abs_errors_m: Vec::with_capacity(rays.len()),
     };
     let n = rays.len().max(1) as f64;
     let with_intensity = rays.iter().filter(|r| r.intensity.is_some()).count();
@@ -146,10 +165,11 @@ pub fn lidar_step(
             (Vec::new(), 0)
         };
         let c = composite(&alphas, &ray.taus_m, &features, fdim);
-        // Depth.
+        // Depth (Eq. 5).
         let r = (c.depth_m - ray.range_m) as f64;
         out.depth_loss += r * r / n;
         out.mean_abs_error_m += r.abs() / n;
+        out.abs_errors_m.push(r.abs() as f32);
         let d_depth = (weights.depth as f64 * 2.0 * r / n) as f32;
         // Intensity.
         let mut d_feature = Vec::new();
@@ -201,12 +221,14 @@ pub fn lidar_step(
             &mut out.mlp,
         );
         out.beta_grad += d_beta;
-        out.pose.add(&pose.ray_backward(
-            ray.world_from_vehicle,
-            ray.dir_in_sensor,
-            d_o,
-            d_d + d_d_sh,
-        ));
+        if r.abs() <= weights.pose_trim_m as f64 {
+            out.pose.add(&pose.ray_backward(
+                ray.world_from_vehicle,
+                ray.dir_in_sensor,
+                d_o,
+                d_d + d_d_sh,
+            ));
+        }
     }
     out
 }
@@ -263,6 +285,7 @@ mod tests {
             depth: 1.0,
             intensity: 2.0,
             regulariser: 0.0,
+            pose_trim_m: f32::INFINITY,
         };
         let model = |beta| LidarModel {
             field: &field,
@@ -338,6 +361,7 @@ mod tests {
             depth: 0.5,
             intensity: 1.0,
             regulariser: 2.0,
+            pose_trim_m: f32::INFINITY,
         };
         let map = IntensityMap::default();
         let run = |f: &SceneField, dec: &IntensityDecoder| {
@@ -395,6 +419,7 @@ mod tests {
             depth: 1.0,
             intensity: 0.0,
             regulariser: 0.0,
+            pose_trim_m: f32::INFINITY,
         };
         let model = LidarModel {
             field: &field,
@@ -414,5 +439,64 @@ mod tests {
             let error = (rendered - ray.range_m).abs() as f64;
             assert!((error - step.mean_abs_error_m).abs() < 1e-5, "{error}");
         }
+    }
+
+    /// A ray whose residual exceeds the trim still trains the scene but leaves the pose
+    /// gradient: the pose gradient is the sum over the kept rays only.
+    #[test]
+    fn trimmed_rays_do_not_steer_the_pose() {
+        let (field, _, pose, rays) = setup();
+        let model = LidarModel {
+            field: &field,
+            beta: 3.0,
+            decoder: None,
+        };
+        let run = |trim, rays: &[DepthRay]| {
+            let w = LidarWeights {
+                depth: 1.0,
+                intensity: 0.0,
+                regulariser: 0.0,
+                pose_trim_m: trim,
+            };
+            let map = IntensityMap::default();
+            lidar_step(model, &pose, &map, &w, rays, &mut SparseGrad::default())
+        };
+        let all = run(f32::INFINITY, &rays);
+        assert!(all.depth_loss > 0.0 && all.abs_errors_m.len() == rays.len());
+        let mut sorted = all.abs_errors_m.clone();
+        sorted.sort_by(f32::total_cmp);
+        let trim = sorted[sorted.len() - 2];
+        let trimmed = run(trim, &rays);
+        assert_eq!(trimmed.depth_loss, all.depth_loss);
+        assert_eq!(trimmed.mlp.weights, all.mlp.weights);
+        // Expected: each kept ray alone (a batch of one: scale by 1/n).
+        let n = rays.len() as f64;
+        let mut expected = PoseGrad::default();
+        for (ray, e) in rays.iter().zip(&all.abs_errors_m) {
+            if *e <= trim {
+                let one = run(f32::INFINITY, std::slice::from_ref(ray)).pose;
+                expected
+                    .r6
+                    .iter_mut()
+                    .zip(one.r6)
+                    .for_each(|(a, b)| *a += b / n);
+                expected.translation_m += one.translation_m / n;
+            }
+        }
+        let close = |a: f64, b: f64| (a - b).abs() <= 1e-6 * (1.0 + b.abs());
+        assert!(
+            trimmed
+                .pose
+                .r6
+                .iter()
+                .zip(expected.r6)
+                .all(|(a, b)| close(*a, b))
+                && (trimmed.pose.translation_m - expected.translation_m).length() < 1e-6,
+            "{:?} vs {expected:?}",
+            trimmed.pose
+        );
+        assert_ne!(trimmed.pose.r6, all.pose.r6);
+        let none = run(-1.0, &rays);
+        assert!(none.pose.r6.iter().all(|g| *g == 0.0) && none.pose.translation_m == DVec3::ZERO);
     }
 }

@@ -1,0 +1,308 @@
+//! `rigcal eval`: measure a calibration against a reference (method.md §13).
+//!
+//! Always: every sensor's rotation (°) and translation (cm) error after aligning the root
+//! sensor ([`crate::geometry::rig_errors`]). With a log, also measured on the data, for the
+//! calibration and for the reference side by side (so a user sees how far the data itself
+//! can tell them apart): the LiDAR–LiDAR point-to-plane error of every LiDAR pair
+//! ([`crate::eval::registration`], cm, 30 cm inliers), the target-free edge-alignment score of
+//! every camera–LiDAR pair ([`crate::optim::edge_align`], px), and with `--checkerboard` the
+//! checkerboard corner re-projection error ([`crate::eval::checkerboard`], px, scaled to a
+//! 1920-pixel-wide image as the paper reports it).
+
+use std::path::PathBuf;
+
+use serde::Serialize;
+
+use crate::calib::dataset_json::load_reference;
+use crate::calib::{CalibrationFile, Rig, SensorKind};
+use crate::eval::checkerboard::{BoardSpec, pair_corner_error};
+use crate::eval::registration::pair_registration_error;
+use crate::geometry::{RigError, rig_errors};
+use crate::log::Drive;
+use crate::optim::edge_align::EdgeAlignment;
+
+/// What `rigcal eval` was asked to do.
+#[derive(Clone, Debug, Default)]
+pub struct EvalArgs {
+    pub ground_truth: PathBuf,
+    pub calibration: PathBuf,
+    pub log: Option<PathBuf>,
+    /// Root sensor (default: the reference's first LiDAR present in both).
+    pub root: Option<String>,
+    /// Frames per pair for the data metrics.
+    pub frames: usize,
+    pub checkerboard: bool,
+}
+
+/// One metric of one sensor pair, for the calibration and for the reference.
+#[derive(Clone, Debug, Serialize, PartialEq)]
+pub struct PairMetric {
+    pub a: String,
+    pub b: String,
+    pub calibration: Option<f64>,
+    pub reference: Option<f64>,
+    /// Why a value is missing, if one is.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub note: Option<String>,
+}
+
+#[derive(Clone, Debug, Serialize, PartialEq)]
+pub struct EvalReport {
+    pub reference: PathBuf,
+    pub calibration: PathBuf,
+    pub root: String,
+    pub poses: Vec<RigError>,
+    /// Reference sensors the calibration does not have.
+    pub missing: Vec<String>,
+    /// LiDAR–LiDAR point-to-plane error (cm).
+    pub registration_cm: Vec<PairMetric>,
+    /// Camera–LiDAR edge-alignment score (px).
+    pub edge_px: Vec<PairMetric>,
+    /// Camera–LiDAR checkerboard corner error (px at 1920 wide).
+    pub corners_px: Vec<PairMetric>,
+}
+
+/// Run the evaluation; `progress(done, total)` after each data metric.
+pub fn evaluate(
+    args: &EvalArgs,
+    progress: &mut dyn FnMut(usize, usize),
+) -> Result<EvalReport, String> {
+    let reference = load_reference(&args.ground_truth).map_err(|e| e.to_string())?;
+    let calibration = CalibrationFile::load_rig(&args.calibration).map_err(|e| e.to_string())?;
+    let common = |name: &str| calibration.sensor(name).is_some();
+    let root = match &args.root {
+        Some(r) if reference.sensor(r).is_some() && common(r) => r.clone(),
+        Some(r) => {
+            return Err(format!(
+                "--root '{r}' is not a sensor of both {} and {}",
+                args.ground_truth.display(),
+                args.calibration.display()
+            ));
+        }
+        None => reference
+            .lidars()
+            .chain(reference.cameras())
+            .map(|s| s.name.clone())
+            .find(|n| common(n))
+            .ok_or_else(|| {
+                format!(
+                    "{} and {} have no sensor in common",
+                    args.ground_truth.display(),
+                    args.calibration.display()
+                )
+            })?,
+    };
+    let poses = rig_errors(&reference.extrinsics(), &calibration.extrinsics(), &root)
+        .ok_or("the root sensor vanished")?;
+    let missing = reference
+        .sensors
+        .iter()
+        .filter(|s| !common(&s.name))
+        .map(|s| s.name.clone())
+        .collect();
+    let mut report = EvalReport {
+        reference: args.ground_truth.clone(),
+        calibration: args.calibration.clone(),
+        root,
+        poses,
+        missing,
+        registration_cm: Vec::new(),
+        edge_px: Vec::new(),
+        corners_px: Vec::new(),
+    };
+    if let Some(log) = &args.log {
+        let drive = Drive::open(log).map_err(|e| e.to_string())?;
+        measure_on_data(
+            args,
+            &drive,
+            &reference,
+            &calibration,
+            &mut report,
+            progress,
+        );
+    }
+    Ok(report)
+}
+
+/// The data metrics of every pair, with the calibration and with the reference (its
+/// extrinsics placed into the calibration's rig, so intrinsics are the same on both sides).
+fn measure_on_data(
+    args: &EvalArgs,
+    drive: &Drive,
+    reference: &Rig,
+    calibration: &Rig,
+    report: &mut EvalReport,
+    progress: &mut dyn FnMut(usize, usize),
+) {
+    let mut reference_rig = calibration.clone();
+    for s in &mut reference_rig.sensors {
+        if let Some(r) = reference.sensor(&s.name) {
+            s.vehicle_from_sensor = r.vehicle_from_sensor;
+        }
+    }
+    let names = |kind| -> Vec<String> {
+        calibration
+            .sensors
+            .iter()
+            .filter(|s| s.kind == kind && drive.stream(&s.name).is_some())
+            .map(|s| s.name.clone())
+            .collect()
+    };
+    let (lidars, cameras) = (names(SensorKind::Lidar), names(SensorKind::Camera));
+    let lidar_pairs: Vec<(String, String)> = lidars
+        .iter()
+        .enumerate()
+        .flat_map(|(i, a)| lidars[i + 1..].iter().map(move |b| (a.clone(), b.clone())))
+        .collect();
+    let camera_pairs: Vec<(String, String)> = cameras
+        .iter()
+        .flat_map(|c| lidars.iter().map(move |l| (c.clone(), l.clone())))
+        .collect();
+    let per_camera = 1 + args.checkerboard as usize;
+    let total = lidar_pairs.len() + camera_pairs.len() * per_camera;
+    let mut done = 0;
+    let frames = args.frames.max(1);
+    for (a, b) in lidar_pairs {
+        let run = |rig: &Rig| pair_registration_error(drive, rig, &a, &b, frames, 4);
+        let (c, r) = (run(calibration), run(&reference_rig));
+        report.registration_cm.push(metric(
+            &a,
+            &b,
+            c.map(|v| v.map(|e| e.mean_cm)),
+            r.map(|v| v.map(|e| e.mean_cm)),
+            "no planar overlap within 30 cm",
+        ));
+        done += 1;
+        progress(done, total);
+    }
+    for (cam, lidar) in &camera_pairs {
+        let run = |rig: &Rig| {
+            EdgeAlignment::score_rig(drive, rig, cam, lidar, frames, &[])
+                .map(|(px, _)| Some(px))
+                .map_err(|e| e.to_string())
+        };
+        report.edge_px.push(metric(
+            cam,
+            lidar,
+            run(calibration),
+            run(&reference_rig),
+            "no silhouette in view",
+        ));
+        done += 1;
+        progress(done, total);
+    }
+    if args.checkerboard {
+        let spec = BoardSpec::default();
+        for (cam, lidar) in &camera_pairs {
+            let width = calibration
+                .sensor(cam)
+                .and_then(|s| s.camera.as_ref())
+                .map_or(1920, |c| c.width);
+            let to_1920 = 1920.0 / width.max(1) as f64;
+            let run = |rig: &Rig| {
+                pair_corner_error(drive, rig, cam, lidar, frames, &spec)
+                    .map(|e| e.map(|e| e.mean_px * to_1920))
+            };
+            report.corners_px.push(metric(
+                cam,
+                lidar,
+                run(calibration),
+                run(&reference_rig),
+                "no board found in both",
+            ));
+            done += 1;
+            progress(done, total);
+        }
+    }
+}
+
+fn metric(
+    a: &str,
+    b: &str,
+    calibration: Result<Option<f64>, String>,
+    reference: Result<Option<f64>, String>,
+    absent: &str,
+) -> PairMetric {
+    let note = match (&calibration, &reference) {
+        (Err(e), _) | (_, Err(e)) => Some(e.clone()),
+        (Ok(None), _) | (_, Ok(None)) => Some(absent.to_string()),
+        _ => None,
+    };
+    PairMetric {
+        a: a.to_string(),
+        b: b.to_string(),
+        calibration: calibration.ok().flatten(),
+        reference: reference.ok().flatten(),
+        note,
+    }
+}
+
+impl EvalReport {
+    /// The report as Markdown tables.
+    pub fn to_markdown(&self) -> String {
+        let mut out = format!(
+            "# {} against {}\n\nPose error after aligning the root sensor `{}`:\n\n\
+             | sensor | rotation (°) | translation (cm) |\n|---|---:|---:|\n",
+            self.calibration.display(),
+            self.reference.display(),
+            self.root
+        );
+        for e in &self.poses {
+            out += &format!(
+                "| {} | {:.4} | {:.2} |\n",
+                e.sensor,
+                e.rotation_deg,
+                e.translation_m * 100.0
+            );
+        }
+        let (n, r, t) = self
+            .poses
+            .iter()
+            .filter(|e| e.sensor != self.root)
+            .fold((0, 0.0, 0.0), |(n, r, t), e| {
+                (n + 1, r + e.rotation_deg, t + e.translation_m)
+            });
+        if n > 0 {
+            out += &format!(
+                "| **mean (without root)** | **{:.4}** | **{:.2}** |\n",
+                r / n as f64,
+                t / n as f64 * 100.0
+            );
+        }
+        if !self.missing.is_empty() {
+            out += &format!("\nNot in the calibration: {}\n", self.missing.join(", "));
+        }
+        for (title, unit, rows) in [
+            (
+                "LiDAR–LiDAR point-to-plane error",
+                "cm",
+                &self.registration_cm,
+            ),
+            ("Camera–LiDAR edge-alignment score", "px", &self.edge_px),
+            (
+                "Camera–LiDAR checkerboard corner error (at 1920 px wide)",
+                "px",
+                &self.corners_px,
+            ),
+        ] {
+            if rows.is_empty() {
+                continue;
+            }
+            out += &format!(
+                "\n{title}:\n\n| pair | calibration ({unit}) | reference ({unit}) | note |\n|---|---:|---:|---|\n"
+            );
+            let cell = |v: Option<f64>| v.map_or("–".to_string(), |v| format!("{v:.2}"));
+            for m in rows {
+                out += &format!(
+                    "| {} × {} | {} | {} | {} |\n",
+                    m.a,
+                    m.b,
+                    cell(m.calibration),
+                    cell(m.reference),
+                    m.note.as_deref().unwrap_or("")
+                );
+            }
+        }
+        out
+    }
+}

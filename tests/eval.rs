@@ -1,0 +1,206 @@
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+//! `rigcal eval` from known answers: a calibration equal to the reference reports zero, a known
+//! perturbation reports exactly that perturbation (whichever side is the reference, and with
+//! the whole rig moved by a common transform), the PandaSet ground truth JSON is accepted, and
+//! on the real drive the LiDAR–LiDAR metric grows when a LiDAR is misaligned.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use glam::DVec3;
+use rigcal::calib::dataset_json::load_reference;
+use rigcal::calib::{CalibrationFile, Rig};
+use rigcal::cli::eval::{EvalArgs, EvalReport, evaluate};
+use rigcal::geometry::Rigid;
+use rigcal::geometry::so3;
+use rigcal::sim::rigs::{RigPreset, SimRig};
+
+fn pandaset_dir() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/data/pandaset-002")
+}
+
+fn temp_dir(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("rigcal-eval-{name}-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+fn save(rig: &Rig, path: &Path) {
+    CalibrationFile::from_rig(rig).save(path).unwrap();
+}
+
+fn run(reference: &Path, calibration: &Path) -> EvalReport {
+    let args = EvalArgs {
+        ground_truth: reference.to_path_buf(),
+        calibration: calibration.to_path_buf(),
+        frames: 1,
+        ..Default::default()
+    };
+    evaluate(&args, &mut |_, _| {}).unwrap()
+}
+
+fn sim_rig() -> Rig {
+    SimRig::preset(RigPreset::Pandaset).to_rig()
+}
+
+#[test]
+fn equal_calibrations_have_zero_error() {
+    let dir = temp_dir("zero");
+    let gt = dir.join("gt.yaml");
+    save(&sim_rig(), &gt);
+    let report = run(&gt, &gt);
+    assert_eq!(report.poses.len(), sim_rig().sensors.len());
+    assert_eq!(report.root, sim_rig().lidars().next().unwrap().name);
+    for e in &report.poses {
+        assert!(e.rotation_deg < 1e-6 && e.translation_m < 1e-9, "{e:?}");
+    }
+    assert!(report.missing.is_empty());
+}
+
+#[test]
+fn a_known_perturbation_is_reported_exactly_both_ways_and_under_a_common_offset() {
+    let dir = temp_dir("known");
+    let reference = sim_rig();
+    let root = reference.lidars().next().unwrap().name.clone();
+    let camera = reference.cameras().nth(1).unwrap().name.clone();
+    let lidar = reference.lidars().nth(1).unwrap().name.clone();
+    // Perturb one camera by 1.5° and 7 cm, one LiDAR by 0.3° and 2 cm (in their own frames),
+    // then move the whole rig by G: root alignment must take G out.
+    let g = Rigid::new(
+        so3::exp(DVec3::new(0.02, -0.01, 0.3)),
+        DVec3::new(0.4, -1.0, 0.2),
+    );
+    let mut estimate = reference.clone();
+    let axis = DVec3::new(1.0, 2.0, -2.0) / 3.0;
+    for (name, deg, shift) in [
+        (&camera, 1.5f64, DVec3::new(0.07, 0.0, 0.0)),
+        (&lidar, 0.3, DVec3::new(0.0, 0.0, 0.02)),
+    ] {
+        let s = estimate.sensor_mut(name).unwrap();
+        s.vehicle_from_sensor = s
+            .vehicle_from_sensor
+            .perturbed_right(axis * deg.to_radians(), shift);
+    }
+    for s in &mut estimate.sensors {
+        s.vehicle_from_sensor = g * s.vehicle_from_sensor;
+    }
+    let (gt_path, est_path) = (dir.join("gt.yaml"), dir.join("est.yaml"));
+    save(&reference, &gt_path);
+    save(&estimate, &est_path);
+    for (a, b) in [(&gt_path, &est_path), (&est_path, &gt_path)] {
+        let report = run(a, b);
+        assert_eq!(report.root, root);
+        for e in &report.poses {
+            let (deg, cm) = if e.sensor == camera {
+                (1.5, 7.0)
+            } else if e.sensor == lidar {
+                (0.3, 2.0)
+            } else {
+                (0.0, 0.0)
+            };
+            assert!(
+                (e.rotation_deg - deg).abs() < 1e-6 && (e.translation_m * 100.0 - cm).abs() < 1e-6,
+                "{e:?}"
+            );
+        }
+        let md = report.to_markdown();
+        assert!(
+            md.contains(&format!("| {camera} | 1.5000 | 7.00 |")),
+            "{md}"
+        );
+    }
+    // A root that is not in both files is refused by name.
+    let args = EvalArgs {
+        ground_truth: gt_path.clone(),
+        calibration: est_path.clone(),
+        root: Some("nope".into()),
+        ..Default::default()
+    };
+    let e = evaluate(&args, &mut |_, _| {}).unwrap_err();
+    assert!(e.contains("nope"), "{e}");
+}
+
+#[test]
+fn the_pandaset_ground_truth_json_is_accepted_and_misalignment_shows_in_the_data() {
+    let json = pandaset_dir().join("ground_truth.json");
+    let reference = load_reference(&json).unwrap();
+    assert_eq!(reference.sensors.len(), 8);
+    assert_eq!(reference.lidars().count(), 2);
+    let dir = temp_dir("pandaset");
+    let same = dir.join("same.yaml");
+    save(&reference, &same);
+    let report = run(&json, &same);
+    assert_eq!(report.root, "pandar64");
+    assert!(report.poses.iter().all(|e| e.rotation_deg < 1e-6));
+    // Misalign the PandarGT by 0.5° and 10 cm: the pose error says so, and so does the
+    // point-to-plane error on the drive (the reference's value is the data's own floor).
+    let mut moved = reference.clone();
+    let s = moved.sensor_mut("pandar_gt").unwrap();
+    s.vehicle_from_sensor = s.vehicle_from_sensor.perturbed_right(
+        DVec3::new(0.0, 0.0, 0.5f64.to_radians()),
+        DVec3::new(0.1, 0.0, 0.0),
+    );
+    let moved_path = dir.join("moved.yaml");
+    save(&moved, &moved_path);
+    let args = EvalArgs {
+        ground_truth: json.clone(),
+        calibration: moved_path,
+        log: Some(pandaset_dir().join("pandaset-002.mcap")),
+        frames: 2,
+        ..Default::default()
+    };
+    let report = evaluate(&args, &mut |_, _| {}).unwrap();
+    let gt_err = report
+        .poses
+        .iter()
+        .find(|e| e.sensor == "pandar_gt")
+        .unwrap();
+    assert!((gt_err.rotation_deg - 0.5).abs() < 1e-6);
+    assert_eq!(report.registration_cm.len(), 1);
+    let m = &report.registration_cm[0];
+    let (calibrated, truth) = (m.calibration.unwrap(), m.reference.unwrap());
+    eprintln!("point-to-plane: moved {calibrated:.2} cm, reference {truth:.2} cm");
+    assert!(truth < 5.0, "{m:?}");
+    assert!(calibrated > truth + 1.0, "{m:?}");
+    assert_eq!(report.edge_px.len(), 12);
+}
+
+#[test]
+fn the_command_prints_tables_and_fails_with_the_file_named() {
+    let dir = temp_dir("cli");
+    let gt = dir.join("gt.yaml");
+    save(&sim_rig(), &gt);
+    let json = dir.join("report.json");
+    let out = Command::new(env!("CARGO_BIN_EXE_rigcal"))
+        .args(["eval", "--ground-truth"])
+        .arg(&gt)
+        .arg("--calibration")
+        .arg(&gt)
+        .arg("--json")
+        .arg(&json)
+        .output()
+        .unwrap();
+    assert!(out.status.success());
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        text.contains("| sensor | rotation (°) | translation (cm) |"),
+        "{text}"
+    );
+    let parsed: serde_json::Value = serde_json::from_slice(&std::fs::read(&json).unwrap()).unwrap();
+    assert!(parsed["poses"].as_array().unwrap().len() > 2);
+    let bad = dir.join("bad.yaml");
+    std::fs::write(&bad, "rigcal_calibration: 1\nsensors: 7\n").unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_rigcal"))
+        .args(["eval", "--ground-truth"])
+        .arg(&gt)
+        .arg("--calibration")
+        .arg(&bad)
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("bad.yaml") && err.lines().count() == 1,
+        "{err}"
+    );
+}
