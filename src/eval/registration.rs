@@ -239,7 +239,7 @@ mod tests {
             .map(|p| DVec3::new(p.x, p.y, 0.5 * p.x))
             .collect();
         let n = plane_normal(&tilted).unwrap();
-        let expected = DVec3::new(-0.5, 0.0, 1.0).normalize();
+        let expected = DVec3::new(-0.5, 0.0, 1.0).normalize_or_zero();
         assert!((n.dot(expected).abs() - 1.0).abs() < 1e-9, "{n}");
         let blob: Vec<DVec3> = (0..64)
             .map(|k| DVec3::new((k % 4) as f64, ((k / 4) % 4) as f64, (k / 16) as f64) * 0.1)
@@ -258,7 +258,7 @@ mod tests {
         assert!(e.mean_cm < 0.05, "{e:?}");
         assert!(e.inliers > source.len() / 2);
         // Shift the source 5 cm along (1, 1, 1)/√3: each plane sees 5/√3 cm.
-        let shift = DVec3::ONE.normalize() * 0.05;
+        let shift = DVec3::ONE.normalize_or_zero() * 0.05;
         let moved: Vec<DVec3> = source.iter().map(|p| *p + shift).collect();
         let e = point_to_plane_error(&moved, &target).unwrap();
         let expected = 5.0 / 3f64.sqrt();

@@ -758,10 +758,19 @@ impl DepthCalibration {
         }
         let total = self.config.iterations;
         let lr_field = decayed_lr(self.config.lr_field, 0.1, self.iteration, total);
-        let lr_pose = if self.iteration < self.config.pose_warmup {
+        // Poses decay from the end of their warm-up, over the iterations in which they move
+        // (decaying from iteration 0 would leave a short run's poses a few percent of their
+        // rate by the time they start).
+        let warmup = self.config.pose_warmup;
+        let lr_pose = if self.iteration < warmup {
             0.0
         } else {
-            decayed_lr(self.config.lr_pose, 0.01, self.iteration, total)
+            decayed_lr(
+                self.config.lr_pose,
+                0.01,
+                self.iteration - warmup,
+                total.saturating_sub(warmup).max(1),
+            )
         };
         let mut geo = self.field.geo.zero_grad();
         let mut beta_grad = 0.0;
