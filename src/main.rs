@@ -186,12 +186,9 @@ fn run() -> Result<()> {
             };
             let started = std::time::Instant::now();
             let mut bar = rigcal::cli::progress::Progress::new("calibrate", 1);
-            rigcal::cli::calibrate::calibrate(&args, &mut |done, total| {
-                bar.set_total(total as u64);
-                bar.set(done as u64);
-            })
-            .map_err(anyhow::Error::msg)
-            .with_context(|| format!("cannot calibrate {}", log.display()))?;
+            rigcal::cli::calibrate::calibrate(&args, &mut |done, total| bar.report(done, total))
+                .map_err(anyhow::Error::msg)
+                .with_context(|| format!("cannot calibrate {}", log.display()))?;
             bar.finish();
             println!(
                 "wrote {} in {:.1} s",
@@ -218,12 +215,10 @@ fn run() -> Result<()> {
                 checkerboard,
             };
             let mut bar = rigcal::cli::progress::Progress::new("eval", 1);
-            let report = rigcal::cli::eval::evaluate(&args, &mut |done, total| {
-                bar.set_total(total as u64);
-                bar.set(done as u64);
-            })
-            .map_err(anyhow::Error::msg)
-            .context("cannot evaluate")?;
+            let report =
+                rigcal::cli::eval::evaluate(&args, &mut |done, total| bar.report(done, total))
+                    .map_err(anyhow::Error::msg)
+                    .context("cannot evaluate")?;
             bar.finish();
             print!("{}", report.to_markdown());
             if let Some(path) = json {
@@ -262,8 +257,7 @@ fn run() -> Result<()> {
             let started = std::time::Instant::now();
             let mut bar = rigcal::cli::progress::Progress::new("synth", 1);
             let result = synth::synthesize(&cfg, &out, &ground_truth, &mut |done, total| {
-                bar.set_total(total as u64);
-                bar.set(done as u64);
+                bar.report(done, total)
             })
             .with_context(|| format!("cannot synthesize {}", out.display()))?;
             bar.finish();

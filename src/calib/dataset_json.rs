@@ -11,7 +11,7 @@ use serde::Deserialize;
 
 use super::file::{CalibFileError, CalibrationFile};
 use super::rig::{Rig, Sensor, SensorKind};
-use crate::geometry::Rigid;
+use super::transform_text::rigid_from_matrix;
 use crate::geometry::camera::CameraIntrinsics;
 
 #[derive(Deserialize)]
@@ -43,27 +43,8 @@ pub fn parse(text: &str, path: &Path) -> Result<Rig, CalibFileError> {
         .map_err(|e| invalid(format!("not a dataset calibration JSON: {e}")))?;
     let mut sensors = Vec::with_capacity(file.sensors.len());
     for (name, s) in file.sensors {
-        let rows = s.vehicle_from_sensor;
-        if rows[3] != [0.0, 0.0, 0.0, 1.0] || rows.iter().flatten().any(|v| !v.is_finite()) {
-            return Err(invalid(format!(
-                "sensor '{name}': vehicle_from_sensor is not a finite rigid 4×4 matrix"
-            )));
-        }
-        let m = glam::DMat3::from_cols_array_2d(&[
-            [rows[0][0], rows[1][0], rows[2][0]],
-            [rows[0][1], rows[1][1], rows[2][1]],
-            [rows[0][2], rows[1][2], rows[2][2]],
-        ]);
-        if (m.transpose() * m - glam::DMat3::IDENTITY)
-            .to_cols_array()
-            .iter()
-            .any(|v| v.abs() > 1e-4)
-            || m.determinant() < 0.0
-        {
-            return Err(invalid(format!(
-                "sensor '{name}': the rotation block of vehicle_from_sensor is not a rotation"
-            )));
-        }
+        let vehicle_from_sensor = rigid_from_matrix(s.vehicle_from_sensor.as_flattened())
+            .map_err(|e| invalid(format!("sensor '{name}': vehicle_from_sensor: {e}")))?;
         let camera = match s.kind {
             SensorKind::Lidar => None,
             SensorKind::Camera => match (s.width, s.height, s.fx, s.fy, s.cx, s.cy) {
@@ -84,7 +65,7 @@ pub fn parse(text: &str, path: &Path) -> Result<Rig, CalibFileError> {
             name,
             kind: s.kind,
             topics: Vec::new(),
-            vehicle_from_sensor: Rigid::from_rows(rows),
+            vehicle_from_sensor,
             camera,
         });
     }

@@ -58,37 +58,49 @@ pub fn parse_transform(text: &str) -> Result<Rigid, String> {
             [numbers[0], numbers[1], numbers[2]],
             [numbers[3], numbers[4], numbers[5], numbers[6]],
         ),
-        12 | 16 => {
-            let m = |r: usize, c: usize| numbers[r * 4 + c];
-            if numbers.len() == 16
-                && ((m(3, 0).abs() + m(3, 1).abs() + m(3, 2).abs()) > 1e-6
-                    || (m(3, 3) - 1.0).abs() > 1e-6)
-            {
-                return Err("the last row of a 4×4 rigid transform must be 0 0 0 1".into());
-            }
-            let rot = DMat3::from_cols(
-                DVec3::new(m(0, 0), m(1, 0), m(2, 0)),
-                DVec3::new(m(0, 1), m(1, 1), m(2, 1)),
-                DVec3::new(m(0, 2), m(1, 2), m(2, 2)),
-            );
-            let err = (rot.transpose() * rot - DMat3::IDENTITY)
-                .to_cols_array()
-                .iter()
-                .fold(0.0f64, |a, v| a.max(v.abs()));
-            if err > 1e-4 || rot.determinant() < 0.0 {
-                return Err(format!(
-                    "the rotation part is not a rotation (orthonormality error {err:.1e})"
-                ));
-            }
-            Ok(Rigid::new(
-                DQuat::from_mat3(&rot).normalize(),
-                DVec3::new(m(0, 3), m(1, 3), m(2, 3)),
-            ))
-        }
+        12 | 16 => rigid_from_matrix(&numbers),
         n => Err(format!(
             "{n} numbers: expected 6 (x y z roll pitch yaw°), 7 (x y z qx qy qz qw), 12 (3×4) or 16 (4×4)"
         )),
     }
+}
+
+/// A rigid transform from a row-major 3×4 or 4×4 matrix (12 or 16 numbers), validated: finite,
+/// last row `0 0 0 1`, rotation block orthonormal with determinant +1 (to 1e-4).
+pub fn rigid_from_matrix(numbers: &[f64]) -> Result<Rigid, String> {
+    if numbers.len() != 12 && numbers.len() != 16 {
+        return Err(format!(
+            "{} numbers: a matrix needs 12 (3×4) or 16 (4×4)",
+            numbers.len()
+        ));
+    }
+    if numbers.iter().any(|v| !v.is_finite()) {
+        return Err("numbers must be finite".into());
+    }
+    let m = |r: usize, c: usize| numbers[r * 4 + c];
+    if numbers.len() == 16
+        && ((m(3, 0).abs() + m(3, 1).abs() + m(3, 2).abs()) > 1e-6 || (m(3, 3) - 1.0).abs() > 1e-6)
+    {
+        return Err("the last row of a 4×4 rigid transform must be 0 0 0 1".into());
+    }
+    let rot = DMat3::from_cols(
+        DVec3::new(m(0, 0), m(1, 0), m(2, 0)),
+        DVec3::new(m(0, 1), m(1, 1), m(2, 1)),
+        DVec3::new(m(0, 2), m(1, 2), m(2, 2)),
+    );
+    let err = (rot.transpose() * rot - DMat3::IDENTITY)
+        .to_cols_array()
+        .iter()
+        .fold(0.0f64, |a, v| a.max(v.abs()));
+    if err > 1e-4 || rot.determinant() < 0.0 {
+        return Err(format!(
+            "the rotation part is not a rotation (orthonormality error {err:.1e})"
+        ));
+    }
+    Ok(Rigid::new(
+        DQuat::from_mat3(&rot).normalize(),
+        DVec3::new(m(0, 3), m(1, 3), m(2, 3)),
+    ))
 }
 
 fn from_quaternion(t: [f64; 3], xyzw: [f64; 4]) -> Result<Rigid, String> {

@@ -16,7 +16,7 @@ use serde::Serialize;
 use crate::calib::dataset_json::load_reference;
 use crate::calib::{CalibrationFile, Rig, SensorKind};
 use crate::eval::checkerboard::{BoardSpec, pair_corner_error};
-use crate::eval::registration::pair_registration_error;
+use crate::eval::registration::{RegistrationError, pair_registration_errors};
 use crate::geometry::{RigError, rig_errors};
 use crate::log::Drive;
 use crate::optim::edge_align::EdgeAlignment;
@@ -163,15 +163,15 @@ fn measure_on_data(
     let mut done = 0;
     let frames = args.frames.max(1);
     for (a, b) in lidar_pairs {
-        let run = |rig: &Rig| pair_registration_error(drive, rig, &a, &b, frames, 4);
-        let (c, r) = (run(calibration), run(&reference_rig));
-        report.registration_cm.push(metric(
-            &a,
-            &b,
-            c.map(|v| v.map(|e| e.mean_cm)),
-            r.map(|v| v.map(|e| e.mean_cm)),
-            "no planar overlap within 30 cm",
-        ));
+        let rigs = [calibration, &reference_rig];
+        let cm = |e: &Option<_>| e.as_ref().map(|e: &RegistrationError| e.mean_cm);
+        let (c, r) = match pair_registration_errors(drive, &rigs, &a, &b, frames, 4) {
+            Ok(v) => (Ok(cm(&v[0])), Ok(cm(&v[1]))),
+            Err(e) => (Err(e.clone()), Err(e)),
+        };
+        report
+            .registration_cm
+            .push(metric(&a, &b, c, r, "no planar overlap within 30 cm"));
         done += 1;
         progress(done, total);
     }

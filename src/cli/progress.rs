@@ -46,10 +46,18 @@ impl Progress {
                 self.started.elapsed().as_secs_f64()
             );
             let _ = err.flush();
-        } else if pct >= self.last_line_pct + 10 || self.done == self.total {
+        } else if pct >= self.last_line_pct + 10
+            || (self.done == self.total && self.last_line_pct < 100)
+        {
             self.last_line_pct = pct;
             let _ = writeln!(err, "{}: {}/{} ({pct}%)", self.label, self.done, self.total);
         }
+    }
+
+    /// `done` of `total`: the shape of the library's `progress(done, total)` callbacks.
+    pub fn report(&mut self, done: usize, total: usize) {
+        self.set_total(total as u64);
+        self.set(done as u64);
     }
 
     pub fn inc(&mut self) {

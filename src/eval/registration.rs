@@ -153,24 +153,29 @@ pub fn point_to_plane_error(source: &[DVec3], target: &[DVec3]) -> Option<Regist
     })
 }
 
-/// The registration error of one LiDAR pair of a drive under `rig`: up to `frames` sweeps of
-/// `source` spread over the drive, each against the sweep of `target` nearest in time, both
-/// moved into the world frame with the trajectory (every `stride`-th source point).
-pub fn pair_registration_error(
+/// The registration error of one LiDAR pair of a drive under each of `rigs` (e.g. a
+/// calibration and its reference): up to `frames` sweeps of `source` spread over the drive,
+/// each against the sweep of `target` nearest in time, both moved into the world frame with the
+/// trajectory (every `stride`-th source point). Each sweep is read once for all rigs.
+pub fn pair_registration_errors(
     drive: &crate::log::Drive,
-    rig: &crate::calib::Rig,
+    rigs: &[&crate::calib::Rig],
     source: &str,
     target: &str,
     frames: usize,
     stride: usize,
-) -> Result<Option<RegistrationError>, String> {
+) -> Result<Vec<Option<RegistrationError>>, String> {
     use crate::geometry::projection::world_points;
-    let extrinsic = |name: &str| {
-        rig.sensor(name)
-            .map(|s| s.vehicle_from_sensor)
-            .ok_or(format!("no sensor '{name}' in the calibration"))
+    let extrinsics = |name: &str| {
+        rigs.iter()
+            .map(|rig| {
+                rig.sensor(name)
+                    .map(|s| s.vehicle_from_sensor)
+                    .ok_or(format!("no sensor '{name}' in the calibration"))
+            })
+            .collect::<Result<Vec<_>, _>>()
     };
-    let (vehicle_from_source, vehicle_from_target) = (extrinsic(source)?, extrinsic(target)?);
+    let (vehicle_from_source, vehicle_from_target) = (extrinsics(source)?, extrinsics(target)?);
     let stream = |name: &str| {
         drive.stream(name).map(|s| &s.frames).ok_or(format!(
             "no sweeps of '{name}' in {}",
@@ -178,35 +183,41 @@ pub fn pair_registration_error(
         ))
     };
     let (sources, targets) = (stream(source)?, stream(target)?);
-    if sources.is_empty() || targets.is_empty() {
-        return Ok(None);
-    }
+    // Per rig: Σ mean·inliers, inliers, points tried.
+    let mut sums = vec![(0.0, 0, 0); rigs.len()];
     let all: Vec<usize> = (0..sources.len()).collect();
-    let (mut sum_cm, mut inliers, mut tried) = (0.0, 0, 0);
     for i in crate::log::spread_evenly(&all, frames) {
         let stamp = sources[i].stamp_nanos;
         let Some(j) = (0..targets.len()).min_by_key(|&j| (targets[j].stamp_nanos - stamp).abs())
         else {
             continue;
         };
-        let load = |name: &str, k: usize, extrinsic, stride| {
-            let sweep = drive.load_sweep(name, k).map_err(|e| e.to_string())?;
-            world_points(&sweep.view(), &drive.trajectory, extrinsic, stride)
-                .map_err(|e| format!("{name}: {e}"))
-        };
-        let src = load(source, i, vehicle_from_source, stride)?;
-        let tgt = load(target, j, vehicle_from_target, 1)?;
-        if let Some(e) = point_to_plane_error(&src, &tgt) {
-            sum_cm += e.mean_cm * e.inliers as f64;
-            inliers += e.inliers;
-            tried += e.source_points;
+        let load = |name: &str, k: usize| drive.load_sweep(name, k).map_err(|e| e.to_string());
+        let (src_sweep, tgt_sweep) = (load(source, i)?, load(target, j)?);
+        for (r, sum) in sums.iter_mut().enumerate() {
+            let world = |sweep: &crate::log::LidarSweep, extrinsic, stride, name: &str| {
+                world_points(&sweep.view(), &drive.trajectory, extrinsic, stride)
+                    .map_err(|e| format!("{name}: {e}"))
+            };
+            let src = world(&src_sweep, vehicle_from_source[r], stride, source)?;
+            let tgt = world(&tgt_sweep, vehicle_from_target[r], 1, target)?;
+            if let Some(e) = point_to_plane_error(&src, &tgt) {
+                sum.0 += e.mean_cm * e.inliers as f64;
+                sum.1 += e.inliers;
+                sum.2 += e.source_points;
+            }
         }
     }
-    Ok((inliers > 0).then(|| RegistrationError {
-        mean_cm: sum_cm / inliers as f64,
-        inliers,
-        source_points: tried,
-    }))
+    Ok(sums
+        .into_iter()
+        .map(|(sum_cm, inliers, tried)| {
+            (inliers > 0).then(|| RegistrationError {
+                mean_cm: sum_cm / inliers as f64,
+                inliers,
+                source_points: tried,
+            })
+        })
+        .collect())
 }
 
 #[cfg(test)]

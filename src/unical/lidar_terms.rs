@@ -89,12 +89,7 @@ pub struct LidarModel<'a> {
     pub decoder: Option<&'a IntensityDecoder>,
 }
 
-/// The rendered range of one ray (forward only, for diagnostics).
-pub fn render_depth(field: &SceneField, beta: f32, pose: &PoseParams, ray: &DepthRay) -> f32 {
-    render_composite(field, beta, pose, ray).depth_m
-}
-
-/// The composite (depth, accumulation, weights) of one LiDAR ray, forward only.
+/// The composite (depth, accumulation, weights) of one LiDAR ray, forward only (diagnostics).
 pub fn render_composite(
     field: &SceneField,
     beta: f32,
@@ -413,7 +408,7 @@ mod tests {
     }
 
     #[test]
-    fn render_depth_is_the_depth_term_forward() {
+    fn render_composite_is_the_depth_term_forward() {
         let (field, _, pose, rays) = setup();
         let w = LidarWeights {
             depth: 1.0,
@@ -435,7 +430,7 @@ mod tests {
                 std::slice::from_ref(ray),
                 &mut SparseGrad::default(),
             );
-            let rendered = render_depth(&field, 3.0, &pose, ray);
+            let rendered = render_composite(&field, 3.0, &pose, ray).depth_m;
             let error = (rendered - ray.range_m).abs() as f64;
             assert!((error - step.mean_abs_error_m).abs() < 1e-5, "{error}");
         }
