@@ -14,6 +14,7 @@
 //!   indexed, lazily decoded drive log.
 //! - [`util`]: atomic file writes and small helpers shared by every module.
 
+pub mod bench;
 pub mod calib;
 pub mod cli;
 pub mod eval;

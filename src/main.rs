@@ -92,6 +92,22 @@ enum Command {
         #[arg(long)]
         json: Option<PathBuf>,
     },
+    /// Run the paper's evaluation protocols on simulated drives and the PandaSet drive; write
+    /// Markdown tables, CSV, JSON and PNG plots.
+    Bench {
+        /// quick (≤ 10 minutes on two cores, release build) | paper (the full protocol: hours)
+        #[arg(long, default_value = "quick")]
+        suite: String,
+        #[arg(long, default_value = "bench-out")]
+        out: PathBuf,
+        /// Folder of the PandaSet drive (pandaset-002.mcap + ground_truth.json); skipped when
+        /// it is not there.
+        #[arg(long, default_value = "../shared/data/pandaset-002")]
+        pandaset: PathBuf,
+        /// Seeds per perturbation level (default: the suite's).
+        #[arg(long)]
+        seeds: Option<u64>,
+    },
     /// Simulate a drive with known ground truth and write it as a ROS 2 MCAP.
     Synth {
         /// urban | parking-lot | featureless | checkerboard
@@ -228,6 +244,12 @@ fn run() -> Result<()> {
             }
             Ok(())
         }
+        Some(Command::Bench {
+            suite,
+            out,
+            pandaset,
+            seeds,
+        }) => bench(&suite, &out, pandaset, seeds),
         Some(Command::Synth {
             scene,
             rig,
@@ -272,6 +294,63 @@ fn run() -> Result<()> {
             Ok(())
         }
     }
+}
+
+fn bench(suite: &str, out: &std::path::Path, pandaset: PathBuf, seeds: Option<u64>) -> Result<()> {
+    use rigcal::bench::{Stage, Suite};
+    let make: fn(Option<PathBuf>) -> Suite = match suite {
+        "quick" => Suite::quick,
+        "paper" => Suite::paper,
+        other => anyhow::bail!("unknown --suite '{other}' (expected quick or paper)"),
+    };
+    let pandaset = pandaset
+        .join("pandaset-002.mcap")
+        .is_file()
+        .then_some(pandaset);
+    if pandaset.is_none() {
+        eprintln!("rigcal bench: no PandaSet drive found (--pandaset); its rows are skipped");
+    }
+    let mut chosen = make(pandaset);
+    if let Some(n) = seeds {
+        chosen = chosen.with_seeds(n);
+    }
+    eprintln!(
+        "rigcal bench --suite {suite}: {} runs for {} table cells, into {}",
+        chosen.runs().len(),
+        chosen.cases.len(),
+        out.display()
+    );
+    let mut bar: Option<(String, rigcal::cli::progress::Progress)> = None;
+    let report = rigcal::bench::run_suite(&chosen, out, &mut |stage, done, total| {
+        let label = match stage {
+            Stage::Simulating(name) => format!("simulate {name}"),
+            Stage::Running { index, runs, what } => format!("run {index}/{runs}: {what}"),
+        };
+        if bar.as_ref().is_none_or(|(l, _)| *l != label) {
+            if let Some((_, b)) = bar.as_mut() {
+                b.finish();
+            }
+            bar = Some((
+                label.clone(),
+                rigcal::cli::progress::Progress::new(&label, 1),
+            ));
+        }
+        if let Some((_, b)) = bar.as_mut() {
+            b.report(done, total);
+        }
+    })
+    .map_err(anyhow::Error::msg)
+    .context("rigcal bench failed")?;
+    if let Some((_, b)) = bar.as_mut() {
+        b.finish();
+    }
+    print!("{}", report.to_markdown());
+    eprintln!(
+        "wrote tables.md, results.csv, results.json, convergence.png and error-vs-perturbation.png into {} ({:.0} s)",
+        out.display(),
+        report.total_secs
+    );
+    Ok(())
 }
 
 #[cfg(feature = "app")]

@@ -3,4 +3,5 @@
 pub mod checkerboard;
 pub mod edges;
 pub mod fast;
+pub mod photometric;
 pub mod registration;

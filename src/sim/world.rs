@@ -18,7 +18,8 @@ use super::bvh::{Bvh, Triangle};
 use super::noise::{band, fbm2, hash3, hash64, stripe, value2};
 use super::raster::Candidate;
 
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
 pub enum SceneKind {
     Urban,
     ParkingLot,

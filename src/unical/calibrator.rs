@@ -104,6 +104,11 @@ impl UnicalLidarStage {
         Ok(self)
     }
 
+    /// The optimisation itself (its scene can render cameras: `render_camera`).
+    pub fn calibration(&self) -> &DepthCalibration {
+        &self.calib
+    }
+
     fn rig_now(&self) -> Rig {
         let mut rig = self.rig.clone();
         for (name, t) in self.calib.extrinsics() {

@@ -168,6 +168,100 @@ pub struct CameraModel<'a> {
     pub beta: f32,
 }
 
+/// Everything one camera ray's forward pass computed, kept for its backward pass.
+struct ColourForward {
+    o: DVec3,
+    d: DVec3,
+    samples: Vec<FieldSample>,
+    far_samples: Vec<FieldSample>,
+    /// How many of the samples lie in the scene box (the rest are background samples).
+    in_box: usize,
+    alphas: Vec<f32>,
+    taus: Vec<f32>,
+    features: Vec<f32>,
+    c: super::composite::Composite,
+    sky: super::mlp::Trace,
+    t_sky: f32,
+    dec: super::mlp::Trace,
+    /// The decoder's colour before the exposure mapping, in [0, 1].
+    rgb: Vec<f32>,
+}
+
+/// One ray's forward pass: march the box, then the background for the light that got through,
+/// composite the features, add the sky for what is left and decode the colour (Eq. 3).
+fn colour_forward(model: CameraModel, pose: &PoseParams, ray: &ColourRay) -> ColourForward {
+    let CameraModel {
+        field,
+        background,
+        appearance,
+        beta,
+    } = model;
+    let dim = field.geo.output_dim().saturating_sub(1);
+    let (o, d) = pose.ray(ray.world_from_vehicle, ray.dir_in_sensor);
+    let (mut alphas, mut transmittance) = (Vec::new(), 1.0f32);
+    let mut march_along = |query: &dyn Fn(DVec3) -> FieldSample, taus: &[f32]| {
+        march(query, (o, d), taus, beta, &mut alphas, &mut transmittance)
+    };
+    let samples = march_along(&|x| field.query(x), &ray.taus_m);
+    let in_box = samples.len();
+    let far_samples = match background {
+        Some(bg) => march_along(&|x| bg.query(x), &ray.background_taus_m),
+        None => Vec::new(),
+    };
+    let mut taus = ray.taus_m[..in_box].to_vec();
+    taus.extend_from_slice(&ray.background_taus_m[..far_samples.len()]);
+    let features: Vec<f32> = samples
+        .iter()
+        .chain(&far_samples)
+        .flat_map(|s| s.feature().iter().copied())
+        .collect();
+    let c = composite(&alphas, &taus, &features, dim);
+    let sh: Vec<f32> = sh_encoding(d).iter().map(|v| *v as f32).collect();
+    let sky = appearance.sky.forward(&sh);
+    let t_sky = 1.0 - c.accumulation;
+    let mut input: Vec<f32> = c
+        .feature
+        .iter()
+        .zip(sky.output())
+        .map(|(f, s)| f + t_sky * s)
+        .collect();
+    input.extend_from_slice(&sh);
+    let dec = appearance.colour.forward(&input);
+    let rgb: Vec<f32> = dec.output().iter().map(|v| sigmoid(*v)).collect();
+    ColourForward {
+        o,
+        d,
+        samples,
+        far_samples,
+        in_box,
+        alphas,
+        taus,
+        features,
+        c,
+        sky,
+        t_sky,
+        dec,
+        rgb,
+    }
+}
+
+/// The colour camera `pose` sees along `ray` (after its exposure mapping), in [0, 1]: the
+/// forward pass alone, for rendering whole images (e.g. held-out frames, method.md §13).
+pub fn render_colour(
+    model: CameraModel,
+    pose: &PoseParams,
+    exposure: &ExposureMap,
+    ray: &ColourRay,
+) -> [f32; 3] {
+    let f = colour_forward(model, pose, ray);
+    let mut out = [0.0f32; 3];
+    for (ch, v) in out.iter_mut().enumerate() {
+        let c = f.rgb.get(ch).copied().unwrap_or(0.0);
+        *v = (exposure.scale[ch] * c + exposure.offset[ch]).clamp(0.0, 1.0);
+    }
+    out
+}
+
 /// Mean squared colour error of `rays` seen from `pose` and its gradients; the hash tables'
 /// gradients go to `grid` (scene) and `background_grid`.
 pub fn colour_step(
@@ -197,39 +291,21 @@ pub fn colour_step(
     let n = rays.len().max(1) as f32;
     let dim = field.geo.output_dim().saturating_sub(1);
     for ray in rays {
-        let (o, d) = pose.ray(ray.world_from_vehicle, ray.dir_in_sensor);
-        // Forward through the box, then the background for the light that got through.
-        let (mut alphas, mut transmittance) = (Vec::new(), 1.0f32);
-        let mut march_along = |query: &dyn Fn(DVec3) -> FieldSample, taus: &[f32]| {
-            march(query, (o, d), taus, beta, &mut alphas, &mut transmittance)
-        };
-        let samples = march_along(&|x| field.query(x), &ray.taus_m);
-        let in_box = samples.len();
-        let far_samples = match background {
-            Some(bg) => march_along(&|x| bg.query(x), &ray.background_taus_m),
-            None => Vec::new(),
-        };
-        let mut taus = ray.taus_m[..in_box].to_vec();
-        taus.extend_from_slice(&ray.background_taus_m[..far_samples.len()]);
-        let features: Vec<f32> = samples
-            .iter()
-            .chain(&far_samples)
-            .flat_map(|s| s.feature().iter().copied())
-            .collect();
-        let c = composite(&alphas, &taus, &features, dim);
-        let sh64 = sh_encoding(d);
-        let sh: Vec<f32> = sh64.iter().map(|v| *v as f32).collect();
-        let sky = appearance.sky.forward(&sh);
-        let t_sky = 1.0 - c.accumulation;
-        let mut input: Vec<f32> = c
-            .feature
-            .iter()
-            .zip(sky.output())
-            .map(|(f, s)| f + t_sky * s)
-            .collect();
-        input.extend_from_slice(&sh);
-        let dec = appearance.colour.forward(&input);
-        let rgb: Vec<f32> = dec.output().iter().map(|v| sigmoid(*v)).collect();
+        let ColourForward {
+            o,
+            d,
+            samples,
+            far_samples,
+            in_box,
+            alphas,
+            taus,
+            features,
+            c,
+            sky,
+            t_sky,
+            dec,
+            rgb,
+        } = colour_forward(model, pose, ray);
         // Loss and ∂L/∂(decoder logits).
         let mut d_logit = [0.0f32; 3];
         for ch in 0..3 {
@@ -376,6 +452,46 @@ mod tests {
     /// The whole chain — field, compositing with early stop, sky, decoder, SH of the view
     /// direction, 6D pose — against finite differences of the loss in the pose, and the
     /// exposure gradients likewise.
+    #[test]
+    fn rendered_colours_are_what_the_loss_compares() {
+        // The training loss is the mean squared difference between render_colour and the
+        // targets (no clamping at this exposure: the decoder's sigmoid stays inside (0, 1)).
+        let (field, background, appearance, pose, rays) = setup();
+        let model = CameraModel {
+            field: &field,
+            background: Some(&background),
+            appearance: &appearance,
+            beta: 3.0,
+        };
+        let exposure = ExposureMap {
+            scale: [0.9, 0.8, 0.85],
+            offset: [0.02, 0.01, 0.0],
+        };
+        let step = colour_step(
+            model,
+            &pose,
+            &exposure,
+            &rays,
+            &mut SparseGrad::default(),
+            &mut SparseGrad::default(),
+        );
+        let mse: f64 = rays
+            .iter()
+            .map(|r| {
+                let c = render_colour(model, &pose, &exposure, r);
+                (0..3)
+                    .map(|k| ((c[k] - r.target[k]) as f64).powi(2))
+                    .sum::<f64>()
+            })
+            .sum::<f64>()
+            / rays.len() as f64;
+        assert!(
+            (mse - step.loss).abs() < 1e-6 * step.loss.max(1e-3),
+            "{mse} vs {}",
+            step.loss
+        );
+    }
+
     #[test]
     fn pose_and_exposure_gradients_match_finite_differences() {
         let (field, background, appearance, pose, rays) = setup();

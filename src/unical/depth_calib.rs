@@ -16,7 +16,9 @@ use rayon::prelude::*;
 
 use super::adam::{AdamConfig, DenseAdam, SparseAdam, decayed_lr};
 use super::background::{Background, BackgroundConfig};
-use super::camera_rgb::{Appearance, CameraModel, ColourRay, ExposureMap, colour_step};
+use super::camera_rgb::{
+    Appearance, CameraModel, ColourRay, ExposureMap, colour_step, render_colour,
+};
 use super::field::{FieldConfig, SceneField};
 use super::hash_grid::{GradAccumulator, HashGridConfig, Scaled};
 use super::intensity::{IntensityDecoder, IntensityMap, normaliser};
@@ -522,6 +524,71 @@ impl DepthCalibration {
                 .map(|(cam, e)| (cam.name.clone(), *e))
                 .collect()
         })
+    }
+
+    /// Render what camera `name` sees at `stamp_nanos` with the current scene, pose and
+    /// exposure, at the resolution it trains on (row-major RGB, `width × height × 3`; `None`
+    /// for an unknown camera or a time outside the trajectory). Forward only, parallel over
+    /// rows; samples sit at the middle of their 10 cm steps. For photometric checks of frames
+    /// the optimisation did not see (method.md §13).
+    pub fn render_camera(&self, name: &str, stamp_nanos: i64) -> Option<(u32, u32, Vec<u8>)> {
+        let stage = self.camera.as_ref()?;
+        let k = stage.cameras.iter().position(|c| c.name == name)?;
+        let (cam, pose, exposure) = (&stage.cameras[k], stage.poses[k], stage.exposure[k]);
+        let wv = self.trajectory.world_from_vehicle(stamp_nanos).ok()?;
+        let model = CameraModel {
+            field: &self.field,
+            background: stage.background.as_ref().map(|b| &b.field),
+            appearance: &stage.appearance,
+            beta: self.ln_beta.exp(),
+        };
+        let (w, h) = (cam.intrinsics.width, cam.intrinsics.height);
+        let rows: Vec<Vec<u8>> = (0..h)
+            .into_par_iter()
+            .map(|y| {
+                let mut row = Vec::with_capacity(3 * w as usize);
+                for x in 0..w {
+                    let rgb = match cam.intrinsics.unproject(DVec2::new(x as f64, y as f64)) {
+                        Some(u) => {
+                            let (o, d) = pose.ray(wv, u);
+                            let ray = ColourRay {
+                                world_from_vehicle: wv,
+                                dir_in_sensor: u,
+                                target: [0.0; 3],
+                                taus_m: self.occupancy.sample(
+                                    o,
+                                    d,
+                                    0.3,
+                                    self.config.camera_far_m,
+                                    self.config.step_m,
+                                    0.5,
+                                    self.config.max_samples_per_ray,
+                                ),
+                                background_taus_m: stage
+                                    .background
+                                    .as_ref()
+                                    .map_or_else(Vec::new, |b| b.field.taus(o, d, 0.5)),
+                            };
+                            render_colour(model, &pose, &exposure, &ray)
+                        }
+                        None => [0.0; 3],
+                    };
+                    row.extend(rgb.map(|v| (v * 255.0).round() as u8));
+                }
+                row
+            })
+            .collect();
+        Some((w, h, rows.concat()))
+    }
+
+    /// The intrinsics camera `name` trains with (its images' size), if it takes part.
+    pub fn camera_intrinsics(&self, name: &str) -> Option<&CameraIntrinsics> {
+        let stage = self.camera.as_ref()?;
+        stage
+            .cameras
+            .iter()
+            .find(|c| c.name == name)
+            .map(|c| &c.intrinsics)
     }
 
     fn draw_camera_rays(&mut self, camera: usize) -> Vec<ColourRay> {
