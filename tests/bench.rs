@@ -43,7 +43,15 @@ fn tiny_suite() -> Suite {
         camera_frames: 1,
         camera_scale: 0.25,
         pose_trim_quantile: 0.95,
+        lidar_supervision: true,
     });
+    let camera_only = match &unical {
+        Method::UniCal(s) => Method::UniCal(UnicalSettings {
+            lidar_supervision: false,
+            ..s.clone()
+        }),
+        m => m.clone(),
+    };
     let edge = Method::Edge {
         frames: 1,
         max_steps: 4,
@@ -102,9 +110,17 @@ fn tiny_suite() -> Suite {
             ),
             // The same run as the third case: shared, run once.
             case(Protocol::Sensors, "Full", &unical, &drive, 2.0, 0.0, 1),
+            case(
+                Protocol::Sensors,
+                "Camera-only",
+                &camera_only,
+                &drive,
+                2.0,
+                0.0,
+                1,
+            ),
             case(Protocol::PandaSet, "missing", &edge, &missing, 1.0, 10.0, 1),
         ],
-        unsupported: Vec::new(),
     }
 }
 
@@ -112,13 +128,13 @@ fn tiny_suite() -> Suite {
 fn a_tiny_suite_measures_every_run_and_writes_tables_and_plots() {
     let out = temp_dir("tiny");
     let suite = tiny_suite();
-    assert_eq!(suite.runs().len(), 5);
+    assert_eq!(suite.runs().len(), 6);
     let mut simulated = false;
     let mut runs_seen = Vec::new();
     let report = run_suite(&suite, &out, &mut |stage, _, _| match stage {
         Stage::Simulating(_) => simulated = true,
         Stage::Running { index, runs, .. } => {
-            assert_eq!(*runs, 5);
+            assert_eq!(*runs, 6);
             if !runs_seen.contains(index) {
                 runs_seen.push(*index);
             }
@@ -126,7 +142,7 @@ fn a_tiny_suite_measures_every_run_and_writes_tables_and_plots() {
     })
     .unwrap();
     assert!(simulated, "the drive was simulated");
-    assert_eq!(report.results.len(), 5);
+    assert_eq!(report.results.len(), 6);
 
     // Known answers: each run's initial errors are the ground truth against its own seeded
     // perturbation, after aligning the root LiDAR.
@@ -141,6 +157,12 @@ fn a_tiny_suite_measures_every_run_and_writes_tables_and_plots() {
     {
         let r = by_case(case);
         assert!(r.error.is_none(), "{:?}", r.error);
+        let camera_only = case.row == "Camera-only";
+        let root = if camera_only {
+            gt.cameras().next().unwrap().name.clone()
+        } else {
+            root.clone()
+        };
         assert_eq!(r.root, root);
         let start = perturb_rig(&gt, case.perturb_deg, case.perturb_cm, case.seed);
         let want = rig_errors(&gt.extrinsics(), &start.extrinsics(), &root).unwrap();
@@ -179,8 +201,23 @@ fn a_tiny_suite_measures_every_run_and_writes_tables_and_plots() {
         p.psnr_db.is_finite() && p.psnr_db > 0.0 && p.ssim.abs() <= 1.0,
         "{p:?}"
     );
+    // Camera-only: errors against a camera root, the LiDARs left where they started.
+    let camera_only = by_case(&suite.cases[5]);
+    assert!(camera_only.result.lidar_rotation_deg.is_none());
+    assert!(camera_only.result.camera_rotation_deg.is_some());
+    assert!(
+        camera_only
+            .sensors
+            .iter()
+            .any(|s| s.kind == "camera" && s.moved_deg > 0.0),
+        "the cameras moved"
+    );
+    for s in camera_only.sensors.iter().filter(|s| s.kind == "lidar") {
+        assert!(!s.optimised);
+        assert!(s.moved_deg < 1e-9 && s.moved_cm < 1e-9, "{s:?}");
+    }
     // A run whose drive is missing is reported, naming the file.
-    let missing = by_case(&suite.cases[5]);
+    let missing = by_case(&suite.cases[6]);
     assert!(
         missing
             .error
@@ -195,6 +232,7 @@ fn a_tiny_suite_measures_every_run_and_writes_tables_and_plots() {
         "| Rotation 2° | edge alignment |",
         "| Transl 20 cm | UniCal |",
         "Table A10 layout",
+        "| Camera-only | UniCal (camera only) |",
         "Run time (Table A1 layout)",
         "Photometric consistency",
         "## Failed runs",
@@ -212,12 +250,12 @@ fn a_tiny_suite_measures_every_run_and_writes_tables_and_plots() {
     let sensors = gt.sensors.len();
     assert_eq!(
         csv.lines().count(),
-        1 + 5 * sensors + 1,
-        "five cases × sensors + the failure"
+        1 + 6 * sensors + 1,
+        "six cases × sensors + the failure"
     );
     let json: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("results.json")).unwrap()).unwrap();
-    assert_eq!(json["results"].as_array().unwrap().len(), 5);
+    assert_eq!(json["results"].as_array().unwrap().len(), 6);
     for plot in ["convergence.png", "error-vs-perturbation.png"] {
         let img = image::open(out.join(plot)).unwrap().to_rgb8();
         assert_eq!(img.dimensions(), (1400, 900));

@@ -36,6 +36,9 @@ pub struct SensorResult {
     pub initial_translation_cm: f64,
     pub final_rotation_deg: f64,
     pub final_translation_cm: f64,
+    /// How far the method moved the sensor's own extrinsic from its start (no alignment).
+    pub moved_deg: f64,
+    pub moved_cm: f64,
 }
 
 /// Mean errors of the optimised cameras and non-root LiDARs at one step.
@@ -177,13 +180,21 @@ fn run_into(
     let started = Instant::now();
     let drive = Drive::open(mcap).map_err(|e| e.to_string())?;
     let reference = load_reference(ground_truth).map_err(|e| e.to_string())?;
-    out.root = reference
-        .lidars()
-        .map(|l| l.name.clone())
+    // Errors are relative to the first LiDAR, or the first camera when the method leaves the
+    // LiDARs alone (camera-only: the cameras cannot know where a LiDAR is).
+    let camera_root = matches!(&case.method, Method::UniCal(s) if !s.lidar_supervision);
+    let (kind, candidates) = if camera_root {
+        ("camera", reference.cameras().collect::<Vec<_>>())
+    } else {
+        ("LiDAR", reference.lidars().collect())
+    };
+    out.root = candidates
+        .iter()
+        .map(|s| s.name.clone())
         .find(|n| drive.rig.sensor(n).is_some())
         .ok_or_else(|| {
             format!(
-                "{} has no LiDAR of {}",
+                "{} has no {kind} of {}",
                 mcap.display(),
                 ground_truth.display()
             )
@@ -198,7 +209,10 @@ fn run_into(
     match &case.method {
         Method::UniCal(settings) => {
             let mut stage = unical_stage(&drive, &initial, settings, case.seed)?;
-            let mut optimised: Vec<String> = initial.lidars().map(|s| s.name.clone()).collect();
+            let mut optimised: Vec<String> = Vec::new();
+            if settings.lidar_supervision {
+                optimised.extend(initial.lidars().map(|s| s.name.clone()));
+            }
             if settings.camera_frames > 0 {
                 optimised.extend(initial.cameras().map(|s| s.name.clone()));
             }
@@ -290,12 +304,13 @@ fn unical_stage(
     s: &UnicalSettings,
     seed: u64,
 ) -> Result<UnicalLidarStage, String> {
+    let lidar = s.lidar_supervision;
     let config = DepthCalibConfig {
         iterations: s.iterations,
-        geometry_init_steps: s.geometry_init_steps,
+        geometry_init_steps: if lidar { s.geometry_init_steps } else { 0 },
         geometry_init_rays: s.geometry_init_rays,
         pose_warmup: s.pose_warmup,
-        rays_per_sensor: s.rays_per_sensor,
+        rays_per_sensor: if lidar { s.rays_per_sensor } else { 0 },
         rays_per_camera: s.rays_per_camera,
         pose_trim_quantile: s.pose_trim_quantile,
         seed,
@@ -359,6 +374,10 @@ fn sensor_results(
         .iter()
         .filter_map(|b| {
             let a = after.iter().find(|a| a.sensor == b.sensor)?;
+            let (moved_rad, moved_m) = initial
+                .sensor(&b.sensor)?
+                .vehicle_from_sensor
+                .difference(result.sensor(&b.sensor)?.vehicle_from_sensor);
             let kind = match reference.sensor(&b.sensor)?.kind {
                 SensorKind::Camera => "camera",
                 SensorKind::Lidar => "lidar",
@@ -371,6 +390,8 @@ fn sensor_results(
                 initial_translation_cm: b.translation_m * 100.0,
                 final_rotation_deg: a.rotation_deg,
                 final_translation_cm: a.translation_m * 100.0,
+                moved_deg: moved_rad.to_degrees(),
+                moved_cm: moved_m * 100.0,
             })
         })
         .collect())

@@ -6,7 +6,7 @@ use std::fmt::Write as _;
 use serde::Serialize;
 
 use super::case::{CaseResult, Errors};
-use super::suite::{Case, Protocol, Suite, Unsupported};
+use super::suite::{Case, Protocol, Suite};
 
 /// A finished suite.
 #[derive(Clone, Debug, Serialize)]
@@ -16,7 +16,6 @@ pub struct BenchReport {
     pub date: String,
     pub total_secs: f64,
     pub cases: Vec<Case>,
-    pub unsupported: Vec<Unsupported>,
     /// One per distinct run ([`Case::key`]).
     pub results: Vec<CaseResult>,
 }
@@ -179,12 +178,7 @@ impl BenchReport {
     /// initial errors beside the results.
     fn metre_table(&self, md: &mut String, protocol: Protocol, first: &str) {
         let groups = self.groups(protocol);
-        let unsupported: Vec<_> = self
-            .unsupported
-            .iter()
-            .filter(|u| u.protocol == protocol)
-            .collect();
-        if groups.is_empty() && unsupported.is_empty() {
+        if groups.is_empty() {
             return;
         }
         let _ = writeln!(
@@ -212,8 +206,13 @@ impl BenchReport {
                 failed_note(g.failed)
             );
         }
-        for u in unsupported {
-            let _ = writeln!(md, "| {} | — | {} | | | | |", u.row, u.reason);
+        if protocol == Protocol::Sensors {
+            let _ = writeln!(
+                md,
+                "\nCamera-only: no LiDAR ray is rendered, no geometry initialisation, LiDAR \
+                 extrinsics untouched; the LiDAR returns only place the occupancy grid camera \
+                 rays are sampled in. Its errors are relative to the first camera (the root)."
+            );
         }
         md.push('\n');
     }
@@ -428,7 +427,6 @@ pub fn report(
         date,
         total_secs,
         cases: suite.cases.clone(),
-        unsupported: suite.unsupported.clone(),
         results,
     }
 }

@@ -103,6 +103,10 @@ pub struct UnicalSettings {
     pub camera_scale: f64,
     /// Quantile of depth residuals that steer the poses (1.0: every ray).
     pub pose_trim_quantile: f32,
+    /// LiDAR depth, intensity, regulariser and geometry initialisation on. Off (camera-only):
+    /// no LiDAR ray is rendered and LiDAR extrinsics stay as they are; the LiDAR returns still
+    /// place the occupancy grid the camera rays are sampled in.
+    pub lidar_supervision: bool,
 }
 
 /// A calibration method as the bench runs it.
@@ -120,6 +124,7 @@ impl Method {
     pub fn label(&self) -> &'static str {
         match self {
             Method::UniCal(s) if s.camera_frames == 0 => "UniCal (LiDAR only)",
+            Method::UniCal(s) if !s.lidar_supervision => "UniCal (camera only)",
             Method::UniCal(_) => "UniCal",
             Method::Edge { .. } => "edge alignment",
         }
@@ -153,20 +158,10 @@ impl Case {
     }
 }
 
-/// Rows a suite shows without running them, with the reason (e.g. a sensor subset the
-/// implementation does not support).
-#[derive(Clone, Debug, PartialEq, Serialize)]
-pub struct Unsupported {
-    pub protocol: Protocol,
-    pub row: String,
-    pub reason: String,
-}
-
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct Suite {
     pub name: String,
     pub cases: Vec<Case>,
-    pub unsupported: Vec<Unsupported>,
 }
 
 /// Sizes that differ between the quick and the paper suite.
@@ -188,7 +183,7 @@ impl Suite {
     /// Smoke-scale protocols, ≤ 10 minutes on two cores (release build).
     pub fn quick(pandaset: Option<PathBuf>) -> Self {
         let unical = UnicalSettings {
-            iterations: 80,
+            iterations: 120,
             geometry_init_steps: 30,
             geometry_init_rays: 2048,
             pose_warmup: 40,
@@ -198,6 +193,7 @@ impl Suite {
             camera_frames: 2,
             camera_scale: 0.25,
             pose_trim_quantile: 0.95,
+            lidar_supervision: true,
         };
         Self::build(
             "quick",
@@ -242,6 +238,7 @@ impl Suite {
             camera_frames: 4,
             camera_scale: 0.25,
             pose_trim_quantile: 0.95,
+            lidar_supervision: true,
         };
         Self::build(
             "paper",
@@ -342,7 +339,17 @@ impl Suite {
             camera_frames: 0,
             ..s.unical.clone()
         });
-        for (row, method) in [("Full", &unical), ("LiDAR-only", &lidar_only)] {
+        let camera_only = Method::UniCal(UnicalSettings {
+            lidar_supervision: false,
+            geometry_init_steps: 0,
+            ..s.unical.clone()
+        });
+        let subsets = [
+            ("Full", &unical),
+            ("Camera-only", &camera_only),
+            ("LiDAR-only", &lidar_only),
+        ];
+        for (row, method) in subsets {
             cases.push(case(
                 Protocol::Sensors,
                 row.into(),
@@ -353,13 +360,6 @@ impl Suite {
                 1,
             ));
         }
-        let unsupported = vec![Unsupported {
-            protocol: Protocol::Sensors,
-            row: "Camera-only".into(),
-            reason: "not supported: the scene's occupancy grid and geometry initialisation \
-                     come from the LiDARs"
-                .into(),
-        }];
         cases.push(case(
             Protocol::Ablation,
             "full".into(),
@@ -404,7 +404,6 @@ impl Suite {
         Self {
             name: name.into(),
             cases,
-            unsupported,
         }
     }
 
