@@ -18,6 +18,7 @@ pub mod bench;
 pub mod calib;
 pub mod cli;
 pub mod eval;
+pub mod features;
 pub mod geometry;
 pub mod log;
 pub mod optim;

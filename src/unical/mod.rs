@@ -38,3 +38,4 @@ pub mod occupancy;
 pub mod pose;
 pub mod regulariser;
 pub mod sdf_init;
+pub mod surface_align;
