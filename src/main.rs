@@ -65,6 +65,10 @@ enum Command {
         /// moves and the trajectory fixes the gauge
         #[arg(long)]
         root: Option<String>,
+        /// unical with cameras: the correspondence term between camera images: none |
+        /// ray-distance (SC-NeRF's projected ray distance) | surface (UniCal's surface alignment)
+        #[arg(long, default_value = "surface")]
+        alignment: String,
         #[arg(long)]
         out: PathBuf,
     },
@@ -186,8 +190,10 @@ fn run() -> Result<()> {
             seed,
             camera_frames,
             root,
+            alignment,
             out,
         }) => {
+            let alignment = alignment.parse().map_err(anyhow::Error::msg)?;
             let args = rigcal::cli::calibrate::CalibrateArgs {
                 log: log.clone(),
                 method,
@@ -198,6 +204,7 @@ fn run() -> Result<()> {
                 seed,
                 camera_frames,
                 root,
+                alignment,
                 out: out.clone(),
             };
             let started = std::time::Instant::now();

@@ -16,6 +16,7 @@ use rigcal::geometry::rig_errors;
 use rigcal::sim::synth::perturb_rig;
 use rigcal::sim::trajectories::TrajectoryKind;
 use rigcal::sim::world::SceneKind;
+use rigcal::unical::surface_align::AlignmentLoss;
 
 fn temp_dir(name: &str) -> PathBuf {
     let dir = std::env::temp_dir().join(format!("rigcal-bench-{name}-{}", std::process::id()));
@@ -44,6 +45,7 @@ fn tiny_suite() -> Suite {
         camera_scale: 0.25,
         pose_trim_quantile: 0.95,
         lidar_supervision: true,
+        alignment: AlignmentLoss::SurfaceAlignment,
     });
     let camera_only = match &unical {
         Method::UniCal(s) => Method::UniCal(UnicalSettings {

@@ -313,6 +313,7 @@ fn unical_stage(
         rays_per_sensor: if lidar { s.rays_per_sensor } else { 0 },
         rays_per_camera: s.rays_per_camera,
         pose_trim_quantile: s.pose_trim_quantile,
+        alignment: s.alignment,
         seed,
         ..DepthCalibConfig::default()
     };

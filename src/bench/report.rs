@@ -127,6 +127,7 @@ impl BenchReport {
         self.metre_table(&mut md, Protocol::Featureless, "Scene");
         self.metre_table(&mut md, Protocol::Sensors, "Sensors");
         self.metre_table(&mut md, Protocol::Ablation, "Variant");
+        self.metre_table(&mut md, Protocol::Correspondence, "Correspondence loss");
         self.pandaset_table(&mut md);
         self.photometric_table(&mut md);
         self.runtime_table(&mut md);
@@ -183,7 +184,7 @@ impl BenchReport {
         }
         let _ = writeln!(
             md,
-            "## {}\n\n| {first} | method | camera rotation (°) | camera translation (m) | LiDAR rotation (°) | LiDAR translation (m) | initial camera / LiDAR |\n|---|---|---|---|---|---|---|",
+            "## {}\n\n| {first} | method | camera rotation (°) | camera translation (m) | LiDAR rotation (°) | LiDAR translation (m) | initial camera / LiDAR | optimisation |\n|---|---|---|---|---|---|---|---|",
             protocol.title()
         );
         for (row, method, rs) in groups {
@@ -196,14 +197,20 @@ impl BenchReport {
                 show(i.lidar_rotation_deg, 1.0, 2, "°"),
                 show(i.lidar_translation_cm, 0.01, 3, " m"),
             );
+            let ok: Vec<f64> = rs
+                .iter()
+                .filter(|r| r.error.is_none())
+                .map(|r| r.run_secs)
+                .collect();
             let _ = writeln!(
                 md,
-                "| {row} | {method} | {} | {} | {} | {} | {initial}{} |",
+                "| {row} | {method} | {} | {} | {} | {} | {initial}{} | {} |",
                 show(g.camera_rotation_deg, 1.0, 3, ""),
                 show(g.camera_translation_cm, 0.01, 3, ""),
                 show(g.lidar_rotation_deg, 1.0, 3, ""),
                 show(g.lidar_translation_cm, 0.01, 3, ""),
-                failed_note(g.failed)
+                failed_note(g.failed),
+                show(stat(&ok), 1.0, 1, " s")
             );
         }
         if protocol == Protocol::Sensors {

@@ -14,6 +14,7 @@ use serde::Serialize;
 
 use crate::sim::trajectories::TrajectoryKind;
 use crate::sim::world::SceneKind;
+use crate::unical::surface_align::AlignmentLoss;
 
 /// The paper's protocols (method.md §13; supplementary Tables A1, A7, A8, A10).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize)]
@@ -28,6 +29,8 @@ pub enum Protocol {
     Sensors,
     /// UniCal with parts switched off.
     Ablation,
+    /// The correspondence term: none, projected ray distance, surface alignment (Table A9).
+    Correspondence,
     /// The real PandaSet drive, 1° / 10 cm.
     PandaSet,
 }
@@ -40,6 +43,7 @@ impl Protocol {
             Protocol::Featureless => "Featureless scene",
             Protocol::Sensors => "Sensor subsets (Table A10 layout)",
             Protocol::Ablation => "Ablations",
+            Protocol::Correspondence => "Correspondence loss (Table A9 layout)",
             Protocol::PandaSet => "Real PandaSet drive (pandaset-002), 1° / 10 cm",
         }
     }
@@ -107,6 +111,8 @@ pub struct UnicalSettings {
     /// no LiDAR ray is rendered and LiDAR extrinsics stay as they are; the LiDAR returns still
     /// place the occupancy grid the camera rays are sampled in.
     pub lidar_supervision: bool,
+    /// The correspondence term between cameras.
+    pub alignment: AlignmentLoss,
 }
 
 /// A calibration method as the bench runs it.
@@ -194,6 +200,7 @@ impl Suite {
             camera_scale: 0.25,
             pose_trim_quantile: 0.95,
             lidar_supervision: true,
+            alignment: AlignmentLoss::SurfaceAlignment,
         };
         Self::build(
             "quick",
@@ -239,6 +246,7 @@ impl Suite {
             camera_scale: 0.25,
             pose_trim_quantile: 0.95,
             lidar_supervision: true,
+            alignment: AlignmentLoss::SurfaceAlignment,
         };
         Self::build(
             "paper",
@@ -384,6 +392,25 @@ impl Suite {
             cases.push(case(
                 Protocol::Ablation,
                 ablation.to_string(),
+                &method,
+                &urban,
+                deg,
+                cm,
+                1,
+            ));
+        }
+        for alignment in [
+            AlignmentLoss::None,
+            AlignmentLoss::ProjectedRayDistance,
+            AlignmentLoss::SurfaceAlignment,
+        ] {
+            let method = Method::UniCal(UnicalSettings {
+                alignment,
+                ..s.unical.clone()
+            });
+            cases.push(case(
+                Protocol::Correspondence,
+                alignment.label().into(),
                 &method,
                 &urban,
                 deg,

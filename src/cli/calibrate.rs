@@ -16,6 +16,7 @@ use crate::optim::edge_refine::EdgeRefiner;
 use crate::optim::runner::Calibrator;
 use crate::unical::calibrator::UnicalLidarStage;
 use crate::unical::depth_calib::DepthCalibConfig;
+use crate::unical::surface_align::AlignmentLoss;
 
 /// What `rigcal calibrate` was asked to do.
 #[derive(Clone, Debug)]
@@ -34,6 +35,8 @@ pub struct CalibrateArgs {
     /// unical: the sensor whose extrinsic stays fixed (default: none; the trajectory fixes the
     /// gauge).
     pub root: Option<String>,
+    /// unical: the correspondence term between cameras (with `camera_frames` > 0).
+    pub alignment: AlignmentLoss,
     pub out: PathBuf,
 }
 
@@ -111,6 +114,7 @@ pub fn calibrate(
                     iterations: args.iterations.unwrap_or(300),
                     seed: args.seed,
                     frozen_sensor: args.root.clone(),
+                    alignment: args.alignment,
                     ..DepthCalibConfig::default()
                 };
                 Box::new(

@@ -7,7 +7,9 @@
 //! The objective is stochastic (random rays per step) and the scene keeps improving, so the
 //! "best" rig is the latest one rather than the lowest single-step loss.
 
+use super::correspondences::training_keypoints;
 use super::depth_calib::{CameraData, CameraFrame, DepthCalibConfig, DepthCalibration, LidarData};
+use super::surface_align::AlignmentLoss;
 use crate::calib::Rig;
 use crate::log::{Drive, spread_evenly};
 use crate::optim::runner::{Calibrator, StepReport};
@@ -67,6 +69,7 @@ impl UnicalLidarStage {
         if !(scale > 0.0 && scale <= 1.0) {
             return Err(format!("camera image scale {scale} is not in (0, 1]"));
         }
+        let with_keypoints = self.calib.config.alignment != AlignmentLoss::None;
         let mut cameras = Vec::new();
         for cam in self.rig.cameras() {
             let Some(intrinsics) = &cam.camera else {
@@ -86,9 +89,15 @@ impl UnicalLidarStage {
                     small.height.max(1),
                     image::imageops::FilterType::Triangle,
                 );
+                let keypoints = if with_keypoints {
+                    training_keypoints(img.as_ref(), small.width)
+                } else {
+                    Vec::new()
+                };
                 frames.push(CameraFrame {
                     stamp_nanos: stream.frames[i].stamp_nanos,
                     rgb: resized.into_raw(),
+                    keypoints,
                 });
             }
             if !frames.is_empty() {
@@ -151,6 +160,9 @@ impl Calibrator for UnicalLidarStage {
         losses.push(("regulariser".into(), r.regulariser_loss));
         if self.calib.has_cameras() {
             losses.push(("colour loss".into(), r.colour_loss));
+        }
+        if !self.calib.correspondences.pairs.is_empty() {
+            losses.push(("alignment px".into(), r.alignment_loss));
         }
         StepReport {
             losses,

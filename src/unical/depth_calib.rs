@@ -19,6 +19,7 @@ use super::background::{Background, BackgroundConfig};
 use super::camera_rgb::{
     Appearance, CameraModel, ColourRay, ExposureMap, colour_step, render_colour,
 };
+use super::correspondences::Correspondences;
 use super::field::{FieldConfig, SceneField};
 use super::hash_grid::{GradAccumulator, HashGridConfig, Scaled};
 use super::intensity::{IntensityDecoder, IntensityMap, normaliser};
@@ -26,6 +27,11 @@ use super::lidar_terms::{DepthRay, LidarModel, LidarWeights, lidar_step};
 use super::occupancy::OccupancyGrid;
 use super::pose::PoseParams;
 use super::sdf_init::{PointIndex, SdfRay, sdf_fit_step};
+use super::surface_align::{
+    AlignCamera, AlignRay, AlignSettings, AlignStep, AlignmentLoss, projected_ray_step,
+    surface_alignment_step,
+};
+use crate::features::orb::Keypoint;
 use crate::geometry::camera::CameraIntrinsics;
 use crate::geometry::{Rigid, Trajectory};
 use crate::log::LidarSweep;
@@ -70,6 +76,20 @@ pub struct DepthCalibConfig {
     /// A sensor whose extrinsic stays fixed (the root); `None`: all move, the trajectory fixes
     /// the gauge (§11).
     pub frozen_sensor: Option<String>,
+    /// The correspondence term between cameras (§9; the Table A9 ablation switch).
+    pub alignment: AlignmentLoss,
+    /// Its weight λ_align (the paper: 0.001 on 1920-wide pixels).
+    pub alignment_weight: f32,
+    /// Matches per camera and step.
+    pub alignment_matches_per_camera: usize,
+    pub alignment_settings: AlignSettings,
+    /// Coarse-to-fine sampling (§10): from this fraction of the iterations on, camera pixels
+    /// are drawn from keypoint heat maps (the paper: 2000 of 30 000); 1.0 keeps them uniform.
+    pub heatmap_start_fraction: f32,
+    /// The heat maps' Gaussian σ at the start and at the end, in pixels of a 1920-wide image.
+    pub heatmap_sigma_px: (f64, f64),
+    /// Share of camera pixels still drawn uniformly once heat maps are on.
+    pub heatmap_uniform_share: f64,
 }
 
 impl Default for DepthCalibConfig {
@@ -98,6 +118,13 @@ impl Default for DepthCalibConfig {
             camera_far_m: 120.0,
             background: Some(BackgroundConfig::default()),
             frozen_sensor: None,
+            alignment: AlignmentLoss::SurfaceAlignment,
+            alignment_weight: 0.001,
+            alignment_matches_per_camera: 32,
+            alignment_settings: AlignSettings::default(),
+            heatmap_start_fraction: 2000.0 / 30_000.0,
+            heatmap_sigma_px: (40.0, 5.0),
+            heatmap_uniform_share: 0.2,
         }
     }
 }
@@ -161,6 +188,9 @@ pub struct CameraFrame {
     pub stamp_nanos: i64,
     /// Row-major RGB, `intrinsics.width × intrinsics.height × 3`.
     pub rgb: Vec<u8>,
+    /// Keypoints for the correspondences and heat maps, in training pixels (empty when the
+    /// optimisation uses no correspondences).
+    pub keypoints: Vec<Keypoint>,
 }
 
 /// One camera's data.
@@ -229,6 +259,8 @@ pub struct DepthCalibration {
     pub iteration: usize,
     rng: u64,
     camera: Option<CameraStage>,
+    /// Matched pixels between camera frames (empty without cameras or correspondences).
+    pub correspondences: Correspondences,
 }
 
 /// One LiDAR return rendered by the current scene (diagnostics).
@@ -257,12 +289,39 @@ pub struct DepthReport {
     pub regulariser_loss: f64,
     /// During the geometry initialisation: its loss (the other terms are 0 then).
     pub geometry_init_loss: Option<f64>,
+    /// The correspondence term (1920-wide pixels; 0 when off) and the matches it kept.
+    pub alignment_loss: f64,
+    pub alignment_matches: usize,
+}
+
+/// The correspondence term's contribution to a step.
+struct AlignmentGrads {
+    /// Per camera, flattened like [`pose_grad_flat`].
+    pose: Vec<[f32; 9]>,
+    geo: super::mlp::MlpGrad,
+    beta_grad: f64,
+    loss: f64,
+    kept: usize,
 }
 
 /// One gradient accumulator per parallel chunk of rays: two chunks per thread.
 fn accumulators(entries: usize) -> Vec<GradAccumulator> {
     let chunks = rayon::current_num_threads().max(1) * 2;
     (0..chunks).map(|_| GradAccumulator::new(entries)).collect()
+}
+
+/// Uniform in [0, 1).
+fn unit(rng: &mut u64) -> f64 {
+    (next(rng) >> 11) as f64 / (1u64 << 53) as f64
+}
+
+/// Two independent standard normal values (Box–Muller).
+fn gaussian_pair(rng: &mut u64) -> (f64, f64) {
+    let u1 = unit(rng).max(1e-12);
+    let u2 = unit(rng);
+    let r = (-2.0 * u1.ln()).sqrt();
+    let (s, c) = (2.0 * std::f64::consts::PI * u2).sin_cos();
+    (r * c, r * s)
 }
 
 fn next(rng: &mut u64) -> u64 {
@@ -407,6 +466,7 @@ impl DepthCalibration {
             rng: config.seed,
             iteration: 0,
             camera: None,
+            correspondences: Correspondences::default(),
             config,
             trajectory,
             lidars,
@@ -449,6 +509,11 @@ impl DepthCalibration {
                 field,
             }
         });
+        if self.config.alignment != AlignmentLoss::None {
+            let extrinsics: Vec<Rigid> = cameras.iter().map(|c| c.initial).collect();
+            self.correspondences =
+                super::correspondences::build(&cameras, &extrinsics, &self.trajectory);
+        }
         self.camera = Some(CameraStage {
             background,
             pose_opt: poses
@@ -555,15 +620,7 @@ impl DepthCalibration {
                                 world_from_vehicle: wv,
                                 dir_in_sensor: u,
                                 target: [0.0; 3],
-                                taus_m: self.occupancy.sample(
-                                    o,
-                                    d,
-                                    0.3,
-                                    self.config.camera_far_m,
-                                    self.config.step_m,
-                                    0.5,
-                                    self.config.max_samples_per_ray,
-                                ),
+                                taus_m: self.camera_taus(o, d, 0.5),
                                 background_taus_m: stage
                                     .background
                                     .as_ref()
@@ -591,6 +648,135 @@ impl DepthCalibration {
             .map(|c| &c.intrinsics)
     }
 
+    /// Sample distances of a camera ray from `o` along `d` in the occupied space (10 cm steps,
+    /// from 0.3 m to `camera_far_m`, stratified by `jitter`).
+    fn camera_taus(&self, o: DVec3, d: DVec3, jitter: f64) -> Vec<f32> {
+        self.occupancy.sample(
+            o,
+            d,
+            0.3,
+            self.config.camera_far_m,
+            self.config.step_m,
+            jitter,
+            self.config.max_samples_per_ray,
+        )
+    }
+
+    /// A matched pixel's ray at its frame's time, sampled like a colour ray.
+    fn align_ray(&mut self, (camera, frame): (usize, usize), pixel: DVec2) -> Option<AlignRay> {
+        let stage = self.camera.as_ref()?;
+        let cam = stage.cameras.get(camera)?;
+        let stamp = cam.frames.get(frame)?.stamp_nanos;
+        let u = cam.intrinsics.unproject(pixel)?;
+        let wv = self.trajectory.world_from_vehicle(stamp).ok()?;
+        let (o, d) = stage.poses[camera].ray(wv, u);
+        let jitter = unit(&mut self.rng);
+        let taus_m = self.camera_taus(o, d, jitter);
+        Some(AlignRay {
+            world_from_vehicle: wv,
+            dir_in_sensor: u,
+            pixel,
+            taus_m,
+        })
+    }
+
+    /// The correspondence term of this step (§9): every camera takes a random pair it is part
+    /// of and up to `alignment_matches_per_camera` of its matches; gradients are weighted by
+    /// λ_align / cameras, the hash table's go to the first accumulator.
+    fn alignment_gradients(&mut self) -> AlignmentGrads {
+        let cameras = self.camera.as_ref().map_or(0, |c| c.cameras.len());
+        let mut out = AlignmentGrads {
+            pose: vec![[0.0; 9]; cameras],
+            geo: self.field.geo.zero_grad(),
+            beta_grad: 0.0,
+            loss: 0.0,
+            kept: 0,
+        };
+        if self.config.alignment == AlignmentLoss::None || self.correspondences.pairs.is_empty() {
+            return out;
+        }
+        // Draw every batch first (the generator advances), then evaluate them.
+        let mut batches = Vec::new();
+        for k in 0..cameras {
+            let owned = self.correspondences.by_camera[k].len();
+            if owned == 0 {
+                continue;
+            }
+            let pi =
+                self.correspondences.by_camera[k][(next(&mut self.rng) % owned as u64) as usize];
+            let (a, b, count) = {
+                let p = &self.correspondences.pairs[pi];
+                (p.a, p.b, p.pixels.len())
+            };
+            let n = self.config.alignment_matches_per_camera.min(count);
+            let mut rays = Vec::with_capacity(n);
+            for _ in 0..n {
+                let j = (next(&mut self.rng) % count as u64) as usize;
+                let (ua, ub) = self.correspondences.pairs[pi].pixels[j];
+                if let (Some(ra), Some(rb)) = (self.align_ray(a, ua), self.align_ray(b, ub)) {
+                    rays.push((ra, rb));
+                }
+            }
+            batches.push((a.0, b.0, rays));
+        }
+        let Some(stage) = self.camera.as_ref() else {
+            return out;
+        };
+        let beta = self.ln_beta.exp();
+        let w = self.config.alignment_weight as f64 / cameras.max(1) as f64;
+        let settings = self.config.alignment_settings;
+        let batch_count = batches.len().max(1) as f64;
+        for (a, b, rays) in &batches {
+            let camera = |k: usize| AlignCamera {
+                pose: &stage.poses[k],
+                intrinsics: &stage.cameras[k].intrinsics,
+                pixel_scale: 1920.0 / stage.cameras[k].intrinsics.width.max(1) as f64,
+            };
+            let step: AlignStep = match self.config.alignment {
+                AlignmentLoss::SurfaceAlignment => surface_alignment_step(
+                    &self.field,
+                    beta,
+                    (camera(*a), camera(*b)),
+                    rays,
+                    &settings,
+                    &mut Scaled {
+                        acc: &mut self.grid_accs[0],
+                        scale: w as f32,
+                    },
+                ),
+                AlignmentLoss::ProjectedRayDistance => {
+                    projected_ray_step((camera(*a), camera(*b)), rays, settings.max_error_px)
+                }
+                AlignmentLoss::None => continue,
+            };
+            let (ga, gb) = (
+                pose_grad_flat(&step.pose_a, w),
+                pose_grad_flat(&step.pose_b, w),
+            );
+            out.pose[*a].iter_mut().zip(ga).for_each(|(x, y)| *x += y);
+            out.pose[*b].iter_mut().zip(gb).for_each(|(x, y)| *x += y);
+            add_scaled(&mut out.geo, &step.geo, w as f32);
+            out.beta_grad += step.beta_grad * w;
+            out.loss += step.loss / batch_count;
+            out.kept += step.kept;
+        }
+        out
+    }
+
+    /// The heat maps' σ in pixels of an image `width` wide at this iteration (§10: geometric
+    /// from the first to the last value), or `None` while pixels are drawn uniformly.
+    pub fn heatmap_sigma(&self, width: f64) -> Option<f64> {
+        let total = self.config.iterations.max(1) as f64;
+        let start = (self.config.heatmap_start_fraction as f64 * total).round();
+        if self.config.heatmap_start_fraction >= 1.0 || (self.iteration as f64) < start {
+            return None;
+        }
+        let progress = ((self.iteration as f64 - start) / (total - start).max(1.0)).clamp(0.0, 1.0);
+        let (first, last) = self.config.heatmap_sigma_px;
+        let sigma_1920 = first * (last / first).powf(progress);
+        Some(sigma_1920 * width / 1920.0)
+    }
+
     fn draw_camera_rays(&mut self, camera: usize) -> Vec<ColourRay> {
         let Some(stage) = &self.camera else {
             return Vec::new();
@@ -601,15 +787,29 @@ impl DepthCalibration {
             return rays;
         }
         let (w, h) = (cam.intrinsics.width as u64, cam.intrinsics.height as u64);
+        let sigma = self.heatmap_sigma(w as f64);
         let mut attempts = 0;
         while rays.len() < self.config.rays_per_camera && attempts < 4 * self.config.rays_per_camera
         {
             attempts += 1;
             let f = &cam.frames[(next(&mut self.rng) % cam.frames.len() as u64) as usize];
-            let (x, y) = (
-                next(&mut self.rng) % w.max(1),
-                next(&mut self.rng) % h.max(1),
-            );
+            let from_heatmap = sigma.is_some_and(|_| {
+                !f.keypoints.is_empty() && unit(&mut self.rng) >= self.config.heatmap_uniform_share
+            });
+            let (x, y) = match sigma.filter(|_| from_heatmap) {
+                // A draw from Σ_k G_σ(u − u_k): a random keypoint plus Gaussian noise.
+                Some(sigma) => {
+                    let k = &f.keypoints[(next(&mut self.rng) % f.keypoints.len() as u64) as usize];
+                    let (gx, gy) = gaussian_pair(&mut self.rng);
+                    let px = (k.x as f64 + sigma * gx).round().clamp(0.0, (w - 1) as f64);
+                    let py = (k.y as f64 + sigma * gy).round().clamp(0.0, (h - 1) as f64);
+                    (px as u64, py as u64)
+                }
+                None => (
+                    next(&mut self.rng) % w.max(1),
+                    next(&mut self.rng) % h.max(1),
+                ),
+            };
             let k = 3 * (y * w + x) as usize;
             let Some(px) = f.rgb.get(k..k + 3) else {
                 continue;
@@ -621,16 +821,8 @@ impl DepthCalibration {
                 continue;
             };
             let (o, d) = pose.ray(wv, u);
-            let jitter = (next(&mut self.rng) >> 11) as f64 / (1u64 << 53) as f64;
-            let taus = self.occupancy.sample(
-                o,
-                d,
-                0.3,
-                self.config.camera_far_m,
-                self.config.step_m,
-                jitter,
-                self.config.max_samples_per_ray,
-            );
+            let jitter = unit(&mut self.rng);
+            let taus = self.camera_taus(o, d, jitter);
             let background_taus_m = stage.background.as_ref().map_or_else(Vec::new, |b| {
                 let jitter = (next(&mut self.rng) >> 11) as f64 / (1u64 << 53) as f64;
                 b.field.taus(o, d, jitter)
@@ -786,6 +978,8 @@ impl DepthCalibration {
             intensity_loss: 0.0,
             regulariser_loss: 0.0,
             geometry_init_loss: Some(loss),
+            alignment_loss: 0.0,
+            alignment_matches: 0,
         }
     }
 
@@ -928,6 +1122,9 @@ impl DepthCalibration {
                 .map(|cam| self.is_frozen(&cam.name))
                 .collect()
         });
+        let align = self.alignment_gradients();
+        add_scaled(&mut geo, &align.geo, 1.0);
+        beta_grad += align.beta_grad;
         if let Some(stage) = self.camera.as_ref() {
             let mut colour = stage.appearance.colour.zero_grad();
             let mut sky = stage.appearance.sky.zero_grad();
@@ -974,7 +1171,7 @@ impl DepthCalibration {
                         (c.len(), part)
                     })
                     .collect();
-                let mut pose_grad = [0.0f32; 9];
+                let mut pose_grad = align.pose[k];
                 let mut exposure_grad = [0.0f32; 6];
                 for (n, part) in parts {
                     let share = n as f64 / total_rays / cameras as f64;
@@ -1045,6 +1242,8 @@ impl DepthCalibration {
             intensity_loss,
             regulariser_loss,
             geometry_init_loss: None,
+            alignment_loss: align.loss,
+            alignment_matches: align.kept,
         }
     }
 }
@@ -1161,7 +1360,11 @@ mod tests {
                         rgb.extend_from_slice(&c);
                     }
                 }
-                CameraFrame { stamp_nanos, rgb }
+                CameraFrame {
+                    stamp_nanos,
+                    rgb,
+                    keypoints: Vec::new(),
+                }
             })
             .collect();
         CameraData {
@@ -1169,6 +1372,57 @@ mod tests {
             initial: vehicle_from_camera,
             intrinsics,
             frames,
+        }
+    }
+
+    /// Coarse-to-fine sampling (§10): uniform before the start, then σ shrinks geometrically
+    /// from 40 to 5 px (at 1920 wide), and heat-map draws land near the keypoints.
+    #[test]
+    fn camera_pixels_follow_the_keypoint_heat_maps() {
+        let (trajectory, mount, sweeps) = flat_drive();
+        let mut camera = ground_camera(&trajectory);
+        let keypoint = crate::features::orb::Keypoint {
+            x: 20.0,
+            y: 30.0,
+            angle_rad: 0.0,
+            response: 1.0,
+            descriptor: [0; 4],
+        };
+        for f in &mut camera.frames {
+            f.keypoints = vec![keypoint];
+        }
+        let config = DepthCalibConfig {
+            iterations: 100,
+            heatmap_start_fraction: 0.2,
+            heatmap_uniform_share: 0.0,
+            ..small_config()
+        };
+        let mut c = DepthCalibration::new(
+            config,
+            trajectory,
+            vec![LidarData {
+                name: "lidar".into(),
+                initial: mount,
+                sweeps,
+            }],
+        )
+        .with_cameras(vec![camera]);
+        assert_eq!(c.heatmap_sigma(1920.0), None, "uniform at first");
+        c.iteration = 20;
+        assert!((c.heatmap_sigma(1920.0).unwrap_or(0.0) - 40.0).abs() < 1e-9);
+        assert!((c.heatmap_sigma(64.0).unwrap_or(0.0) - 40.0 * 64.0 / 1920.0).abs() < 1e-9);
+        c.iteration = 100;
+        assert!((c.heatmap_sigma(1920.0).unwrap_or(0.0) - 5.0).abs() < 1e-9);
+        // σ = 5 px at 1920 wide is 0.17 px here: every draw is the keypoint's pixel.
+        let intrinsics = c.camera_intrinsics("camera").cloned().unwrap();
+        let rays = c.draw_camera_rays(0);
+        assert!(!rays.is_empty());
+        for r in &rays {
+            let px = intrinsics.project(r.dir_in_sensor).unwrap();
+            assert!(
+                (px.x - 20.0).abs() < 0.51 && (px.y - 30.0).abs() < 0.51,
+                "{px:?}"
+            );
         }
     }
 

@@ -28,6 +28,7 @@ pub mod background;
 pub mod calibrator;
 pub mod camera_rgb;
 pub mod composite;
+pub mod correspondences;
 pub mod depth_calib;
 pub mod field;
 pub mod hash_grid;

@@ -25,7 +25,7 @@ use crate::geometry::Rigid;
 use crate::geometry::camera::CameraIntrinsics;
 
 /// Which correspondence term the optimisation uses (the paper's Table A9 ablation).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, serde::Serialize)]
 pub enum AlignmentLoss {
     /// No correspondence loss.
     #[default]
@@ -63,6 +63,32 @@ pub struct AlignSettings {
     pub max_error_px: f64,
     /// Rays with less accumulated opacity are left out.
     pub min_accumulation: f32,
+}
+
+impl AlignmentLoss {
+    /// The row names of the paper's Table A9.
+    pub fn label(self) -> &'static str {
+        match self {
+            AlignmentLoss::None => "No",
+            AlignmentLoss::ProjectedRayDistance => "Projected Ray Dist",
+            AlignmentLoss::SurfaceAlignment => "Surface Alignment Dist",
+        }
+    }
+}
+
+impl std::str::FromStr for AlignmentLoss {
+    type Err = String;
+
+    fn from_str(text: &str) -> Result<Self, String> {
+        match text {
+            "none" => Ok(AlignmentLoss::None),
+            "ray-distance" => Ok(AlignmentLoss::ProjectedRayDistance),
+            "surface" => Ok(AlignmentLoss::SurfaceAlignment),
+            other => Err(format!(
+                "unknown --alignment '{other}' (expected none, ray-distance or surface)"
+            )),
+        }
+    }
 }
 
 impl Default for AlignSettings {

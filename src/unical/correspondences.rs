@@ -1,0 +1,210 @@
+//! Image correspondences for the surface alignment term (method.md §9, §15.6), computed once
+//! before the optimisation starts.
+//!
+//! Candidate pairs are two training frames of different cameras taken within 0.3 s of each
+//! other, or of one camera within 2 s, whose views overlap under the starting calibration: of a
+//! grid of pixels of the first, pushed out to 8 and 20 m and projected into the second, at least
+//! 10 % land inside its image. Each pair's keypoints (oriented FAST + steered BRIEF, detected at
+//! up to 960 px wide and scaled to the training resolution) are matched by mutual nearest
+//! neighbours with a 0.8 ratio test and verified by RANSAC on the essential matrix (1.5 training
+//! pixels); pairs with fewer than 12 inliers are dropped. Pairs are processed in parallel.
+
+use glam::{DVec2, DVec3};
+use rayon::prelude::*;
+
+use super::depth_calib::CameraData;
+use crate::features::epipolar::verify;
+use crate::features::matching::match_mutual;
+use crate::features::orb::Keypoint;
+use crate::geometry::{Rigid, Trajectory};
+
+/// Frames of different cameras at most this far apart in time form pairs.
+const CROSS_CAMERA_SECS: f64 = 0.3;
+/// Frames of one camera at most this far apart form pairs.
+const SAME_CAMERA_SECS: f64 = 2.0;
+const MIN_OVERLAP: f64 = 0.1;
+const MIN_INLIERS: usize = 12;
+
+/// Keypoints of a camera image for correspondences and heat maps: detected at up to 960 px
+/// wide (the training images are too small for 2048 of them), positions scaled to an image
+/// `training_width` pixels wide.
+pub fn training_keypoints(img: &image::RgbImage, training_width: u32) -> Vec<Keypoint> {
+    let (w, h) = img.dimensions();
+    let scale = (960.0 / w.max(1) as f64).min(1.0);
+    let (dw, dh) = (
+        ((w as f64 * scale).round() as u32).max(1),
+        ((h as f64 * scale).round() as u32).max(1),
+    );
+    let detect_on = if scale < 1.0 {
+        image::imageops::resize(img, dw, dh, image::imageops::FilterType::Triangle)
+    } else {
+        img.clone()
+    };
+    let gray = crate::eval::fast::luma(&detect_on);
+    let to_training = training_width as f32 / dw as f32;
+    crate::features::orb::detect(&gray, dw as usize, dh as usize, 2048)
+        .into_iter()
+        .map(|k| Keypoint {
+            x: k.x * to_training,
+            y: k.y * to_training,
+            ..k
+        })
+        .collect()
+}
+
+/// Matched pixels (training resolution) of frame `a` and frame `b`, each `(camera, frame)`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct MatchedPair {
+    pub a: (usize, usize),
+    pub b: (usize, usize),
+    pub pixels: Vec<(DVec2, DVec2)>,
+}
+
+/// All verified pairs, and for each camera the pairs it takes part in.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Correspondences {
+    pub pairs: Vec<MatchedPair>,
+    pub by_camera: Vec<Vec<usize>>,
+    /// Candidate pairs examined (overlapping views).
+    pub candidates: usize,
+}
+
+impl Correspondences {
+    pub fn matches(&self) -> usize {
+        self.pairs.iter().map(|p| p.pixels.len()).sum()
+    }
+}
+
+/// Match every overlapping pair of `cameras`' frames (their keypoints, in training pixels),
+/// given each camera's current `vehicle_from_camera`.
+pub fn build(
+    cameras: &[CameraData],
+    vehicle_from_camera: &[Rigid],
+    trajectory: &Trajectory,
+) -> Correspondences {
+    let mut candidates = Vec::new();
+    for (i, ci) in cameras.iter().enumerate() {
+        for (j, cj) in cameras.iter().enumerate().skip(i) {
+            for (fi, a) in ci.frames.iter().enumerate() {
+                for (fj, b) in cj.frames.iter().enumerate() {
+                    let dt = (a.stamp_nanos - b.stamp_nanos).abs() as f64 * 1e-9;
+                    let near = if i == j {
+                        fj > fi && dt <= SAME_CAMERA_SECS
+                    } else {
+                        dt <= CROSS_CAMERA_SECS
+                    };
+                    if near {
+                        candidates.push(((i, fi), (j, fj)));
+                    }
+                }
+            }
+        }
+    }
+    let overlapping: Vec<_> = candidates
+        .into_iter()
+        .filter(|&(a, b)| {
+            overlap(cameras, vehicle_from_camera, trajectory, a, b)
+                .is_some_and(|o| o >= MIN_OVERLAP)
+        })
+        .collect();
+    let pairs: Vec<MatchedPair> = overlapping
+        .par_iter()
+        .filter_map(|&(a, b)| {
+            let ka = &cameras.get(a.0)?.frames.get(a.1)?.keypoints;
+            let kb = &cameras.get(b.0)?.frames.get(b.1)?.keypoints;
+            match_pair(cameras, (a, ka), (b, kb))
+        })
+        .collect();
+    let mut by_camera = vec![Vec::new(); cameras.len()];
+    for (k, p) in pairs.iter().enumerate() {
+        by_camera[p.a.0].push(k);
+        if p.b.0 != p.a.0 {
+            by_camera[p.b.0].push(k);
+        }
+    }
+    Correspondences {
+        pairs,
+        by_camera,
+        candidates: overlapping.len(),
+    }
+}
+
+/// Fraction of a grid of frame a's pixels, at 8 and 20 m, that frame b sees.
+fn overlap(
+    cameras: &[CameraData],
+    vehicle_from_camera: &[Rigid],
+    trajectory: &Trajectory,
+    (ca, fa): (usize, usize),
+    (cb, fb): (usize, usize),
+) -> Option<f64> {
+    let (cam_a, cam_b) = (&cameras[ca], &cameras[cb]);
+    let world_from_a = trajectory
+        .world_from_vehicle(cam_a.frames[fa].stamp_nanos)
+        .ok()?
+        * vehicle_from_camera[ca];
+    let b_from_world = (trajectory
+        .world_from_vehicle(cam_b.frames[fb].stamp_nanos)
+        .ok()?
+        * vehicle_from_camera[cb])
+        .inverse();
+    let (w, h) = (
+        cam_a.intrinsics.width as f64,
+        cam_a.intrinsics.height as f64,
+    );
+    let (mut seen, mut total) = (0usize, 0usize);
+    for gy in 0..6 {
+        for gx in 0..8 {
+            let pixel = DVec2::new((gx as f64 + 0.5) * w / 8.0, (gy as f64 + 0.5) * h / 6.0);
+            let Some(ray) = cam_a.intrinsics.unproject(pixel) else {
+                continue;
+            };
+            for depth in [8.0, 20.0] {
+                total += 1;
+                let p: DVec3 = world_from_a.transform_point(ray * depth);
+                let q = b_from_world.transform_point(p);
+                if cam_b
+                    .intrinsics
+                    .project(q)
+                    .is_some_and(|u| cam_b.intrinsics.in_image(u))
+                {
+                    seen += 1;
+                }
+            }
+        }
+    }
+    (total > 0).then(|| seen as f64 / total as f64)
+}
+
+fn match_pair(
+    cameras: &[CameraData],
+    (a, ka): ((usize, usize), &[Keypoint]),
+    (b, kb): ((usize, usize), &[Keypoint]),
+) -> Option<MatchedPair> {
+    let matches = match_mutual(ka, kb, 0.8, 64);
+    if matches.len() < MIN_INLIERS {
+        return None;
+    }
+    let (ia, ib) = (&cameras[a.0].intrinsics, &cameras[b.0].intrinsics);
+    let pixel = |k: &Keypoint| DVec2::new(k.x as f64, k.y as f64);
+    let mut rays_a = Vec::with_capacity(matches.len());
+    let mut rays_b = Vec::with_capacity(matches.len());
+    let mut pixels = Vec::with_capacity(matches.len());
+    for (i, j) in matches {
+        let (pa, pb) = (pixel(&ka[i]), pixel(&kb[j]));
+        if let (Some(ra), Some(rb)) = (ia.unproject(pa), ib.unproject(pb)) {
+            rays_a.push(ra);
+            rays_b.push(rb);
+            pixels.push((pa, pb));
+        }
+    }
+    let threshold = 1.5 / ia.fx.max(1e-9).min(ib.fx.max(1e-9));
+    let seed = (a.0 * 1000 + a.1 * 31 + b.0 * 7 + b.1) as u64 + 1;
+    let verified = verify(&rays_a, &rays_b, threshold, 200, MIN_INLIERS, seed)?;
+    let pixels: Vec<(DVec2, DVec2)> = pixels
+        .into_iter()
+        .zip(&verified.inliers)
+        .filter(|(_, keep)| **keep)
+        .map(|(p, _)| p)
+        .collect();
+    (pixels.len() >= MIN_INLIERS).then_some(MatchedPair { a, b, pixels })
+}
