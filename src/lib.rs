@@ -16,6 +16,7 @@
 
 pub mod bench;
 pub mod calib;
+pub mod classical;
 pub mod cli;
 pub mod eval;
 pub mod features;

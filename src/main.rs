@@ -41,7 +41,7 @@ enum Command {
     /// Calibrate a drive and write the native calibration file.
     Calibrate {
         log: PathBuf,
-        /// unical | edge (icp, mi, target, pose-graph: not in this build yet)
+        /// unical | icp | edge (mi, target, pose-graph: not in this build yet)
         #[arg(long)]
         method: String,
         /// Initial extrinsics (native calibration file); default: the log's /tf_static.

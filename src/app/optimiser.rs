@@ -19,6 +19,7 @@ use super::Studio;
 pub enum Method {
     #[default]
     EdgeAlign,
+    Icp,
     UnicalLidar,
     Unical,
 }
@@ -27,6 +28,7 @@ impl Method {
     fn label(self) -> &'static str {
         match self {
             Method::EdgeAlign => "Edge alignment (cameras vs LiDAR, rotation)",
+            Method::Icp => "Point-to-plane ICP (LiDARs vs the reference LiDAR)",
             Method::UnicalLidar => "UniCal, LiDAR terms (scene + LiDARs; slow on CPU)",
             Method::Unical => "UniCal, LiDARs + cameras (1/8-size images; slowest)",
         }
@@ -188,6 +190,23 @@ pub fn start(studio: &mut Studio) {
         }));
         return;
     }
+    if method == Method::Icp {
+        studio.optimiser.message = Some(format!(
+            "registering every LiDAR against {lidar} on {frames} sweep(s)…"
+        ));
+        studio.optimiser.run = Some(Run::spawn_with(move || {
+            crate::classical::icp_calibrator::IcpCalibrator::from_drive(
+                &drive,
+                &prepare_rig,
+                &lidar,
+                frames,
+                &segments,
+                crate::classical::icp::IcpConfig::default(),
+            )
+            .map(|c| Box::new(c) as Box<dyn Calibrator>)
+        }));
+        return;
+    }
     studio.optimiser.run = Some(Run::spawn_with(move || {
         EdgeRefiner::new(&drive, &prepare_rig, &lidar, &cameras, frames, &segments)
             .map(|r| Box::new(r) as Box<dyn Calibrator>)
@@ -205,7 +224,12 @@ pub fn optimiser_ui(studio: &mut Studio, ui: &mut egui::Ui) {
         egui::ComboBox::from_label("method")
             .selected_text(studio.optimiser.method.label())
             .show_ui(ui, |ui| {
-                for m in [Method::EdgeAlign, Method::UnicalLidar, Method::Unical] {
+                for m in [
+                    Method::EdgeAlign,
+                    Method::Icp,
+                    Method::UnicalLidar,
+                    Method::Unical,
+                ] {
                     ui.selectable_value(&mut studio.optimiser.method, m, m.label());
                 }
             });

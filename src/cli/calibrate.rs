@@ -5,12 +5,15 @@
 //! rotation) and `unical` (UniCal: the scene and every LiDAR extrinsic from LiDAR depth,
 //! intensity and the regulariser; with `--camera-frames N` the cameras join through the colour
 //! term; `--root` keeps one sensor fixed).
-//! `icp`, `mi`, `target` and `pose-graph` are named by the contract and refused with a clear
-//! message until they land.
+//! `icp`: every LiDAR against the reference LiDAR (`--root`, default the first) by
+//! point-to-plane ICP on three sweeps each. `mi`, `target` and `pose-graph` are named by the
+//! contract and refused with a clear message until they land.
 
 use std::path::PathBuf;
 
 use crate::calib::{CalibrationFile, Rig};
+use crate::classical::icp::IcpConfig;
+use crate::classical::icp_calibrator::IcpCalibrator;
 use crate::log::Drive;
 use crate::optim::edge_refine::EdgeRefiner;
 use crate::optim::runner::Calibrator;
@@ -122,9 +125,27 @@ pub fn calibrate(
                         .with_cameras(&drive, args.camera_frames, &segments, 0.125)?,
                 )
             }
-            m @ ("icp" | "mi" | "target" | "pose-graph") => {
+            "icp" => {
+                let reference = match &args.root {
+                    Some(r) => r.clone(),
+                    None => rig
+                        .lidars()
+                        .next()
+                        .map(|l| l.name.clone())
+                        .ok_or("the log has no LiDAR")?,
+                };
+                Box::new(IcpCalibrator::from_drive(
+                    &drive,
+                    &rig,
+                    &reference,
+                    3,
+                    &segments,
+                    IcpConfig::default(),
+                )?)
+            }
+            m @ ("mi" | "target" | "pose-graph") => {
                 return Err(format!(
-                    "--method {m} is not in this build yet (available: unical, edge)"
+                    "--method {m} is not in this build yet (available: unical, icp, edge)"
                 ));
             }
             m => {

@@ -35,15 +35,23 @@ pub struct RegistrationError {
     pub source_points: usize,
 }
 
-/// Target points hashed by cell.
-struct CellIndex<'a> {
+/// Points hashed by cell, for radius queries (also ICP's neighbour search).
+pub struct CellIndex<'a> {
     points: &'a [DVec3],
     cell_m: f64,
     cells: HashMap<[i32; 3], Vec<u32>>,
 }
 
 impl<'a> CellIndex<'a> {
-    fn new(points: &'a [DVec3], cell_m: f64) -> Self {
+    /// The nearest point within `radius_m` of `p`.
+    pub fn nearest(&self, p: DVec3, radius_m: f64) -> Option<u32> {
+        self.within(p, radius_m).min_by(|a, b| {
+            let da = self.points[*a as usize].distance_squared(p);
+            da.total_cmp(&self.points[*b as usize].distance_squared(p))
+        })
+    }
+
+    pub fn new(points: &'a [DVec3], cell_m: f64) -> Self {
         let mut cells: HashMap<[i32; 3], Vec<u32>> = HashMap::new();
         for (i, p) in points.iter().enumerate() {
             cells
@@ -63,7 +71,7 @@ impl<'a> CellIndex<'a> {
     }
 
     /// Indices of the points within `radius_m` of `p`.
-    fn within(&self, p: DVec3, radius_m: f64) -> impl Iterator<Item = u32> + '_ {
+    pub fn within(&self, p: DVec3, radius_m: f64) -> impl Iterator<Item = u32> + '_ {
         let reach = (radius_m / self.cell_m).ceil() as i32;
         let [cx, cy, cz] = Self::key(p, self.cell_m);
         let r2 = radius_m * radius_m;
@@ -132,11 +140,7 @@ pub fn point_to_plane_error(source: &[DVec3], target: &[DVec3]) -> Option<Regist
         .par_iter()
         .filter_map(|p| {
             let nearest = index
-                .within(*p, MAX_CORRESPONDENCE_M)
-                .min_by(|a, b| {
-                    let da = target[*a as usize].distance_squared(*p);
-                    da.total_cmp(&target[*b as usize].distance_squared(*p))
-                })
+                .nearest(*p, MAX_CORRESPONDENCE_M)
                 .map(|i| target[i as usize])?;
             let neighbours: Vec<DVec3> = index
                 .within(nearest, NORMAL_RADIUS_M)

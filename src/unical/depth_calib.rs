@@ -725,36 +725,56 @@ impl DepthCalibration {
         let beta = self.ln_beta.exp();
         let w = self.config.alignment_weight as f64 / cameras.max(1) as f64;
         let settings = self.config.alignment_settings;
+        let alignment = self.config.alignment;
         let batch_count = batches.len().max(1) as f64;
-        for (a, b, rays) in &batches {
-            let camera = |k: usize| AlignCamera {
-                pose: &stage.poses[k],
-                intrinsics: &stage.cameras[k].intrinsics,
-                pixel_scale: 1920.0 / stage.cameras[k].intrinsics.width.max(1) as f64,
-            };
-            let step: AlignStep = match self.config.alignment {
-                AlignmentLoss::SurfaceAlignment => surface_alignment_step(
-                    &self.field,
-                    beta,
-                    (camera(*a), camera(*b)),
-                    rays,
-                    &settings,
-                    &mut Scaled {
-                        acc: &mut self.grid_accs[0],
-                        scale: w as f32,
-                    },
-                ),
-                AlignmentLoss::ProjectedRayDistance => {
-                    projected_ray_step((camera(*a), camera(*b)), rays, settings.max_error_px)
-                }
-                AlignmentLoss::None => continue,
-            };
+        let field = &self.field;
+        // Batches in parallel, each group of them into its own accumulator (deterministic).
+        let group = batches.len().div_ceil(self.grid_accs.len()).max(1);
+        let steps: Vec<Vec<(usize, usize, AlignStep)>> = batches
+            .chunks(group)
+            .zip(self.grid_accs.iter_mut())
+            .collect::<Vec<_>>()
+            .into_par_iter()
+            .map(|(chunk, acc)| {
+                chunk
+                    .iter()
+                    .map(|(a, b, rays)| {
+                        let camera = |k: usize| AlignCamera {
+                            pose: &stage.poses[k],
+                            intrinsics: &stage.cameras[k].intrinsics,
+                            pixel_scale: 1920.0 / stage.cameras[k].intrinsics.width.max(1) as f64,
+                        };
+                        let step = match alignment {
+                            AlignmentLoss::SurfaceAlignment => surface_alignment_step(
+                                field,
+                                beta,
+                                (camera(*a), camera(*b)),
+                                rays,
+                                &settings,
+                                &mut Scaled {
+                                    acc: &mut *acc,
+                                    scale: w as f32,
+                                },
+                            ),
+                            AlignmentLoss::ProjectedRayDistance => projected_ray_step(
+                                (camera(*a), camera(*b)),
+                                rays,
+                                settings.max_error_px,
+                            ),
+                            AlignmentLoss::None => AlignStep::default(),
+                        };
+                        (*a, *b, step)
+                    })
+                    .collect()
+            })
+            .collect();
+        for (a, b, step) in steps.into_iter().flatten() {
             let (ga, gb) = (
                 pose_grad_flat(&step.pose_a, w),
                 pose_grad_flat(&step.pose_b, w),
             );
-            out.pose[*a].iter_mut().zip(ga).for_each(|(x, y)| *x += y);
-            out.pose[*b].iter_mut().zip(gb).for_each(|(x, y)| *x += y);
+            out.pose[a].iter_mut().zip(ga).for_each(|(x, y)| *x += y);
+            out.pose[b].iter_mut().zip(gb).for_each(|(x, y)| *x += y);
             add_scaled(&mut out.geo, &step.geo, w as f32);
             out.beta_grad += step.beta_grad * w;
             out.loss += step.loss / batch_count;

@@ -122,18 +122,24 @@ struct Rendered {
     point: DVec3,
 }
 
+/// Samples stop once this little light gets through (as for colour rays).
+const MIN_TRANSMITTANCE: f32 = 1e-3;
+
 fn render(field: &SceneField, beta: f32, pose: &PoseParams, ray: &AlignRay) -> Rendered {
     let (o, d) = pose.ray(ray.world_from_vehicle, ray.dir_in_sensor);
-    let samples: Vec<FieldSample> = ray
-        .taus_m
-        .iter()
-        .map(|t| field.query(o + d * *t as f64))
-        .collect();
-    let alphas: Vec<f32> = samples
-        .iter()
-        .map(|s| alpha_from_sdf(s.sdf(), beta).0)
-        .collect();
-    let composite = composite(&alphas, &ray.taus_m, &[], 0);
+    let (mut samples, mut alphas) = (Vec::new(), Vec::new());
+    let mut transmittance = 1.0f32;
+    for t in &ray.taus_m {
+        if transmittance < MIN_TRANSMITTANCE {
+            break;
+        }
+        let s = field.query(o + d * *t as f64);
+        let a = alpha_from_sdf(s.sdf(), beta).0;
+        transmittance *= 1.0 - a;
+        samples.push(s);
+        alphas.push(a);
+    }
+    let composite = composite(&alphas, &ray.taus_m[..samples.len()], &[], 0);
     let depth_m = composite.depth_m as f64 / (composite.accumulation as f64).max(1e-6);
     Rendered {
         d,
@@ -291,22 +297,10 @@ fn backward_direction(
         accumulation: (-rendered.composite.depth_m as f64 / (a * a) * d_depth_bar) as f32,
         ..Upstream::default()
     };
-    let (d_alpha, _) = composite_backward(
-        &rendered.alphas,
-        &from_ray.taus_m,
-        &[],
-        0,
-        &rendered.composite,
-        &up,
-    );
-    let (d_o, d_d, d_beta) = field.ray_backward(
-        &rendered.samples,
-        &from_ray.taus_m,
-        beta,
-        (&d_alpha, &[]),
-        grid,
-        geo,
-    );
+    let taus = &from_ray.taus_m[..rendered.samples.len()];
+    let (d_alpha, _) = composite_backward(&rendered.alphas, taus, &[], 0, &rendered.composite, &up);
+    let (d_o, d_d, d_beta) =
+        field.ray_backward(&rendered.samples, taus, beta, (&d_alpha, &[]), grid, geo);
     let from_grad = from_cam.pose.ray_backward(
         from_ray.world_from_vehicle,
         from_ray.dir_in_sensor,

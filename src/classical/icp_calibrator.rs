@@ -1,0 +1,152 @@
+//! Point-to-plane ICP as a [`Calibrator`]: every LiDAR against one reference LiDAR (which stays
+//! fixed), on sweeps spread over the drive or its selected segments. For each source sweep the
+//! reference's sweeps nearest in time (the nearest and its two neighbours) form the target, all
+//! deskewed with the trajectory at each point's firing time; one step is one Gauss–Newton step
+//! of every pair ([`super::icp`]).
+
+use glam::DVec3;
+
+use super::icp::{IcpConfig, IcpProblem, SourcePoint};
+use crate::calib::Rig;
+use crate::geometry::projection::world_points;
+use crate::log::{Drive, LidarSweep, spread_evenly};
+use crate::optim::runner::{Calibrator, StepReport};
+
+pub struct IcpCalibrator {
+    rig: Rig,
+    problems: Vec<(String, IcpProblem)>,
+    max_steps: usize,
+}
+
+/// Every `stride`-th point of `sweep` in its own frame with the vehicle pose at its firing time.
+pub fn source_points(
+    sweep: &LidarSweep,
+    trajectory: &crate::geometry::Trajectory,
+    stride: usize,
+) -> Vec<SourcePoint> {
+    (0..sweep.points_in_sensor.len())
+        .step_by(stride.max(1))
+        .filter_map(|i| {
+            let offset = sweep
+                .time_offset_secs
+                .as_ref()
+                .and_then(|t| t.get(i))
+                .map_or(0, |s| (*s as f64 * 1e9) as i64);
+            let p = sweep.points_in_sensor[i];
+            Some(SourcePoint {
+                in_sensor: DVec3::new(p[0] as f64, p[1] as f64, p[2] as f64),
+                world_from_vehicle: trajectory
+                    .world_from_vehicle(sweep.stamp_nanos + offset)
+                    .ok()?,
+            })
+        })
+        .collect()
+}
+
+impl IcpCalibrator {
+    /// Register every LiDAR of `rig` but `reference` against it on `frames` sweeps each.
+    pub fn from_drive(
+        drive: &Drive,
+        rig: &Rig,
+        reference: &str,
+        frames: usize,
+        segments_nanos: &[(i64, i64)],
+        config: IcpConfig,
+    ) -> Result<Self, String> {
+        let fixed = rig
+            .sensor(reference)
+            .ok_or_else(|| format!("no LiDAR '{reference}' in the rig"))?
+            .vehicle_from_sensor;
+        let targets = drive.frames_within(reference, segments_nanos);
+        let target_stream = drive
+            .stream(reference)
+            .ok_or_else(|| format!("no sweeps of '{reference}' in {}", drive.path().display()))?;
+        let mut problems = Vec::new();
+        for lidar in rig.lidars().filter(|l| l.name != reference) {
+            let Some(stream) = drive.stream(&lidar.name) else {
+                continue;
+            };
+            let mut target = Vec::new();
+            let mut source = Vec::new();
+            for i in spread_evenly(&drive.frames_within(&lidar.name, segments_nanos), frames) {
+                let sweep = drive
+                    .load_sweep(&lidar.name, i)
+                    .map_err(|e| e.to_string())?;
+                source.extend(source_points(&sweep, &drive.trajectory, 1));
+                let stamp = stream.frames[i].stamp_nanos;
+                let Some(&nearest) = targets
+                    .iter()
+                    .min_by_key(|&&j| (target_stream.frames[j].stamp_nanos - stamp).abs())
+                else {
+                    continue;
+                };
+                let position = targets.iter().position(|&j| j == nearest).unwrap_or(0);
+                for &j in &targets[position.saturating_sub(1)..(position + 2).min(targets.len())] {
+                    let t = drive.load_sweep(reference, j).map_err(|e| e.to_string())?;
+                    target.extend(
+                        world_points(&t.view(), &drive.trajectory, fixed, 1)
+                            .map_err(|e| format!("{reference}: {e}"))?,
+                    );
+                }
+            }
+            if source.is_empty() || target.is_empty() {
+                continue;
+            }
+            let problem =
+                IcpProblem::new(&target, &source, lidar.vehicle_from_sensor, config.clone());
+            problems.push((lidar.name.clone(), problem));
+        }
+        if problems.is_empty() {
+            return Err(format!(
+                "no LiDAR to register against '{reference}' inside the trajectory and the selected segments"
+            ));
+        }
+        let max_steps = config.levels.len() * config.iterations_per_level;
+        Ok(Self {
+            rig: rig.clone(),
+            problems,
+            max_steps,
+        })
+    }
+
+    fn rig_now(&self) -> Rig {
+        let mut rig = self.rig.clone();
+        for (name, p) in &self.problems {
+            if let Some(s) = rig.sensor_mut(name) {
+                s.vehicle_from_sensor = p.vehicle_from_source;
+            }
+        }
+        rig
+    }
+}
+
+impl Calibrator for IcpCalibrator {
+    fn name(&self) -> &str {
+        "point-to-plane ICP"
+    }
+
+    fn max_steps(&self) -> usize {
+        self.max_steps
+    }
+
+    fn step(&mut self) -> StepReport {
+        let mut losses = Vec::new();
+        for (name, p) in &mut self.problems {
+            let s = p.step();
+            losses.push((format!("icp rmse cm/{name}"), s.inlier_rmse_m * 100.0));
+            losses.push((format!("icp fitness/{name}"), s.fitness));
+        }
+        StepReport {
+            losses,
+            done: self.problems.iter().all(|(_, p)| p.done),
+        }
+    }
+
+    fn current(&self) -> Rig {
+        self.rig_now()
+    }
+
+    fn best(&self) -> Rig {
+        self.rig_now()
+    }
+}
