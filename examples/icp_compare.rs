@@ -4,7 +4,9 @@
 //!
 //! Takes the first two LiDARs of the reference present in the log, one sweep of the second and
 //! the first's sweep nearest in time, and makes the rigid problem both tools solve: the target
-//! is the first LiDAR's sweep in the vehicle frame (reference extrinsic), the source is the
+//! is the first LiDAR's sweep in the vehicle frame at the source sweep's stamp (reference
+//! extrinsic, the vehicle's motion between the two stamps compensated; use deskewed or
+//! stationary data), the source is the
 //! second LiDAR's sweep in its own frame, the start is its reference extrinsic turned by 1° and
 //! moved by 10 cm (fixed axis and direction). Writes `target.ply`, `source.ply` and `case.json`
 //! (start, reference, levels, stopping rule) into OUT_DIR for `benches/icp_open3d.py`, then runs
@@ -88,9 +90,14 @@ fn main() -> Result<()> {
             .filter(|p| p.length() > 0.5)
             .collect()
     };
+    // The target in the source sweep's vehicle frame: both sweeps are deskewed to their
+    // stamps, and the vehicle moves between the two stamps.
+    let world_from = |stamp| drive.trajectory.world_from_vehicle(stamp);
+    let source_from_target_vehicle =
+        world_from(stamp)?.inverse() * world_from(root_frames[j].stamp_nanos)?;
     let target: Vec<DVec3> = to_points(&drive.load_sweep(root, j)?)
         .into_iter()
-        .map(|p| x_root.transform_point(p))
+        .map(|p| source_from_target_vehicle.transform_point(x_root.transform_point(p)))
         .collect();
     let source = to_points(&drive.load_sweep(other, k)?);
     let start = Rigid::new(
@@ -124,6 +131,7 @@ fn main() -> Result<()> {
         })
         .collect();
     let mut icp = IcpProblem::new(&target, &points, start, config);
+    let prepared = started.elapsed().as_secs_f64();
     let mut iterations = 0;
     while !icp.done {
         icp.step();
@@ -137,6 +145,7 @@ fn main() -> Result<()> {
         serde_json::json!({
             "tool": "rigcal",
             "seconds": seconds,
+            "prepare_seconds": prepared,
             "iterations": iterations,
             "rotation_deg": rot.to_degrees(),
             "translation_cm": trans * 100.0,

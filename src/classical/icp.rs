@@ -14,17 +14,119 @@
 //! `X ← (I + [ω]×, τ) X` in the vehicle frame and `v = X p`, `m = R_Wᵀ n`, the Jacobian is
 //! `[v × m, m]`; Huber weights (δ = [`IcpConfig::huber_m`]) make it robust, and the 6 × 6
 //! normal equations are solved by Cholesky. Levels go coarse to fine: the source is thinned
-//! by a voxel grid of each level's size and the correspondence distance shrinks with it; a
-//! level ends when the update is below 1e-6 rad / 1e-6 m or after its iteration budget.
+//! by a voxel grid of each level's size and the correspondence distance shrinks with it (nearest
+//! target points from a k-d tree built once); a level ends when the update is below 1e-6 rad / 1e-6 m or after its iteration budget.
 
 use glam::DVec3;
 use rayon::prelude::*;
 
-use crate::eval::registration::{CellIndex, plane_normal};
+use crate::eval::registration::plane_normal;
 use crate::geometry::{Rigid, so3};
 
 /// Radius of the neighbourhood a target normal is fitted to (m).
 const NORMAL_RADIUS_M: f64 = 0.5;
+/// A static k-d tree over the target points for nearest-neighbour queries: an implicit
+/// balanced tree over a reordered array (the node of a range is its middle element, split on
+/// the axis of the range's largest extent), built once by median selection.
+struct KdTree {
+    points: Vec<DVec3>,
+    /// Original index of each reordered point.
+    index: Vec<u32>,
+    axis: Vec<u8>,
+}
+
+impl KdTree {
+    fn new(points: &[DVec3]) -> Self {
+        let mut order: Vec<(DVec3, u32)> = points.iter().copied().zip(0u32..).collect();
+        let mut axis = vec![0u8; points.len()];
+        Self::build(&mut order, &mut axis, 0);
+        Self {
+            points: order.iter().map(|(p, _)| *p).collect(),
+            index: order.iter().map(|(_, i)| *i).collect(),
+            axis,
+        }
+    }
+
+    fn build(items: &mut [(DVec3, u32)], axis: &mut [u8], _depth: usize) {
+        if items.len() <= 1 {
+            return;
+        }
+        let (mut lo, mut hi) = (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY));
+        for (p, _) in items.iter() {
+            lo = lo.min(*p);
+            hi = hi.max(*p);
+        }
+        let extent = hi - lo;
+        let a = if extent.x >= extent.y && extent.x >= extent.z {
+            0
+        } else if extent.y >= extent.z {
+            1
+        } else {
+            2
+        };
+        let m = items.len() / 2;
+        items.select_nth_unstable_by(m, |x, y| x.0[a].total_cmp(&y.0[a]));
+        axis[m] = a as u8;
+        let (left, rest) = items.split_at_mut(m);
+        let (left_axis, rest_axis) = axis.split_at_mut(m);
+        Self::build(left, left_axis, _depth + 1);
+        Self::build(&mut rest[1..], &mut rest_axis[1..], _depth + 1);
+    }
+
+    /// Original index of the nearest point within `max_m` of `p`.
+    fn nearest(&self, p: DVec3, max_m: f64) -> Option<u32> {
+        let mut best = (max_m * max_m, u32::MAX);
+        self.search(0, self.points.len(), p, &mut best);
+        (best.1 != u32::MAX).then(|| self.index[best.1 as usize])
+    }
+
+    /// Every point within `radius_m` of `p`, appended to `out`.
+    fn within(&self, p: DVec3, radius_m: f64, out: &mut Vec<DVec3>) {
+        self.range(0, self.points.len(), p, radius_m * radius_m, out);
+    }
+
+    fn range(&self, lo: usize, hi: usize, p: DVec3, r2: f64, out: &mut Vec<DVec3>) {
+        if lo >= hi {
+            return;
+        }
+        let m = lo + (hi - lo) / 2;
+        let q = self.points[m];
+        if q.distance_squared(p) <= r2 {
+            out.push(q);
+        }
+        let a = self.axis[m] as usize;
+        let diff = p[a] - q[a];
+        if diff < 0.0 || diff * diff <= r2 {
+            self.range(lo, m, p, r2, out);
+        }
+        if diff >= 0.0 || diff * diff <= r2 {
+            self.range(m + 1, hi, p, r2, out);
+        }
+    }
+
+    fn search(&self, lo: usize, hi: usize, p: DVec3, best: &mut (f64, u32)) {
+        if lo >= hi {
+            return;
+        }
+        let m = lo + (hi - lo) / 2;
+        let q = self.points[m];
+        let d2 = q.distance_squared(p);
+        if d2 <= best.0 {
+            *best = (d2, m as u32);
+        }
+        let a = self.axis[m] as usize;
+        let diff = p[a] - q[a];
+        let (near, far) = if diff < 0.0 {
+            ((lo, m), (m + 1, hi))
+        } else {
+            ((m + 1, hi), (lo, m))
+        };
+        self.search(near.0, near.1, p, best);
+        if diff * diff <= best.0 {
+            self.search(far.0, far.1, p, best);
+        }
+    }
+}
 
 #[derive(Clone, Debug, PartialEq)]
 pub struct IcpConfig {
@@ -71,6 +173,7 @@ pub struct IcpStats {
 /// One LiDAR pair being registered.
 pub struct IcpProblem {
     target: Vec<DVec3>,
+    tree: KdTree,
     normals: Vec<DVec3>,
     /// Source points per level (voxel-thinned).
     sources: Vec<Vec<SourcePoint>>,
@@ -102,17 +205,17 @@ impl IcpProblem {
         config: IcpConfig,
     ) -> Self {
         let thinned = voxel_thin(target_world, config.target_voxel_m, |p| *p);
-        let index = CellIndex::new(&thinned, NORMAL_RADIUS_M);
+        let all = KdTree::new(&thinned);
         let with_normals: Vec<(DVec3, DVec3)> = thinned
             .par_iter()
-            .filter_map(|p| {
-                let neighbours: Vec<DVec3> = index
-                    .within(*p, NORMAL_RADIUS_M)
-                    .map(|i| thinned[i as usize])
-                    .collect();
-                Some((*p, plane_normal(&neighbours)?))
+            .map_init(Vec::new, |neighbours, p| {
+                neighbours.clear();
+                all.within(*p, NORMAL_RADIUS_M, neighbours);
+                Some((*p, plane_normal(neighbours)?))
             })
+            .flatten()
             .collect();
+        let target: Vec<DVec3> = with_normals.iter().map(|(p, _)| *p).collect();
         // Thin the source in the world under the starting extrinsic (close enough to decide
         // which points are redundant).
         let sources = config
@@ -126,8 +229,9 @@ impl IcpProblem {
             })
             .collect();
         Self {
-            target: with_normals.iter().map(|(p, _)| *p).collect(),
+            tree: KdTree::new(&target),
             normals: with_normals.iter().map(|(_, n)| *n).collect(),
+            target,
             sources,
             config,
             vehicle_from_source: start,
@@ -149,7 +253,7 @@ impl IcpProblem {
             return self.last;
         }
         let max_d = self.config.levels[self.level].1;
-        let index = CellIndex::new(&self.target, max_d);
+        let tree = &self.tree;
         let x = self.vehicle_from_source;
         let huber = self.config.huber_m;
         let source = &self.sources[self.level];
@@ -162,7 +266,7 @@ impl IcpProblem {
                 |(mut h, mut g, mut sq, mut n), s| {
                     let v = x.transform_point(s.in_sensor);
                     let w = s.world_from_vehicle.transform_point(v);
-                    if let Some(i) = index.nearest(w, max_d) {
+                    if let Some(i) = tree.nearest(w, max_d) {
                         let (q, normal) = (target[i as usize], normals[i as usize]);
                         let r = normal.dot(w - q);
                         let m = s.world_from_vehicle.rotation.inverse() * normal;
@@ -371,6 +475,43 @@ mod tests {
                 stats.fitness > 0.5 && stats.inlier_rmse_m < 0.005,
                 "{stats:?}"
             );
+        }
+    }
+
+    #[test]
+    fn the_kd_tree_finds_the_nearest_point_like_brute_force() {
+        let pts: Vec<DVec3> = (0..2000)
+            .map(|i| {
+                let f = i as f64;
+                DVec3::new(
+                    (f * 0.618).fract() * 10.0,
+                    (f * 0.377).fract() * 5.0,
+                    (f * 0.123).fract(),
+                )
+            })
+            .collect();
+        let tree = KdTree::new(&pts);
+        for k in 0..300 {
+            let f = k as f64 * 0.731;
+            let q = DVec3::new(
+                f.fract() * 12.0 - 1.0,
+                (f * 1.7).fract() * 6.0,
+                (f * 2.3).fract() * 2.0,
+            );
+            let brute = (0..pts.len())
+                .filter(|&i| pts[i].distance(q) <= 0.5)
+                .min_by(|&a, &b| {
+                    pts[a]
+                        .distance_squared(q)
+                        .total_cmp(&pts[b].distance_squared(q))
+                });
+            let got = tree.nearest(q, 0.5).map(|i| i as usize);
+            match (brute, got) {
+                (Some(b), Some(g)) => {
+                    assert!((pts[b].distance(q) - pts[g].distance(q)).abs() < 1e-12)
+                }
+                (b, g) => assert_eq!(b, g),
+            }
         }
     }
 
