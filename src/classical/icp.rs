@@ -3,7 +3,7 @@
 //!
 //! How it works. The target LiDAR (fixed, usually the root) gives a cloud in the world frame:
 //! every point moved with the trajectory at its own firing time (deskewed), voxel-downsampled
-//! to [`IcpConfig::target_voxel_m`], each point with the normal of the least-squares plane of
+//! to [`IcpConfig::target_voxel_m`] (voxel centroids), each point with the normal of the least-squares plane of
 //! its neighbours within 0.5 m (flat neighbourhoods only: [`crate::eval::registration`]). The
 //! source LiDAR keeps its points in its own frame `p_i`, each with the vehicle pose `W_i` at its
 //! firing time, so the unknown extrinsic `X = vehicle_from_source` enters every point as
@@ -195,6 +195,23 @@ pub fn voxel_thin<T: Copy>(points: &[T], voxel_m: f64, position: impl Fn(&T) -> 
         .collect()
 }
 
+/// The centroid of the points in each occupied voxel (in order of first appearance): noise
+/// averages out of the target surface (as Open3D's voxel downsampling does).
+pub fn voxel_centroids(points: &[DVec3], voxel_m: f64) -> Vec<DVec3> {
+    let mut slot: std::collections::HashMap<[i32; 3], usize> = Default::default();
+    let mut sums: Vec<(DVec3, u32)> = Vec::new();
+    for p in points {
+        let key = (*p / voxel_m).floor().as_ivec3().to_array();
+        let k = *slot.entry(key).or_insert_with(|| {
+            sums.push((DVec3::ZERO, 0));
+            sums.len() - 1
+        });
+        sums[k].0 += *p;
+        sums[k].1 += 1;
+    }
+    sums.into_iter().map(|(s, n)| s / n as f64).collect()
+}
+
 impl IcpProblem {
     /// `target_world`: the fixed LiDAR's points in the world; `source`: the other LiDAR's points
     /// with their poses; `start`: the initial `vehicle_from_source`.
@@ -204,7 +221,7 @@ impl IcpProblem {
         start: Rigid,
         config: IcpConfig,
     ) -> Self {
-        let thinned = voxel_thin(target_world, config.target_voxel_m, |p| *p);
+        let thinned = voxel_centroids(target_world, config.target_voxel_m);
         let all = KdTree::new(&thinned);
         let with_normals: Vec<(DVec3, DVec3)> = thinned
             .par_iter()
