@@ -183,6 +183,8 @@ struct Scale {
     unical_log: UnicalSettings,
     edge: Method,
     ablations: &'static [&'static str],
+    /// Run the correspondence ablation (Table A9) on the recorded drive as well.
+    correspondence_on_log: bool,
 }
 
 impl Suite {
@@ -226,6 +228,7 @@ impl Suite {
                     max_steps: 60,
                 },
                 ablations: &["no geometry initialisation"],
+                correspondence_on_log: false,
             },
             pandaset,
         )
@@ -273,6 +276,7 @@ impl Suite {
                     max_steps: 300,
                 },
                 ablations: &["no geometry initialisation", "no pose trim"],
+                correspondence_on_log: true,
             },
             pandaset,
         )
@@ -423,6 +427,28 @@ impl Suite {
                 mcap: dir.join("pandaset-002.mcap"),
                 ground_truth: dir.join("ground_truth.json"),
             };
+            if s.correspondence_on_log {
+                for alignment in [
+                    AlignmentLoss::None,
+                    AlignmentLoss::ProjectedRayDistance,
+                    AlignmentLoss::SurfaceAlignment,
+                ] {
+                    let method = Method::UniCal(UnicalSettings {
+                        alignment,
+                        ..s.unical_log.clone()
+                    });
+                    let row = format!("{} (pandaset-002)", alignment.label());
+                    cases.push(case(
+                        Protocol::Correspondence,
+                        row,
+                        &method,
+                        &drive,
+                        deg,
+                        cm,
+                        1,
+                    ));
+                }
+            }
             for method in [&Method::UniCal(s.unical_log.clone()), &s.edge] {
                 let row = "pandaset-002".to_string();
                 cases.push(case(Protocol::PandaSet, row, method, &drive, deg, cm, 1));
@@ -474,5 +500,14 @@ mod tests {
         let paper = Suite::paper(Some(PathBuf::from("p")));
         assert_eq!(perturbation(&paper), 6 * 2 * 10);
         assert!(paper.cases.iter().any(|c| c.protocol == Protocol::PandaSet));
+        let on_log = |s: &Suite| {
+            s.cases
+                .iter()
+                .filter(|c| c.protocol == Protocol::Correspondence)
+                .filter(|c| matches!(c.drive, DriveSpec::Log { .. }))
+                .count()
+        };
+        assert_eq!(on_log(&paper), 3, "Table A9 on PandaSet in the paper suite");
+        assert_eq!(on_log(&Suite::quick(Some(PathBuf::from("p")))), 0);
     }
 }
