@@ -5,10 +5,9 @@
 //! with every other loss switched off the alignment term alone moves the cameras (and only with
 //! it on).
 
-use std::path::PathBuf;
+mod common;
 
 use rigcal::calib::Rig;
-use rigcal::calib::dataset_json::load_reference;
 use rigcal::log::Drive;
 use rigcal::optim::runner::Calibrator;
 use rigcal::unical::calibrator::UnicalLidarStage;
@@ -18,20 +17,7 @@ use rigcal::unical::surface_align::{
     AlignCamera, AlignRay, AlignSettings, AlignmentLoss, projected_ray_distance,
 };
 
-fn pandaset() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/data/pandaset-002")
-}
-
-fn reference_rig(drive: &Drive) -> Rig {
-    let reference = load_reference(&pandaset().join("ground_truth.json")).unwrap();
-    let mut rig = drive.rig.clone();
-    for s in &mut rig.sensors {
-        if let Some(r) = reference.sensor(&s.name) {
-            s.vehicle_from_sensor = r.vehicle_from_sensor;
-        }
-    }
-    rig
-}
+use common::{pandaset_dir as pandaset, reference_rig};
 
 fn stage(drive: &Drive, rig: &Rig, config: DepthCalibConfig) -> UnicalLidarStage {
     UnicalLidarStage::from_drive(drive, rig, 1, &[], config)

@@ -7,11 +7,11 @@
 //! answer is `classical::icp`'s simulated test.) Through the CLI the result lands in the native
 //! file.
 
-use std::path::PathBuf;
+mod common;
+
 use std::process::Command;
 
 use glam::DVec3;
-use rigcal::calib::dataset_json::load_reference;
 use rigcal::calib::{CalibrationFile, Rig};
 use rigcal::classical::icp::IcpConfig;
 use rigcal::classical::icp_calibrator::IcpCalibrator;
@@ -20,20 +20,7 @@ use rigcal::geometry::{Rigid, so3};
 use rigcal::log::Drive;
 use rigcal::optim::runner::Calibrator;
 
-fn pandaset() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/data/pandaset-002")
-}
-
-fn reference_rig(drive: &Drive) -> Rig {
-    let reference = load_reference(&pandaset().join("ground_truth.json")).unwrap();
-    let mut rig = drive.rig.clone();
-    for s in &mut rig.sensors {
-        if let Some(r) = reference.sensor(&s.name) {
-            s.vehicle_from_sensor = r.vehicle_from_sensor;
-        }
-    }
-    rig
-}
+use common::{pandaset_dir as pandaset, reference_rig};
 
 fn moved(rig: &Rig, name: &str, axis: DVec3, dir: DVec3) -> Rig {
     let mut out = rig.clone();

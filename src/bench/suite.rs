@@ -403,51 +403,37 @@ impl Suite {
                 1,
             ));
         }
-        for alignment in [
-            AlignmentLoss::None,
-            AlignmentLoss::ProjectedRayDistance,
-            AlignmentLoss::SurfaceAlignment,
-        ] {
-            let method = Method::UniCal(UnicalSettings {
-                alignment,
-                ..s.unical.clone()
-            });
-            cases.push(case(
-                Protocol::Correspondence,
-                alignment.label().into(),
-                &method,
-                &urban,
-                deg,
-                cm,
-                1,
-            ));
-        }
+        // Table A9: the same run with each correspondence term.
+        let a9 = |cases: &mut Vec<Case>, base: &UnicalSettings, drive: &DriveSpec, suffix: &str| {
+            for alignment in [
+                AlignmentLoss::None,
+                AlignmentLoss::ProjectedRayDistance,
+                AlignmentLoss::SurfaceAlignment,
+            ] {
+                let method = Method::UniCal(UnicalSettings {
+                    alignment,
+                    ..base.clone()
+                });
+                let row = format!("{}{suffix}", alignment.label());
+                cases.push(case(
+                    Protocol::Correspondence,
+                    row,
+                    &method,
+                    drive,
+                    deg,
+                    cm,
+                    1,
+                ));
+            }
+        };
+        a9(&mut cases, &s.unical, &urban, "");
         if let Some(dir) = pandaset {
             let drive = DriveSpec::Log {
                 mcap: dir.join("pandaset-002.mcap"),
                 ground_truth: dir.join("ground_truth.json"),
             };
             if s.correspondence_on_log {
-                for alignment in [
-                    AlignmentLoss::None,
-                    AlignmentLoss::ProjectedRayDistance,
-                    AlignmentLoss::SurfaceAlignment,
-                ] {
-                    let method = Method::UniCal(UnicalSettings {
-                        alignment,
-                        ..s.unical_log.clone()
-                    });
-                    let row = format!("{} (pandaset-002)", alignment.label());
-                    cases.push(case(
-                        Protocol::Correspondence,
-                        row,
-                        &method,
-                        &drive,
-                        deg,
-                        cm,
-                        1,
-                    ));
-                }
+                a9(&mut cases, &s.unical_log, &drive, " (pandaset-002)");
             }
             for method in [&Method::UniCal(s.unical_log.clone()), &s.edge] {
                 let row = "pandaset-002".to_string();
