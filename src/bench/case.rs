@@ -228,11 +228,11 @@ fn run_into(
                 .filter(|c| c.camera.is_some())
                 .map(|c| c.name.clone())
                 .collect();
-            let refiner = EdgeRefiner::new(&drive, &initial, &out.root, &cameras, *frames, &[])
-                .map_err(|e| e.to_string())?;
+            let mut refiner = EdgeRefiner::new(&drive, &initial, &out.root, &cameras, *frames, &[])
+                .map_err(|e| e.to_string())?
+                .with_max_steps(*max_steps);
             out.prepare_secs = started.elapsed().as_secs_f64();
-            let mut capped = Capped(refiner, *max_steps);
-            optimise(&mut capped, &reference, &initial, &cameras, progress, out)?;
+            optimise(&mut refiner, &reference, &initial, &cameras, progress, out)?;
         }
     }
     Ok(())
@@ -275,27 +275,6 @@ fn optimise(
     out.result = measure(&best)?;
     out.sensors = sensor_results(reference, initial, &best, &root, optimised)?;
     Ok(())
-}
-
-/// The edge refiner stopped after `max_steps` steps.
-struct Capped(EdgeRefiner, usize);
-
-impl Calibrator for Capped {
-    fn name(&self) -> &str {
-        self.0.name()
-    }
-    fn max_steps(&self) -> usize {
-        self.1.min(self.0.max_steps())
-    }
-    fn step(&mut self) -> crate::optim::runner::StepReport {
-        self.0.step()
-    }
-    fn current(&self) -> Rig {
-        self.0.current()
-    }
-    fn best(&self) -> Rig {
-        self.0.best()
-    }
 }
 
 fn unical_stage(

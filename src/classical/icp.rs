@@ -39,7 +39,7 @@ impl KdTree {
     fn new(points: &[DVec3]) -> Self {
         let mut order: Vec<(DVec3, u32)> = points.iter().copied().zip(0u32..).collect();
         let mut axis = vec![0u8; points.len()];
-        Self::build(&mut order, &mut axis, 0);
+        Self::build(&mut order, &mut axis);
         Self {
             points: order.iter().map(|(p, _)| *p).collect(),
             index: order.iter().map(|(_, i)| *i).collect(),
@@ -47,7 +47,7 @@ impl KdTree {
         }
     }
 
-    fn build(items: &mut [(DVec3, u32)], axis: &mut [u8], _depth: usize) {
+    fn build(items: &mut [(DVec3, u32)], axis: &mut [u8]) {
         if items.len() <= 1 {
             return;
         }
@@ -69,8 +69,8 @@ impl KdTree {
         axis[m] = a as u8;
         let (left, rest) = items.split_at_mut(m);
         let (left_axis, rest_axis) = axis.split_at_mut(m);
-        Self::build(left, left_axis, _depth + 1);
-        Self::build(&mut rest[1..], &mut rest_axis[1..], _depth + 1);
+        Self::build(left, left_axis);
+        Self::build(&mut rest[1..], &mut rest_axis[1..]);
     }
 
     /// Original index of the nearest point within `max_m` of `p`.

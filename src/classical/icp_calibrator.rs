@@ -74,13 +74,11 @@ impl IcpCalibrator {
                     .map_err(|e| e.to_string())?;
                 source.extend(source_points(&sweep, &drive.trajectory, 1));
                 let stamp = stream.frames[i].stamp_nanos;
-                let Some(&nearest) = targets
-                    .iter()
-                    .min_by_key(|&&j| (target_stream.frames[j].stamp_nanos - stamp).abs())
+                let Some(position) = (0..targets.len())
+                    .min_by_key(|&k| (target_stream.frames[targets[k]].stamp_nanos - stamp).abs())
                 else {
                     continue;
                 };
-                let position = targets.iter().position(|&j| j == nearest).unwrap_or(0);
                 for &j in &targets[position.saturating_sub(1)..(position + 2).min(targets.len())] {
                     let t = drive.load_sweep(reference, j).map_err(|e| e.to_string())?;
                     target.extend(

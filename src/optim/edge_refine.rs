@@ -47,6 +47,12 @@ impl EdgeRefiner {
         }
     }
 
+    /// Stop after at most `steps` steps (default 300).
+    pub fn with_max_steps(mut self, steps: usize) -> Self {
+        self.max_steps = steps;
+        self
+    }
+
     fn losses(&self) -> Vec<(String, f64)> {
         let mut out: Vec<(String, f64)> = self
             .problems
