@@ -12,6 +12,8 @@
 //!   calibration file (`rigcal_calibration: 1`, see `docs/interfaces.md`).
 //! - [`log`]: MCAP ingestion (ROS 2 CDR and Foxglove schemas), TF tree resolution and the
 //!   indexed, lazily decoded drive log.
+//! - [`interop`]: export to and import from the formats other tools read (URDF, ROS, Autoware,
+//!   OpenCV, Kalibr, KITTI, nuScenes, MCAP /tf_static).
 //! - [`util`]: atomic file writes and small helpers shared by every module.
 
 pub mod bench;
@@ -21,6 +23,7 @@ pub mod cli;
 pub mod eval;
 pub mod features;
 pub mod geometry;
+pub mod interop;
 pub mod log;
 pub mod optim;
 pub mod session;

@@ -44,7 +44,9 @@ enum Command {
         /// unical | icp | edge (mi, target, pose-graph: not in this build yet)
         #[arg(long)]
         method: String,
-        /// Initial extrinsics (native calibration file); default: the log's /tf_static.
+        /// Initial guess: a native calibration file, URDF, ROS camera_info YAML (or a directory
+        /// of them) or an MCAP's /tf_static; sensors matched by name or frame id. Default: the
+        /// log's /tf_static.
         #[arg(long)]
         init: Option<PathBuf>,
         /// Time range in seconds from the start of the log, START..END.
@@ -111,6 +113,28 @@ enum Command {
         /// Seeds per perturbation level (default: the suite's).
         #[arg(long)]
         seeds: Option<u64>,
+    },
+    /// Write a calibration in another tool's format; every file names the direction of the
+    /// transforms it holds.
+    Export {
+        /// The native calibration file.
+        calibration: PathBuf,
+        /// native | camera-info | mcap | urdf | ros2-static-tf | ros2-launch | autoware | opencv
+        /// | kalibr | kitti | nuscenes
+        #[arg(long)]
+        format: String,
+        /// The file to write; for camera-info and opencv a directory (one file per camera).
+        #[arg(long)]
+        out: PathBuf,
+        /// Only these sensors, comma-separated (default: all).
+        #[arg(long, value_delimiter = ',')]
+        sensors: Vec<String>,
+        /// opencv, kitti: the reference LiDAR (default: the first).
+        #[arg(long)]
+        lidar: Option<String>,
+        /// kitti, kalibr: the reference camera, cam0 (default: the first).
+        #[arg(long)]
+        camera: Option<String>,
     },
     /// Simulate a drive with known ground truth and write it as a ROS 2 MCAP.
     Synth {
@@ -248,6 +272,30 @@ fn run() -> Result<()> {
                 let text = serde_json::to_string_pretty(&report)?;
                 rigcal::util::write_atomic(&path, text.as_bytes())
                     .with_context(|| format!("cannot write {}", path.display()))?;
+            }
+            Ok(())
+        }
+        Some(Command::Export {
+            calibration,
+            format,
+            out,
+            sensors,
+            lidar,
+            camera,
+        }) => {
+            use rigcal::interop;
+            let format: interop::ExportFormat = format.parse()?;
+            let doc = rigcal::calib::CalibrationFile::load(&calibration)?;
+            let options = interop::ExportOptions {
+                sensors,
+                lidar,
+                camera,
+            };
+            let export = interop::export(&doc, format, &options)
+                .with_context(|| format!("cannot export {}", calibration.display()))?;
+            let written = interop::write(&export, &out)?;
+            for path in written {
+                println!("wrote {}", path.display());
             }
             Ok(())
         }

@@ -1,14 +1,22 @@
-//! The export panel: choose which extrinsics to write (current, best, initial), see exactly
-//! what will be written, with the direction of every transform spelled out, and save it
-//! atomically or copy it. The native file now; other formats join with the export issue.
+//! The export panel: choose which extrinsics to write (current, best, initial) and the format,
+//! see exactly what will be written with the direction of every transform spelled out, and
+//! save it atomically (a folder for the per-camera formats) or copy it. The files come from
+//! [`crate::interop`], the same code as `rigcal export`.
 
 use super::Studio;
 use super::state::ExtrinsicsView;
 use crate::calib::{CalibrationFile, Rig};
+use crate::interop::{self, Export, ExportFormat, ExportOptions};
 
 #[derive(Default)]
 pub struct ExportPanel {
     pub which: Option<ExtrinsicsView>,
+    pub format: Option<ExportFormat>,
+    /// Reference LiDAR (OpenCV, KITTI) and camera (KITTI, Kalibr); `None`: the first.
+    pub lidar: Option<String>,
+    pub camera: Option<String>,
+    /// The last export and what it was made from (an MCAP export writes a file: not every frame).
+    cache: Option<(String, Result<Export, String>)>,
 }
 
 /// The native calibration document for `rig`, with provenance and the checks' metrics.
@@ -66,6 +74,18 @@ pub fn document(studio: &Studio, rig: &Rig, which: ExtrinsicsView) -> Calibratio
     doc
 }
 
+/// A reference-sensor picker: "first" or one of `names`.
+fn reference_combo(ui: &mut egui::Ui, label: &str, choice: &mut Option<String>, names: &[String]) {
+    egui::ComboBox::from_label(label)
+        .selected_text(choice.clone().unwrap_or_else(|| "(the first)".into()))
+        .show_ui(ui, |ui| {
+            ui.selectable_value(choice, None, "(the first)");
+            for n in names {
+                ui.selectable_value(choice, Some(n.clone()), n);
+            }
+        });
+}
+
 pub(crate) fn export_ui(studio: &mut Studio, ui: &mut egui::Ui) {
     ui.heading("Export");
     let mut views = vec![ExtrinsicsView::Current, ExtrinsicsView::Initial];
@@ -80,41 +100,105 @@ pub(crate) fn export_ui(studio: &mut Studio, ui: &mut egui::Ui) {
         }
     });
     studio.export.which = Some(which);
+    let mut format = studio.export.format.unwrap_or(ExportFormat::Native);
     egui::ComboBox::from_label("format")
-        .selected_text("rigcal native (YAML)")
+        .selected_text(format.label())
+        .width(320.0)
         .show_ui(ui, |ui| {
-            ui.label("rigcal native (YAML)");
+            for f in ExportFormat::ALL {
+                ui.selectable_value(&mut format, f, f.label());
+            }
         });
-    ui.label(
-        "Every transform is vehicle_from_sensor: it maps a point from the sensor's frame into \
-         the vehicle frame, p_vehicle = R · p_sensor + t (t = the sensor's origin in the \
-         vehicle frame). Camera frames are OpenCV optical frames: x right, y down, z forward.",
+    studio.export.format = Some(format);
+    let rig = studio.rig_for(which).clone();
+    if matches!(format, ExportFormat::OpenCv | ExportFormat::Kitti) {
+        let lidars: Vec<String> = rig.lidars().map(|s| s.name.clone()).collect();
+        reference_combo(ui, "reference LiDAR", &mut studio.export.lidar, &lidars);
+    }
+    if matches!(format, ExportFormat::Kitti | ExportFormat::Kalibr) {
+        let cameras: Vec<String> = rig.cameras().map(|s| s.name.clone()).collect();
+        reference_combo(
+            ui,
+            "reference camera (cam0)",
+            &mut studio.export.camera,
+            &cameras,
+        );
+    }
+    ui.label(format.describe());
+    ui.weak(
+        "rigcal keeps vehicle_from_sensor: it maps a point from the sensor's frame into the \
+         vehicle frame, p_vehicle = R · p_sensor + t. Camera frames are OpenCV optical frames: \
+         x right, y down, z forward.",
     );
-    let doc = document(studio, studio.rig_for(which), which);
-    let text = doc.to_yaml();
+    let doc = document(studio, &rig, which);
+    let options = ExportOptions {
+        sensors: Vec::new(),
+        lidar: studio.export.lidar.clone(),
+        camera: studio.export.camera.clone(),
+    };
+    let key = format!("{}|{:?}|{}", format.name(), options, doc.to_yaml());
+    if studio.export.cache.as_ref().is_none_or(|(k, _)| *k != key) {
+        let made = interop::export(&doc, format, &options).map_err(|e| e.to_string());
+        studio.export.cache = Some((key, made));
+    }
+    let Some((_, made)) = &studio.export.cache else {
+        return;
+    };
+    let made = made.clone();
+    let export = match made {
+        Ok(e) => e,
+        Err(e) => {
+            ui.colored_label(egui::Color32::LIGHT_RED, format!("cannot export: {e}"));
+            return;
+        }
+    };
+    let preview = export.preview();
     ui.horizontal(|ui| {
-        if ui.button("Save…").clicked()
-            && let Some(path) = rfd::FileDialog::new()
-                .add_filter("YAML", &["yaml"])
-                .set_file_name("calibration.yaml")
-                .save_file()
-        {
-            match doc.save(&path) {
-                Ok(()) => studio.status.push(format!("exported {}", path.display())),
-                Err(e) => studio.status.push(format!("error: {e}")),
+        let label = if format.is_directory() {
+            "Save to folder…"
+        } else {
+            "Save…"
+        };
+        if ui.button(label).clicked() {
+            let dialog = rfd::FileDialog::new();
+            let path = if format.is_directory() {
+                dialog.pick_folder()
+            } else {
+                dialog.set_file_name(format.default_file_name()).save_file()
+            };
+            if let Some(path) = path {
+                match interop::write(&export, &path) {
+                    Ok(files) => studio.status.push(format!(
+                        "exported {} ({} file{})",
+                        path.display(),
+                        files.len(),
+                        if files.len() == 1 { "" } else { "s" }
+                    )),
+                    Err(e) => studio.status.push(format!("error: {e}")),
+                }
             }
         }
-        if ui.button("Copy").clicked() {
-            ui.ctx().copy_text(text.clone());
-            studio.status.push("copied the calibration file".into());
+        if ui
+            .add_enabled(format != ExportFormat::Mcap, egui::Button::new("Copy"))
+            .clicked()
+        {
+            ui.ctx().copy_text(preview.clone());
+            studio
+                .status
+                .push(format!("copied the {} export", format.name()));
         }
+        ui.weak(format!(
+            "{} file{}",
+            export.files.len(),
+            if export.files.len() == 1 { "" } else { "s" }
+        ));
     });
     egui::ScrollArea::vertical()
         .id_salt("export_preview")
         .max_height(420.0)
         .show(ui, |ui| {
             ui.add(
-                egui::TextEdit::multiline(&mut text.as_str())
+                egui::TextEdit::multiline(&mut preview.as_str())
                     .font(egui::TextStyle::Monospace)
                     .desired_width(f32::INFINITY),
             );

@@ -256,15 +256,20 @@ impl Studio {
         }
     }
 
-    /// Replace the current extrinsics with those of a calibration file (sensors matched by name).
+    /// Take the extrinsics (and intrinsics) a calibration file gives the current sensors, as one
+    /// edit: the native file, a URDF, a ROS camera_info YAML or the /tf_static of an MCAP
+    /// (sensors matched by name or frame id, see [`crate::interop::import`]).
     pub fn load_calibration(&mut self, path: &Path) {
-        match CalibrationFile::load_rig(path) {
-            Ok(rig) => {
-                let matched = self.apply_rig(&rig);
+        match crate::interop::import::load_initial_guess(path, &self.current) {
+            Ok(imported) => {
+                self.apply_rig(&imported.rig);
                 self.status.push(format!(
-                    "loaded {} ({matched} of {} sensors matched)",
+                    "loaded {} ({}): {} of {} sensors matched ({})",
                     path.display(),
-                    rig.sensors.len()
+                    imported.format,
+                    imported.matched.len(),
+                    self.current.sensors.len(),
+                    imported.matched.join(", ")
                 ));
                 self.remember(path);
             }

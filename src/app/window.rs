@@ -78,7 +78,9 @@ impl Studio {
                 self.redo();
             }
             ui.separator();
-            ui.weak("Drop an .mcap, calibration .yaml or session .json anywhere to open it.");
+            ui.weak(
+                "Drop an .mcap, calibration .yaml / .urdf or session .json anywhere to open it.",
+            );
         });
     }
 
@@ -101,9 +103,15 @@ impl Studio {
             }
         });
         ui.separator();
-        if ui.button("Load calibration…").clicked()
+        if ui
+            .button("Load calibration…")
+            .on_hover_text(
+                "a rigcal calibration, URDF, ROS camera_info YAML or the /tf_static of an MCAP; \
+                 sensors are matched by name or frame id",
+            )
+            .clicked()
             && let Some(path) = rfd::FileDialog::new()
-                .add_filter("YAML", &["yaml", "yml"])
+                .add_filter("calibration", &["yaml", "yml", "urdf", "xml", "mcap"])
                 .pick_file()
         {
             self.load_calibration(&path);
@@ -154,13 +162,13 @@ impl Studio {
         let name = path.to_string_lossy().to_lowercase();
         if name.ends_with(".mcap") {
             self.open_log(&path);
-        } else if name.ends_with(".yaml") || name.ends_with(".yml") {
+        } else if [".yaml", ".yml", ".urdf"].iter().any(|e| name.ends_with(e)) {
             self.load_calibration(&path);
         } else if name.ends_with(".json") {
             self.restore_session(&path);
         } else {
             self.status.push(format!(
-                "error: {}: not an .mcap, calibration .yaml or session .json file",
+                "error: {}: not an .mcap, calibration .yaml / .urdf or session .json file",
                 path.display()
             ));
         }

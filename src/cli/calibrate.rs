@@ -71,12 +71,9 @@ pub fn calibrate(
     let drive = Drive::open(&args.log).map_err(|e| e.to_string())?;
     let mut rig = drive.rig.clone();
     if let Some(init) = &args.init {
-        let other = CalibrationFile::load_rig(init).map_err(|e| e.to_string())?;
-        for s in &other.sensors {
-            if let Some(t) = rig.sensor_mut(&s.name) {
-                t.vehicle_from_sensor = s.vehicle_from_sensor;
-            }
-        }
+        rig = crate::interop::import::load_initial_guess(init, &rig)
+            .map_err(|e| format!("--init: {e}"))?
+            .rig;
     }
     let asked = args.sensors.iter().map(|s| ("--sensors", s));
     for (option, s) in asked.chain(args.root.iter().map(|s| ("--root", s))) {

@@ -19,6 +19,7 @@ use super::pointcloud::{self, LidarSweep};
 use super::tf::{TfTree, normalize_frame};
 use super::types::{CameraInfoMsg, Decoded, PoseMsg, TransformMsg};
 use crate::calib::{Rig, Sensor, SensorKind};
+use crate::geometry::camera::CameraIntrinsics;
 use crate::geometry::{Rigid, Trajectory};
 
 #[derive(Clone, Debug)]
@@ -124,6 +125,9 @@ pub struct Drive {
     pub trajectory_source: String,
     /// The initial rig: extrinsics from the static TF tree, intrinsics from camera info.
     pub rig: Rig,
+    /// Intrinsics of every camera info in the log by (normalised) frame id, whether or not
+    /// images of that frame are in it.
+    pub camera_infos: BTreeMap<String, CameraIntrinsics>,
     pub streams: Vec<SensorStream>,
     pub problems: Vec<Problem>,
     image_cache: Mutex<VecDeque<((usize, usize), Arc<RgbImage>)>>,
@@ -390,6 +394,10 @@ impl Drive {
                 "no trajectory: no dynamic /tf, odometry or pose topic",
             ));
         }
+        let camera_infos = camera_infos
+            .into_iter()
+            .map(|(frame, (_, info))| (frame, info.intrinsics))
+            .collect();
         Ok(Self {
             container,
             topics,
@@ -398,6 +406,7 @@ impl Drive {
             trajectory,
             trajectory_source,
             rig,
+            camera_infos,
             streams,
             problems,
             image_cache: Mutex::new(VecDeque::new()),

@@ -1,0 +1,375 @@
+//! Export to, and import from, the formats calibration consumers use (docs/users.md §4).
+//!
+//! How it works: [`export`] turns a native calibration document into the files of one
+//! [`ExportFormat`] in memory (text, or an MCAP written through a temporary file), each file
+//! naming the direction of every transform it holds in a key or a comment (`p_parent =
+//! parent_from_child · p_child`). [`write`] puts them on disk atomically: one file, or one file
+//! per camera in a directory for the per-camera formats. [`import::load_initial_guess`] reads
+//! the native file, URDF, ROS camera_info YAML or the `/tf_static` of any MCAP *onto* a base
+//! rig (the log's sensors), matching sensors by frame id or name, so another tool's file becomes
+//! the initial guess of a calibration.
+//!
+//! Cameras are OpenCV optical frames throughout rigcal; formats that expect a camera's body
+//! frame (URDF's `camera_link`, Autoware) get it through REP-103 ([`frames`]).
+
+pub mod autoware;
+pub mod camera_info;
+pub mod frames;
+pub mod import;
+pub mod kalibr;
+pub mod kitti;
+pub mod mcap_tf;
+pub mod numbers;
+pub mod nuscenes;
+pub mod opencv;
+pub mod ros_tf;
+pub mod urdf;
+
+use std::path::{Path, PathBuf};
+
+use thiserror::Error;
+
+use crate::calib::{CalibrationFile, Rig, Sensor, SensorKind};
+
+#[derive(Debug, Error)]
+pub enum ExportError {
+    #[error("unknown export format '{0}' (expected one of: {list})", list = ExportFormat::names().join(", "))]
+    UnknownFormat(String),
+    #[error("{format}: {what}")]
+    Unsupported { format: &'static str, what: String },
+    #[error("{path}: cannot write: {what}")]
+    Write { path: PathBuf, what: String },
+}
+
+/// The formats `rigcal export --format` writes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum ExportFormat {
+    /// The native `rigcal_calibration: 1` YAML.
+    Native,
+    /// ROS `camera_info` YAML, one file per camera (directory).
+    CameraInfo,
+    /// `/tf_static` + `CameraInfo` as a ROS 2 MCAP (Foxglove, Rerun, ros2 bag play).
+    Mcap,
+    /// URDF fixed joints with REP-103 optical frames for cameras.
+    Urdf,
+    /// ROS 2 `static_transform_publisher` commands (a shell script).
+    Ros2StaticTf,
+    /// A ROS 2 XML launch file with one static_transform_publisher per sensor.
+    Ros2Launch,
+    /// Autoware `sensor_kit_calibration.yaml`.
+    Autoware,
+    /// OpenCV FileStorage YAML (Autoware.AI layout), one file per camera (directory).
+    OpenCv,
+    /// Kalibr camchain YAML.
+    Kalibr,
+    /// KITTI object calib (`P0..`, `R0_rect`, `Tr_velo_to_cam`, `Tr_imu_to_velo`).
+    Kitti,
+    /// nuScenes `calibrated_sensor.json`.
+    Nuscenes,
+}
+
+impl ExportFormat {
+    pub const ALL: [ExportFormat; 11] = [
+        Self::Native,
+        Self::CameraInfo,
+        Self::Mcap,
+        Self::Urdf,
+        Self::Ros2StaticTf,
+        Self::Ros2Launch,
+        Self::Autoware,
+        Self::OpenCv,
+        Self::Kalibr,
+        Self::Kitti,
+        Self::Nuscenes,
+    ];
+
+    /// The `--format` value.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Native => "native",
+            Self::CameraInfo => "camera-info",
+            Self::Mcap => "mcap",
+            Self::Urdf => "urdf",
+            Self::Ros2StaticTf => "ros2-static-tf",
+            Self::Ros2Launch => "ros2-launch",
+            Self::Autoware => "autoware",
+            Self::OpenCv => "opencv",
+            Self::Kalibr => "kalibr",
+            Self::Kitti => "kitti",
+            Self::Nuscenes => "nuscenes",
+        }
+    }
+
+    /// What a person picks from a list.
+    pub fn label(self) -> &'static str {
+        match self {
+            Self::Native => "rigcal native (YAML)",
+            Self::CameraInfo => "ROS camera_info YAML (one per camera)",
+            Self::Mcap => "MCAP: /tf_static + CameraInfo (ROS 2)",
+            Self::Urdf => "URDF fixed joints (REP-103 optical frames)",
+            Self::Ros2StaticTf => "ROS 2 static_transform_publisher commands",
+            Self::Ros2Launch => "ROS 2 launch file (static TF)",
+            Self::Autoware => "Autoware sensor_kit_calibration.yaml",
+            Self::OpenCv => "OpenCV FileStorage YAML (one per camera)",
+            Self::Kalibr => "Kalibr camchain",
+            Self::Kitti => "KITTI calib.txt",
+            Self::Nuscenes => "nuScenes calibrated_sensor.json",
+        }
+    }
+
+    /// What the file holds and which way its transforms go, in one or two sentences.
+    pub fn describe(self) -> &'static str {
+        match self {
+            Self::Native => {
+                "vehicle_from_sensor for every sensor: p_vehicle = R · p_sensor + t (t = the sensor's origin in the vehicle frame); cameras are OpenCV optical frames (x right, y down, z forward)."
+            }
+            Self::CameraInfo => {
+                "Intrinsics only, one file per camera: K, distortion in the ROS model's order, R = I, P = [K | 0]."
+            }
+            Self::Mcap => {
+                "One /tf_static message: parent = the vehicle frame, child = each sensor's frame, transform = the child's pose in the parent (vehicle_from_sensor); plus a CameraInfo per camera."
+            }
+            Self::Urdf => {
+                "Fixed joints whose origin is parent_from_child (p_parent = R(rpy) p_child + xyz); cameras get a body link (x forward) and an optical link (REP-103, rpy -π/2 0 -π/2)."
+            }
+            Self::Ros2StaticTf => {
+                "One static_transform_publisher per sensor: --frame-id = the vehicle frame (parent), --child-frame-id = the sensor frame; the transform is vehicle_from_sensor, quaternion x y z w."
+            }
+            Self::Ros2Launch => {
+                "The same publishers as a ROS 2 XML launch file: parent = the vehicle frame, child = the sensor frame, transform = vehicle_from_sensor."
+            }
+            Self::Autoware => {
+                "Each sensor's pose in the vehicle frame (parent_from_child) as x y z roll pitch yaw (URDF fixed-axis); cameras by their body frame <camera>_link, as Autoware expects."
+            }
+            Self::OpenCv => {
+                "One file per camera: CameraExtrinsicMat = lidar_from_camera (the camera's pose in the reference LiDAR's frame), CameraMat, DistCoeff, ImageSize."
+            }
+            Self::Kalibr => {
+                "cam0 = the reference camera; T_cn_cnm1 maps points from the previous camera into camera n (p_cn = T p_cn-1); radtan / equidistant / none."
+            }
+            Self::Kitti => {
+                "Tr_velo_to_cam = cam0_from_lidar, Tr_imu_to_velo = lidar_from_vehicle, P_i = K_i [cami_from_cam0], R0_rect = I; undistorted cameras only."
+            }
+            Self::Nuscenes => {
+                "ego_from_sensor per sensor: translation (m) and rotation as w, x, y, z; camera_intrinsic for cameras."
+            }
+        }
+    }
+
+    /// Default file name, or directory name for the per-camera formats.
+    pub fn default_file_name(self) -> &'static str {
+        match self {
+            Self::Native => "calibration.yaml",
+            Self::CameraInfo => "camera_info",
+            Self::Mcap => "calibration.mcap",
+            Self::Urdf => "rig.urdf",
+            Self::Ros2StaticTf => "static_tf.sh",
+            Self::Ros2Launch => "static_tf.launch.xml",
+            Self::Autoware => "sensor_kit_calibration.yaml",
+            Self::OpenCv => "opencv",
+            Self::Kalibr => "camchain.yaml",
+            Self::Kitti => "calib.txt",
+            Self::Nuscenes => "calibrated_sensor.json",
+        }
+    }
+
+    /// Per-camera formats write a directory with one file per camera.
+    pub fn is_directory(self) -> bool {
+        matches!(self, Self::CameraInfo | Self::OpenCv)
+    }
+
+    pub fn names() -> Vec<&'static str> {
+        Self::ALL.iter().map(|f| f.name()).collect()
+    }
+}
+
+impl std::str::FromStr for ExportFormat {
+    type Err = ExportError;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        Self::ALL
+            .into_iter()
+            .find(|f| f.name() == s)
+            .ok_or_else(|| ExportError::UnknownFormat(s.to_string()))
+    }
+}
+
+/// Choices some formats need.
+#[derive(Clone, Debug, Default)]
+pub struct ExportOptions {
+    /// Only these sensors (by name); empty: every sensor.
+    pub sensors: Vec<String>,
+    /// The LiDAR that OpenCV's `CameraExtrinsicMat` and KITTI's `Tr_velo_to_cam` refer to
+    /// (default: the first LiDAR).
+    pub lidar: Option<String>,
+    /// KITTI's and Kalibr's reference camera, cam0 (default: the first camera).
+    pub camera: Option<String>,
+}
+
+/// One written file: its name (inside the output directory for per-camera formats) and bytes.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ExportedFile {
+    pub name: String,
+    pub bytes: Vec<u8>,
+}
+
+/// The files of one export.
+#[derive(Clone, Debug)]
+pub struct Export {
+    pub format: ExportFormat,
+    pub files: Vec<ExportedFile>,
+}
+
+impl Export {
+    /// The text of every file, for a preview (binary files summarised).
+    pub fn preview(&self) -> String {
+        let mut out = String::new();
+        for f in &self.files {
+            if self.files.len() > 1 {
+                out.push_str(&format!("==> {} <==\n", f.name));
+            }
+            match std::str::from_utf8(&f.bytes) {
+                Ok(text) => out.push_str(text),
+                Err(_) => out.push_str(&format!("({} bytes of binary data)\n", f.bytes.len())),
+            }
+            if self.files.len() > 1 {
+                out.push('\n');
+            }
+        }
+        out
+    }
+}
+
+/// Export `doc` (validated) in `format`.
+pub fn export(
+    doc: &CalibrationFile,
+    format: ExportFormat,
+    options: &ExportOptions,
+) -> Result<Export, ExportError> {
+    let unsupported = |what: String| ExportError::Unsupported {
+        format: format.name(),
+        what,
+    };
+    let full = doc
+        .to_rig(Path::new("the calibration"))
+        .map_err(|e| unsupported(e.to_string()))?;
+    let rig = select(&full, &options.sensors).map_err(unsupported)?;
+    let one = |text: String| {
+        vec![ExportedFile {
+            name: format.default_file_name().to_string(),
+            bytes: text.into_bytes(),
+        }]
+    };
+    let files = match format {
+        ExportFormat::Native => {
+            let mut out = CalibrationFile::from_rig(&rig);
+            out.provenance = doc.provenance.clone();
+            out.metrics = doc.metrics.clone();
+            one(out.to_yaml())
+        }
+        ExportFormat::CameraInfo => camera_info::export(&rig).map_err(unsupported)?,
+        ExportFormat::Mcap => one_binary(format, mcap_tf::export(&rig).map_err(unsupported)?),
+        ExportFormat::Urdf => one(urdf::export(&rig)),
+        ExportFormat::Ros2StaticTf => one(ros_tf::script(&rig)),
+        ExportFormat::Ros2Launch => one(ros_tf::launch(&rig)),
+        ExportFormat::Autoware => one(autoware::export(&rig)),
+        ExportFormat::OpenCv => {
+            opencv::export(&rig, options.lidar.as_deref()).map_err(unsupported)?
+        }
+        ExportFormat::Kalibr => {
+            one(kalibr::export(&rig, options.camera.as_deref()).map_err(unsupported)?)
+        }
+        ExportFormat::Kitti => {
+            one(
+                kitti::export(&rig, options.camera.as_deref(), options.lidar.as_deref())
+                    .map_err(unsupported)?,
+            )
+        }
+        ExportFormat::Nuscenes => one(nuscenes::export(&rig)),
+    };
+    Ok(Export { format, files })
+}
+
+fn one_binary(format: ExportFormat, bytes: Vec<u8>) -> Vec<ExportedFile> {
+    vec![ExportedFile {
+        name: format.default_file_name().to_string(),
+        bytes,
+    }]
+}
+
+/// The sensors named in `names` (all when empty), in the rig's order.
+fn select(rig: &Rig, names: &[String]) -> Result<Rig, String> {
+    if let Some(missing) = names.iter().find(|n| rig.sensor(n).is_none()) {
+        let known: Vec<&str> = rig.sensors.iter().map(|s| s.name.as_str()).collect();
+        return Err(format!(
+            "'{missing}' is not a sensor of the calibration (it has: {})",
+            known.join(", ")
+        ));
+    }
+    Ok(Rig {
+        vehicle_frame: rig.vehicle_frame.clone(),
+        sensors: rig
+            .sensors
+            .iter()
+            .filter(|s| names.is_empty() || names.contains(&s.name))
+            .cloned()
+            .collect(),
+    })
+}
+
+/// The sensor named `name` of `kind`, or the rig's first of that kind.
+pub(crate) fn pick<'a>(
+    rig: &'a Rig,
+    kind: SensorKind,
+    name: Option<&str>,
+) -> Result<&'a Sensor, String> {
+    match name {
+        Some(n) => rig
+            .sensor(n)
+            .filter(|s| s.kind == kind)
+            .ok_or_else(|| format!("'{n}' is not a {} of the calibration", kind.as_str())),
+        None => rig
+            .sensors
+            .iter()
+            .find(|s| s.kind == kind)
+            .ok_or_else(|| format!("the calibration has no {}", kind.as_str())),
+    }
+}
+
+/// Write an export atomically: the file at `out`, or for per-camera formats the directory `out`
+/// (created if missing) holding one file per camera, each written atomically. Nothing is
+/// written unless every file's directory exists or can be made.
+pub fn write(export: &Export, out: &Path) -> Result<Vec<PathBuf>, ExportError> {
+    let err = |path: &Path, what: String| ExportError::Write {
+        path: path.to_path_buf(),
+        what,
+    };
+    if export.format.is_directory() {
+        if out.is_file() {
+            return Err(err(
+                out,
+                format!(
+                    "is a file; the {} export writes a directory (one file per camera)",
+                    export.format.name()
+                ),
+            ));
+        }
+        std::fs::create_dir_all(out).map_err(|e| err(out, e.to_string()))?;
+        let mut written = Vec::new();
+        for f in &export.files {
+            let path = out.join(&f.name);
+            crate::util::write_atomic(&path, &f.bytes).map_err(|e| err(&path, e.to_string()))?;
+            written.push(path);
+        }
+        Ok(written)
+    } else {
+        if out.is_dir() {
+            return Err(err(out, "is a directory; give a file name".into()));
+        }
+        let bytes = export.files.first().map_or(&[][..], |f| &f.bytes);
+        crate::util::write_atomic(out, bytes).map_err(|e| err(out, e.to_string()))?;
+        Ok(vec![out.to_path_buf()])
+    }
+}
+
+#[cfg(test)]
+pub(crate) mod test_rig;
