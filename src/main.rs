@@ -285,7 +285,9 @@ fn run() -> Result<()> {
         }) => {
             use rigcal::interop;
             let format: interop::ExportFormat = format.parse()?;
-            let doc = rigcal::calib::CalibrationFile::load(&calibration)?;
+            // The library's errors already name the file and the cause: print them once.
+            let doc = rigcal::calib::CalibrationFile::load(&calibration)
+                .map_err(|e| anyhow::Error::msg(e.to_string()))?;
             let options = interop::ExportOptions {
                 sensors,
                 lidar,

@@ -488,3 +488,65 @@ fn icp_runs_from_the_optimiser_panel() {
     }
     assert!(h.state().status.iter().all(|s| !s.starts_with("error")));
 }
+
+#[test]
+fn the_export_panel_writes_every_format_and_a_urdf_loads_back_as_an_undoable_edit() {
+    use rigcal::app::state::Tab;
+    use rigcal::interop::{ExportFormat, write};
+    let mut h = harness(pandaset());
+    h.state_mut().tab = Tab::Export;
+    h.run_steps(2);
+    let dir = std::env::temp_dir().join(format!("rigcal-studio-export-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    for format in ExportFormat::ALL {
+        h.state_mut().export.format = Some(format);
+        h.run_steps(2);
+        // The button says where it writes: a folder for the per-camera formats.
+        let button = if format.is_directory() {
+            "Save to folder…"
+        } else {
+            "Save…"
+        };
+        h.get_by_label(button);
+        let export = match h.state().export.last() {
+            Some(Ok(e)) => e.clone(),
+            other => panic!("{}: {other:?}", format.name()),
+        };
+        assert_eq!(export.format, format);
+        // PandaSet's cameras are undistorted pinholes, so every format can take the whole rig.
+        let out = dir.join(format.default_file_name());
+        let files = write(&export, &out).unwrap();
+        assert!(!files.is_empty() && files.iter().all(|f| f.metadata().unwrap().len() > 0));
+    }
+    // A URDF edited elsewhere comes back as one edit, and undo takes it back.
+    let before = h.state().current.clone();
+    let lidar = before.lidars().last().unwrap().clone();
+    let mut moved = before.clone();
+    moved
+        .sensor_mut(&lidar.name)
+        .unwrap()
+        .vehicle_from_sensor
+        .translation
+        .z += 0.25;
+    let urdf = dir.join("moved.urdf");
+    let doc = rigcal::calib::CalibrationFile::from_rig(&moved);
+    let e = rigcal::interop::export(&doc, ExportFormat::Urdf, &Default::default()).unwrap();
+    write(&e, &urdf).unwrap();
+    h.state_mut().load_calibration(&urdf);
+    h.run_steps(2);
+    let got = h
+        .state()
+        .current
+        .sensor(&lidar.name)
+        .unwrap()
+        .vehicle_from_sensor;
+    assert!((got.translation.z - lidar.vehicle_from_sensor.translation.z - 0.25).abs() < 1e-9);
+    let status = h.state().status.last().unwrap().clone();
+    assert!(
+        status.contains("URDF") && status.contains("8 of 8"),
+        "{status}"
+    );
+    h.state_mut().undo();
+    assert_eq!(h.state().current, before);
+    let _ = std::fs::remove_dir_all(dir);
+}

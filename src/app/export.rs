@@ -19,6 +19,13 @@ pub struct ExportPanel {
     cache: Option<(String, Result<Export, String>)>,
 }
 
+impl ExportPanel {
+    /// The export the panel shows (made on the last frame), or why it could not be made.
+    pub fn last(&self) -> Option<&Result<Export, String>> {
+        self.cache.as_ref().map(|(_, e)| e)
+    }
+}
+
 /// The native calibration document for `rig`, with provenance and the checks' metrics.
 pub fn document(studio: &Studio, rig: &Rig, which: ExtrinsicsView) -> CalibrationFile {
     let mut doc = CalibrationFile::from_rig(rig);

@@ -279,6 +279,53 @@ mod tests {
     }
 
     #[test]
+    fn a_sensor_that_is_the_vehicle_frame_gets_no_transform_to_itself() {
+        // PandaSet's layout: the vehicle frame is the main LiDAR's.
+        let mut rig = test_rig::rig();
+        rig.vehicle_frame = "lidar_top".into();
+        let lidar_top = rig
+            .sensor("lidar_top")
+            .unwrap()
+            .vehicle_from_sensor
+            .inverse();
+        for s in &mut rig.sensors {
+            s.vehicle_from_sensor = lidar_top * s.vehicle_from_sensor;
+        }
+        let doc = CalibrationFile::from_rig(&rig);
+        let dir = scratch("self-frame");
+        for format in [ExportFormat::Urdf, ExportFormat::Mcap] {
+            let out = dir.join(format.default_file_name());
+            write(
+                &export(&doc, format, &ExportOptions::default()).unwrap(),
+                &out,
+            )
+            .unwrap();
+            let got = load_initial_guess(&out, &spoiled_with_frame(&rig)).unwrap();
+            assert_eq!(got.matched.len(), rig.sensors.len(), "{}", format.name());
+            let (r, t) = test_rig::max_difference(&rig, &got.rig);
+            assert!(r < 1e-12 && t < 1e-12, "{}: {r} {t}", format.name());
+        }
+        let urdf = String::from_utf8(
+            export(&doc, ExportFormat::Urdf, &ExportOptions::default())
+                .unwrap()
+                .files[0]
+                .bytes
+                .clone(),
+        )
+        .unwrap();
+        assert!(!urdf.contains("<child link=\"lidar_top\"/>"), "{urdf}");
+        let sh = super::super::ros_tf::script(&rig);
+        assert!(!sh.contains("--child-frame-id lidar_top\n") && sh.contains("identity"));
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    fn spoiled_with_frame(rig: &Rig) -> Rig {
+        let mut s = spoiled();
+        s.vehicle_frame = rig.vehicle_frame.clone();
+        s
+    }
+
+    #[test]
     fn urdf_with_extra_links_between_resolves() {
         let text = r#"<robot name="r">
   <link name="base_link"/><link name="sensor_kit"/><link name="lidar_top"/>

@@ -43,6 +43,8 @@ pub fn write(rig: &Rig, path: &Path) -> Result<(), String> {
     let transforms: Vec<_> = rig
         .sensors
         .iter()
+        // tf2 ignores a transform from a frame to itself (a sensor that is the vehicle frame).
+        .filter(|s| s.frame_id != rig.vehicle_frame)
         .map(|s| {
             (
                 rig.vehicle_frame.clone(),

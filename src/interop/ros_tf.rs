@@ -36,6 +36,13 @@ pub fn script(rig: &Rig) -> String {
         DIRECTION
     );
     for s in &rig.sensors {
+        if s.frame_id == rig.vehicle_frame {
+            out.push_str(&format!(
+                "# {}: its frame is the vehicle frame (identity): nothing to publish\n",
+                s.name
+            ));
+            continue;
+        }
         out.push_str(&format!(
             "# {} ({}): vehicle_from_sensor\nros2 run tf2_ros static_transform_publisher {} &\n",
             s.name,
@@ -71,7 +78,11 @@ pub fn launch(rig: &Rig) -> String {
         env!("CARGO_PKG_VERSION"),
         DIRECTION
     );
-    for s in &rig.sensors {
+    for s in rig
+        .sensors
+        .iter()
+        .filter(|s| s.frame_id != rig.vehicle_frame)
+    {
         out.push_str(&format!(
             "  <!-- {}: vehicle_from_sensor -->\n  <node pkg=\"tf2_ros\" exec=\"static_transform_publisher\" name=\"{}\" args=\"{}\"/>\n",
             esc(&s.name).replace("--", "- -"),

@@ -52,6 +52,10 @@ pub fn export(rig: &Rig) -> String {
     let mut links = vec![v.clone()];
     let mut joints = String::new();
     for s in &rig.sensors {
+        if s.frame_id == *v {
+            // The sensor defines the vehicle frame (PandaSet's pandar64): no joint to itself.
+            continue;
+        }
         match s.kind {
             SensorKind::Lidar => {
                 joint(
