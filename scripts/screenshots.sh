@@ -50,7 +50,11 @@ if want pandaset-checks; then
   shot pandaset-checks 90; stop
 fi
 if want pandaset-export; then
-  session export 3 false 0 intensity export
+  # The export panel on the URDF format (chosen through the session's view).
+  cat > "$tmp/export.json" <<JSON
+{"rigcal_session": 1, "log": "$log", "initial": null, "current": null, "camera": 3,
+ "view": {"color_by": "intensity", "tab": "export", "export_format": "urdf"}}
+JSON
   start --session "$tmp/export.json"; shot pandaset-export 6; stop
 fi
 if want checkerboard-checks; then

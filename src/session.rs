@@ -90,6 +90,9 @@ pub struct SessionView {
     /// The right-hand panel: optimise | checks | export
     #[serde(default)]
     pub tab: String,
+    /// The export panel's format (a `rigcal export --format` name; empty: native).
+    #[serde(default, skip_serializing_if = "String::is_empty")]
+    pub export_format: String,
 }
 
 fn default_color_by() -> String {

@@ -413,6 +413,11 @@ impl Studio {
                 Tab::Export => "export",
             }
             .into(),
+            export_format: self
+                .export
+                .format
+                .map(|f| f.name().to_string())
+                .unwrap_or_default(),
         });
         s
     }
@@ -499,6 +504,7 @@ impl Studio {
                 "export" => Tab::Export,
                 _ => Tab::Optimise,
             };
+            self.export.format = v.export_format.parse().ok();
         }
         self.overlays.clear();
         self.status
