@@ -39,6 +39,28 @@ impl CameraModel {
         }
     }
 
+    /// Number of coefficients ROS's CameraInfo carries for the model (pinhole: plumb_bob's 5).
+    pub fn ros_distortion_len(self) -> usize {
+        match self {
+            CameraModel::Pinhole | CameraModel::PlumbBob => 5,
+            CameraModel::RationalPolynomial => 8,
+            CameraModel::Equidistant => 4,
+        }
+    }
+
+    /// The model and coefficients as read from a file or message: an all-zero radial-tangential
+    /// distortion is a pinhole whatever the model's name (an all-zero fisheye is still a
+    /// fisheye: r = f·θ, not f·tan θ).
+    pub fn normalized(self, distortion: Vec<f64>) -> (Self, Vec<f64>) {
+        if self == CameraModel::Pinhole
+            || (self != CameraModel::Equidistant && distortion.iter().all(|&v| v == 0.0))
+        {
+            (CameraModel::Pinhole, Vec::new())
+        } else {
+            (self, distortion)
+        }
+    }
+
     /// Parse a ROS `distortion_model` string (also accepts a few common aliases).
     pub fn parse(name: &str) -> Option<Self> {
         match name.trim().to_ascii_lowercase().as_str() {
@@ -78,6 +100,17 @@ impl CameraIntrinsics {
             cy,
             distortion: Vec::new(),
         }
+    }
+
+    /// The ROS `distortion_model` name and coefficients padded to its length: a pinhole is
+    /// written as `plumb_bob` with five zeros, as ROS drivers do.
+    pub fn ros_distortion(&self) -> (&'static str, Vec<f64>) {
+        let (name, mut d) = match self.model {
+            CameraModel::Pinhole => (CameraModel::PlumbBob.as_str(), Vec::new()),
+            m => (m.as_str(), self.distortion.clone()),
+        };
+        d.resize(self.model.ros_distortion_len().max(d.len()), 0.0);
+        (name, d)
     }
 
     /// Pixel of a point in the camera frame; `None` if it is not in front of the camera
@@ -527,6 +560,29 @@ mod tests {
                 }
             }
         }
+    }
+
+    #[test]
+    fn zero_distortion_reads_as_pinhole_but_a_zero_fisheye_stays_a_fisheye() {
+        use CameraModel::*;
+        assert_eq!(PlumbBob.normalized(vec![0.0; 5]), (Pinhole, vec![]));
+        assert_eq!(
+            RationalPolynomial.normalized(vec![0.0; 8]),
+            (Pinhole, vec![])
+        );
+        assert_eq!(
+            Equidistant.normalized(vec![0.0; 4]),
+            (Equidistant, vec![0.0; 4])
+        );
+        assert_eq!(PlumbBob.normalized(vec![0.1]), (PlumbBob, vec![0.1]));
+        let mut c = CameraIntrinsics::pinhole(10, 10, 1.0, 1.0, 5.0, 5.0);
+        assert_eq!(c.ros_distortion(), ("plumb_bob", vec![0.0; 5]));
+        c.model = Equidistant;
+        c.distortion = vec![0.1];
+        assert_eq!(
+            c.ros_distortion(),
+            ("equidistant", vec![0.1, 0.0, 0.0, 0.0])
+        );
     }
 
     #[test]

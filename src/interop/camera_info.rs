@@ -13,25 +13,6 @@ use super::numbers::list;
 use crate::calib::{Rig, Sensor};
 use crate::geometry::camera::{CameraIntrinsics, CameraModel};
 
-/// Number of coefficients ROS expects for a model.
-pub fn distortion_len(model: CameraModel) -> usize {
-    match model {
-        CameraModel::Pinhole | CameraModel::PlumbBob => 5,
-        CameraModel::RationalPolynomial => 8,
-        CameraModel::Equidistant => 4,
-    }
-}
-
-/// The ROS model name and the coefficients padded to its length.
-pub fn ros_distortion(c: &CameraIntrinsics) -> (&'static str, Vec<f64>) {
-    let (name, mut d) = match c.model {
-        CameraModel::Pinhole => (CameraModel::PlumbBob.as_str(), Vec::new()),
-        m => (m.as_str(), c.distortion.clone()),
-    };
-    d.resize(distortion_len(c.model).max(d.len()), 0.0);
-    (name, d)
-}
-
 /// `K` row-major.
 pub fn k_matrix(c: &CameraIntrinsics) -> [f64; 9] {
     [c.fx, 0.0, c.cx, 0.0, c.fy, c.cy, 0.0, 0.0, 1.0]
@@ -39,7 +20,7 @@ pub fn k_matrix(c: &CameraIntrinsics) -> [f64; 9] {
 
 /// One camera's file text.
 pub fn text(camera: &Sensor, c: &CameraIntrinsics) -> String {
-    let (model, d) = ros_distortion(c);
+    let (model, d) = c.ros_distortion();
     let p = [
         c.fx, 0.0, c.cx, 0.0, 0.0, c.fy, c.cy, 0.0, 0.0, 0.0, 1.0, 0.0,
     ];
@@ -143,16 +124,7 @@ pub fn parse(text: &str, path: &Path) -> Result<(Option<String>, CameraIntrinsic
         ));
     }
     // A pinhole written as plumb_bob with zeros reads back as pinhole.
-    let model = if model == CameraModel::PlumbBob && distortion.iter().all(|&v| v == 0.0) {
-        CameraModel::Pinhole
-    } else {
-        model
-    };
-    let distortion = if model == CameraModel::Pinhole {
-        Vec::new()
-    } else {
-        distortion
-    };
+    let (model, distortion) = model.normalized(distortion);
     Ok((
         y.camera_name.filter(|n| !n.is_empty()),
         CameraIntrinsics {
@@ -182,7 +154,7 @@ mod tests {
             let (name, c) = parse(&text, Path::new(&f.name)).unwrap();
             assert_eq!(name.as_deref(), Some(cam.name.as_str()));
             let mut expected = cam.camera.clone().unwrap();
-            let n = distortion_len(expected.model);
+            let n = expected.model.ros_distortion_len();
             if expected.model != CameraModel::Pinhole {
                 expected.distortion.resize(n, 0.0);
             }

@@ -6,7 +6,7 @@
 //! order), `ImageSize`, `ReprojectionError` and `DistModel` follow. Two extra matrices name
 //! their direction in their keys: `VehicleFromCamera` and `VehicleFromLidar`.
 
-use super::camera_info::{file_stem, k_matrix, ros_distortion};
+use super::camera_info::{file_stem, k_matrix};
 use super::numbers::{list, rows_4x4};
 use super::{ExportedFile, pick};
 use crate::calib::{Rig, SensorKind};
@@ -32,7 +32,7 @@ pub fn export(rig: &Rig, lidar: Option<&str>) -> Result<Vec<ExportedFile>, Strin
     for cam in rig.cameras() {
         let Some(c) = &cam.camera else { continue };
         let ref_from_camera = vehicle_from_ref.inverse() * cam.vehicle_from_sensor;
-        let (model, d) = ros_distortion(c);
+        let (model, d) = c.ros_distortion();
         let mut text = format!(
             "%YAML:1.0\n---\n\
              # Camera '{cam}' written by rigcal {version} (OpenCV FileStorage, Autoware.AI layout).\n\
@@ -134,10 +134,7 @@ mod tests {
             let (dr, dt) = got.difference(expected);
             assert!(dr < 1e-9 && dt < 1e-12);
             let (_, _, nd, _) = m.iter().find(|m| m.0 == "DistCoeff").unwrap();
-            assert_eq!(
-                *nd,
-                super::super::camera_info::distortion_len(cam.camera.as_ref().unwrap().model)
-            );
+            assert_eq!(*nd, cam.camera.as_ref().unwrap().model.ros_distortion_len());
         }
         assert!(
             export(&rig, Some("front_camera"))

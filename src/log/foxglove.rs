@@ -120,16 +120,7 @@ fn calibration(
     }
     let model = CameraModel::parse(model)
         .ok_or_else(|| DecodeError::new(format!("unknown distortion_model '{model}'")))?;
-    let model = if d.iter().all(|v| *v == 0.0) {
-        CameraModel::Pinhole
-    } else {
-        model
-    };
-    let distortion = if model == CameraModel::Pinhole {
-        Vec::new()
-    } else {
-        d
-    };
+    let (model, distortion) = model.normalized(d);
     Ok(Decoded::CameraInfo(CameraInfoMsg {
         stamp_nanos: stamp,
         frame_id,

@@ -123,17 +123,7 @@ pub fn decode(kind: Ros2Type, payload: &[u8]) -> DecodeResult<Decoded<'_>> {
             let model = CameraModel::parse(&model_name).ok_or_else(|| {
                 DecodeError::new(format!("unknown distortion_model '{model_name}'"))
             })?;
-            // An all-zero distortion is a pinhole whatever the model says.
-            let model = if d.iter().all(|v| *v == 0.0) {
-                CameraModel::Pinhole
-            } else {
-                model
-            };
-            let distortion = if model == CameraModel::Pinhole {
-                Vec::new()
-            } else {
-                d
-            };
+            let (model, distortion) = model.normalized(d);
             Decoded::CameraInfo(CameraInfoMsg {
                 stamp_nanos: h.stamp_nanos,
                 frame_id: h.frame_id,

@@ -33,7 +33,7 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use thiserror::Error;
 
 use crate::geometry::Rigid;
-use crate::geometry::camera::{CameraIntrinsics, CameraModel};
+use crate::geometry::camera::CameraIntrinsics;
 
 /// An error of [`Ros2McapWriter`]; every message names the output file.
 #[derive(Debug, Error)]
@@ -330,15 +330,6 @@ const FLOAT32: u8 = 7;
 /// Fields of the clouds this writer produces: name and byte offset, all float32, count 1.
 const CLOUD_FIELDS: [(&str, u32); 5] = [("x", 0), ("y", 4), ("z", 8), ("intensity", 12), ("t", 16)];
 const POINT_STEP: usize = 20;
-
-/// Number of distortion coefficients ROS expects for a model.
-fn distortion_len(model: CameraModel) -> usize {
-    match model {
-        CameraModel::Pinhole | CameraModel::PlumbBob => 5,
-        CameraModel::RationalPolynomial => 8,
-        CameraModel::Equidistant => 4,
-    }
-}
 
 // ------------------------------------------------------------------------------------------------
 // The writer
@@ -674,13 +665,7 @@ impl Ros2McapWriter {
         intrinsics: &CameraIntrinsics,
     ) -> Result<(), WriterError> {
         let c = intrinsics;
-        let (model_name, mut d) = match c.model {
-            CameraModel::Pinhole => (CameraModel::PlumbBob.as_str(), Vec::new()),
-            m => (m.as_str(), c.distortion.clone()),
-        };
-        if d.len() < distortion_len(c.model) {
-            d.resize(distortion_len(c.model), 0.0);
-        }
+        let (model_name, d) = c.ros_distortion();
         let k = [c.fx, 0.0, c.cx, 0.0, c.fy, c.cy, 0.0, 0.0, 1.0];
         let r = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0];
         let p = [
