@@ -550,3 +550,46 @@ fn the_export_panel_writes_every_format_and_a_urdf_loads_back_as_an_undoable_edi
     assert_eq!(h.state().current, before);
     let _ = std::fs::remove_dir_all(dir);
 }
+
+#[test]
+fn mutual_information_runs_from_the_optimiser_panel_and_moves_only_its_camera() {
+    use rigcal::app::optimiser::Method;
+    let mut h = harness(pandaset());
+    h.run_steps(2);
+    h.state_mut().optimiser.method = Method::MutualInformation;
+    h.state_mut().optimiser.frames = 1;
+    h.state_mut().optimiser.cameras = vec!["front_camera".into()];
+    h.run_steps(2);
+    let before = h.state().current.clone();
+    h.get_by_label("Start").click();
+    h.run_steps(1);
+    assert!(
+        run_until(&mut h, 300.0, |s| s.optimiser.run.is_none()
+            && !s.optimiser.history.is_empty()),
+        "MI did not finish: {:?}",
+        s_status(&h)
+    );
+    let losses = h.state().optimiser.history.last().unwrap().1.clone();
+    assert!(
+        losses
+            .iter()
+            .any(|(n, v)| n == "mi_nats/front_camera" && v.is_finite() && *v > 0.0),
+        "{losses:?}"
+    );
+    for s in &before.sensors {
+        let (rot, trans) = s.vehicle_from_sensor.difference(
+            h.state()
+                .current
+                .sensor(&s.name)
+                .unwrap()
+                .vehicle_from_sensor,
+        );
+        if s.name == "front_camera" {
+            // Within the paper's bounds: ±2° and ±20 cm per axis.
+            assert!(rot.to_degrees() < 3.5 && trans < 0.35, "{rot} {trans}");
+        } else {
+            assert!(rot + trans < 1e-12, "{} moved", s.name);
+        }
+    }
+    assert!(h.state().status.iter().all(|s| !s.starts_with("error")));
+}

@@ -20,6 +20,7 @@ pub enum Method {
     #[default]
     EdgeAlign,
     Icp,
+    MutualInformation,
     UnicalLidar,
     Unical,
 }
@@ -29,6 +30,9 @@ impl Method {
         match self {
             Method::EdgeAlign => "Edge alignment (cameras vs LiDAR, rotation)",
             Method::Icp => "Point-to-plane ICP (LiDARs vs the reference LiDAR)",
+            Method::MutualInformation => {
+                "Mutual information (cameras vs LiDAR reflectivity, ±2° / ±20 cm)"
+            }
             Method::UnicalLidar => "UniCal, LiDAR terms (scene + LiDARs; slow on CPU)",
             Method::Unical => "UniCal, LiDARs + cameras (1/8-size images; slowest)",
         }
@@ -207,6 +211,21 @@ pub fn start(studio: &mut Studio) {
         }));
         return;
     }
+    if method == Method::MutualInformation {
+        studio.optimiser.run = Some(Run::spawn_with(move || {
+            crate::classical::mi_calibrator::MiCalibrator::from_drive(
+                &drive,
+                &prepare_rig,
+                &lidar,
+                &cameras,
+                frames,
+                &segments,
+                crate::classical::mutual_info::MiConfig::default(),
+            )
+            .map(|c| Box::new(c) as Box<dyn Calibrator>)
+        }));
+        return;
+    }
     studio.optimiser.run = Some(Run::spawn_with(move || {
         EdgeRefiner::new(&drive, &prepare_rig, &lidar, &cameras, frames, &segments)
             .map(|r| Box::new(r) as Box<dyn Calibrator>)
@@ -227,6 +246,7 @@ pub fn optimiser_ui(studio: &mut Studio, ui: &mut egui::Ui) {
                 for m in [
                     Method::EdgeAlign,
                     Method::Icp,
+                    Method::MutualInformation,
                     Method::UnicalLidar,
                     Method::Unical,
                 ] {

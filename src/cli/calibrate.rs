@@ -14,6 +14,8 @@ use std::path::PathBuf;
 use crate::calib::{CalibrationFile, Rig};
 use crate::classical::icp::IcpConfig;
 use crate::classical::icp_calibrator::IcpCalibrator;
+use crate::classical::mi_calibrator::MiCalibrator;
+use crate::classical::mutual_info::MiConfig;
 use crate::log::Drive;
 use crate::optim::edge_refine::EdgeRefiner;
 use crate::optim::runner::Calibrator;
@@ -140,9 +142,32 @@ pub fn calibrate(
                     IcpConfig::default(),
                 )?)
             }
-            m @ ("mi" | "target" | "pose-graph") => {
+            "mi" => {
+                let reference = match &args.root {
+                    Some(r) => r.clone(),
+                    None => rig
+                        .lidars()
+                        .next()
+                        .map(|l| l.name.clone())
+                        .ok_or("the log has no LiDAR")?,
+                };
+                let cameras: Vec<String> = rig
+                    .cameras()
+                    .filter(|c| c.camera.is_some())
+                    .map(|c| c.name.clone())
+                    .filter(|c| args.sensors.is_empty() || args.sensors.contains(c))
+                    .collect();
+                let config = MiConfig {
+                    iterations: args.iterations.unwrap_or(MiConfig::default().iterations),
+                    ..MiConfig::default()
+                };
+                Box::new(MiCalibrator::from_drive(
+                    &drive, &rig, &reference, &cameras, 3, &segments, config,
+                )?)
+            }
+            m @ ("target" | "pose-graph") => {
                 return Err(format!(
-                    "--method {m} is not in this build yet (available: unical, icp, edge)"
+                    "--method {m} is not in this build yet (available: unical, icp, mi, edge)"
                 ));
             }
             m => {

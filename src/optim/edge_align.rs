@@ -54,6 +54,68 @@ pub enum AlignError {
     Setup(String),
 }
 
+/// A LiDAR sweep and the image of a camera nearest to it in time.
+pub struct SweepImagePair {
+    pub sweep: LidarSweep,
+    pub image_index: usize,
+    pub image_stamp_nanos: i64,
+}
+
+/// Up to `frames` sweeps of `lidar`, evenly spread over `segments_nanos` (empty: the whole
+/// drive), each with the image of `camera` nearest in time (within 200 ms, inside the
+/// trajectory). Errors name what is missing.
+pub fn sweep_image_pairs(
+    drive: &Drive,
+    camera: &str,
+    lidar: &str,
+    frames: usize,
+    segments_nanos: &[(i64, i64)],
+) -> Result<Vec<SweepImagePair>, AlignError> {
+    let cam_stream = drive
+        .stream(camera)
+        .ok_or_else(|| AlignError::Setup(format!("no images for '{camera}' in the log")))?;
+    if drive.stream(lidar).is_none() {
+        return Err(AlignError::Setup(format!(
+            "no sweeps for '{lidar}' in the log"
+        )));
+    }
+    let usable = drive.frames_within(lidar, segments_nanos);
+    if usable.is_empty() {
+        return Err(AlignError::Setup(format!(
+            "no sweep of '{lidar}' inside the trajectory and the selected segments"
+        )));
+    }
+    let mut out = Vec::with_capacity(frames);
+    for sweep_index in crate::log::spread_evenly(&usable, frames) {
+        let sweep = drive.load_sweep(lidar, sweep_index)?;
+        let Some(image_index) = (0..cam_stream.frames.len())
+            .min_by_key(|&j| (cam_stream.frames[j].stamp_nanos - sweep.stamp_nanos).abs())
+        else {
+            continue;
+        };
+        let image_stamp_nanos = cam_stream.frames[image_index].stamp_nanos;
+        if (image_stamp_nanos - sweep.stamp_nanos).abs() > 200_000_000
+            || drive
+                .trajectory
+                .world_from_vehicle(image_stamp_nanos)
+                .is_err()
+        {
+            continue;
+        }
+        out.push(SweepImagePair {
+            sweep,
+            image_index,
+            image_stamp_nanos,
+        });
+    }
+    if out.is_empty() {
+        return Err(AlignError::Setup(format!(
+            "no image of '{camera}' within 200 ms of a sweep of '{lidar}'"
+        )));
+    }
+    Ok(out)
+}
+
 /// Silhouette points of `sweep` moved into the vehicle frame at `image_stamp_nanos`.
 pub fn silhouettes_in_vehicle(
     sweep: &LidarSweep,
@@ -61,13 +123,33 @@ pub fn silhouettes_in_vehicle(
     vehicle_from_lidar: Rigid,
     image_stamp_nanos: i64,
 ) -> Result<Vec<DVec3>, TrajectoryError> {
+    let indices = edges::depth_discontinuities(&sweep.points_in_sensor, 0.05);
+    points_in_vehicle_at(
+        sweep,
+        &indices,
+        drive_trajectory,
+        vehicle_from_lidar,
+        image_stamp_nanos,
+    )
+}
+
+/// The points `indices` of `sweep`, each taken through the trajectory at its own firing time
+/// into the vehicle frame at `image_stamp_nanos`:
+/// `world_from_vehicle(t_img)⁻¹ · world_from_vehicle(t_pt) · vehicle_from_lidar · p`.
+pub fn points_in_vehicle_at(
+    sweep: &LidarSweep,
+    indices: &[usize],
+    drive_trajectory: &crate::geometry::Trajectory,
+    vehicle_from_lidar: Rigid,
+    image_stamp_nanos: i64,
+) -> Result<Vec<DVec3>, TrajectoryError> {
     let vehicle_from_world = drive_trajectory
         .world_from_vehicle(image_stamp_nanos)?
         .inverse();
-    let mut out = Vec::new();
+    let mut out = Vec::with_capacity(indices.len());
     // Poses cached per millisecond of firing time: a sweep spans ~100 ms.
     let mut cache: Vec<(i64, Rigid)> = Vec::new();
-    for i in edges::depth_discontinuities(&sweep.points_in_sensor, 0.05) {
+    for &i in indices {
         let t = sweep.stamp_nanos
             + sweep
                 .time_offset_secs
@@ -147,46 +229,18 @@ impl EdgeAlignment {
             .sensor(lidar)
             .ok_or_else(|| AlignError::Setup(format!("no sensor '{lidar}' in the rig")))?
             .vehicle_from_sensor;
-        let cam_stream = drive
-            .stream(camera)
-            .ok_or_else(|| AlignError::Setup(format!("no images for '{camera}' in the log")))?;
-        if drive.stream(lidar).is_none() {
-            return Err(AlignError::Setup(format!(
-                "no sweeps for '{lidar}' in the log"
-            )));
-        }
-        let usable = drive.frames_within(lidar, segments_nanos);
-        if usable.is_empty() {
-            return Err(AlignError::Setup(format!(
-                "no sweep of '{lidar}' inside the trajectory and the selected segments"
-            )));
-        }
         let mut out = Vec::with_capacity(frames);
-        for sweep_index in crate::log::spread_evenly(&usable, frames) {
-            let sweep = drive.load_sweep(lidar, sweep_index)?;
-            // The image nearest in time to the sweep.
-            let Some(image_index) = (0..cam_stream.frames.len())
-                .min_by_key(|&j| (cam_stream.frames[j].stamp_nanos - sweep.stamp_nanos).abs())
-            else {
-                continue;
-            };
-            let image_stamp = cam_stream.frames[image_index].stamp_nanos;
-            if (image_stamp - sweep.stamp_nanos).abs() > 200_000_000
-                || drive.trajectory.world_from_vehicle(image_stamp).is_err()
-            {
-                continue;
-            }
-            let image = drive.load_image(camera, image_index)?;
-            let points =
-                silhouettes_in_vehicle(&sweep, &drive.trajectory, vehicle_from_lidar, image_stamp)?;
+        for pair in sweep_image_pairs(drive, camera, lidar, frames, segments_nanos)? {
+            let image = drive.load_image(camera, pair.image_index)?;
+            let points = silhouettes_in_vehicle(
+                &pair.sweep,
+                &drive.trajectory,
+                vehicle_from_lidar,
+                pair.image_stamp_nanos,
+            )?;
             let mut frame = EdgeFrame::new(&image, points);
-            frame.sweep_stamp_nanos = sweep.stamp_nanos;
+            frame.sweep_stamp_nanos = pair.sweep.stamp_nanos;
             out.push(frame);
-        }
-        if out.is_empty() {
-            return Err(AlignError::Setup(format!(
-                "no image of '{camera}' within 200 ms of a sweep of '{lidar}'"
-            )));
         }
         let mut problem = Self {
             camera: camera.into(),

@@ -226,11 +226,7 @@ pub fn synthesize(
                         world_from_camera,
                         exposure,
                     );
-                    let mut jpeg = Vec::new();
-                    image::codecs::jpeg::JpegEncoder::new_with_quality(&mut jpeg, cfg.jpeg_quality)
-                        .encode_image(&img)
-                        .map_err(|e| SimError::Image(e.to_string()))?;
-                    Ok((trigger, jpeg))
+                    Ok((trigger, encode_jpeg(&img, cfg.jpeg_quality)?))
                 })
                 .collect();
             for (cam, frame) in rig.cameras.iter().zip(frames) {
@@ -276,4 +272,24 @@ pub fn synthesize(
         sweeps: sweeps_written,
         images: images_written,
     })
+}
+
+/// Baseline JPEG, 4:2:0 chroma as camera drivers write it.
+pub fn encode_jpeg(img: &image::RgbImage, quality: u8) -> Result<Vec<u8>, SimError> {
+    let too_big = || {
+        SimError::Image(format!(
+            "{}×{} is too large for JPEG",
+            img.width(),
+            img.height()
+        ))
+    };
+    let w = u16::try_from(img.width()).map_err(|_| too_big())?;
+    let h = u16::try_from(img.height()).map_err(|_| too_big())?;
+    let mut out = Vec::with_capacity(img.as_raw().len() / 8);
+    let mut encoder = jpeg_encoder::Encoder::new(&mut out, quality);
+    encoder.set_sampling_factor(jpeg_encoder::SamplingFactor::R_4_2_0);
+    encoder
+        .encode(img.as_raw(), w, h, jpeg_encoder::ColorType::Rgb)
+        .map_err(|e| SimError::Image(e.to_string()))?;
+    Ok(out)
 }
