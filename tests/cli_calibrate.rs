@@ -85,7 +85,7 @@ fn bad_arguments_fail_with_one_line() {
             String::from_utf8_lossy(&o.stderr).to_string(),
         )
     };
-    let (ok, err) = run(&["--method", "mi"]);
+    let (ok, err) = run(&["--method", "pose-graph"]);
     assert!(!ok && err.contains("not in this build"), "{err}");
     let (ok, err) = run(&["--method", "edge", "--sensors", "nope"]);
     assert!(!ok && err.contains("'nope'"), "{err}");

@@ -6,7 +6,8 @@
 //! intensity and the regulariser; with `--camera-frames N` the cameras join through the colour
 //! term; `--root` keeps one sensor fixed).
 //! `icp`: every LiDAR against the reference LiDAR (`--root`, default the first) by
-//! point-to-plane ICP on three sweeps each. `mi`, `target` and `pose-graph` are named by the
+//! point-to-plane ICP on three sweeps each. `mi`: every camera against the reference LiDAR by
+//! mutual information. `target` and `pose-graph` are named by the
 //! contract and refused with a clear message until they land.
 
 use std::path::PathBuf;
