@@ -55,7 +55,27 @@ impl RayTable {
         }
     }
 
+    /// The ray through a sub-pixel position: bilinear between the four table rays around it
+    /// (the camera model's rays bend smoothly: exact to second order in the quarter-pixel
+    /// offsets), the camera model itself at the border or beside an invalid ray.
     fn dir(&self, intr: &CameraIntrinsics, x: f32, y: f32) -> Vec3 {
+        let (w, h) = (self.width as usize, self.height as usize);
+        let (x0, y0) = (x.floor(), y.floor());
+        let (fx, fy) = (x - x0, y - y0);
+        if x0 >= 0.0 && y0 >= 0.0 && (x0 as usize) + 1 < w && (y0 as usize) + 1 < h {
+            let k = y0 as usize * w + x0 as usize;
+            let (a, b, c, d) = (
+                self.dirs[k],
+                self.dirs[k + 1],
+                self.dirs[k + w],
+                self.dirs[k + w + 1],
+            );
+            if a != Vec3::ZERO && b != Vec3::ZERO && c != Vec3::ZERO && d != Vec3::ZERO {
+                let top = a + (b - a) * fx;
+                let bottom = c + (d - c) * fx;
+                return (top + (bottom - top) * fy).normalize_or_zero();
+            }
+        }
         intr.unproject(DVec2::new(x as f64, y as f64))
             .map_or(Vec3::ZERO, |d| d.as_vec3())
     }
@@ -96,6 +116,12 @@ const SKY_DISTANCE_M: f32 = 600.0;
 const SMOOTH_RELATIVE: f32 = 0.04;
 const SMOOTH_ABSOLUTE: f32 = 0.004;
 
+/// Whether the sun reached a shaded sample: its neighbours' answer lets an in-between pixel on
+/// the same face skip its shadow ray.
+const SHADOW: u8 = 0;
+const LIT: u8 = 1;
+const NO_SUN: u8 = 2;
+
 /// Linear radiance along one ray and the primitive it hit.
 fn radiance(
     world: &World,
@@ -104,27 +130,44 @@ fn radiance(
     pixel_angle: f32,
     candidate: Candidate,
 ) -> (Vec3, u32) {
+    let hit = world.trace_with(origin, dir, SKY_DISTANCE_M, candidate);
+    let (c, prim, _) = shade_hit(world, dir, hit, pixel_angle, None);
+    (c, prim)
+}
+
+/// Linear radiance of what a ray hit (the sky when nothing), its primitive and whether the sun
+/// reaches it. `sun_hint` answers the shadow question without a shadow ray (from neighbours on
+/// the same face that agree).
+fn shade_hit(
+    world: &World,
+    dir: Vec3,
+    hit: Option<crate::sim::world::SurfaceHit>,
+    pixel_angle: f32,
+    sun_hint: Option<bool>,
+) -> (Vec3, u32, u8) {
     let sun = world.sun_dir;
-    let Some(hit) = world.trace_with(origin, dir, SKY_DISTANCE_M, candidate) else {
-        return (sky(dir, sun, world.seed), SKY);
+    let Some(hit) = hit else {
+        return (sky(dir, sun, world.seed), SKY, NO_SUN);
     };
     let cos_view = (-dir.dot(hit.normal)).abs().max(0.15);
     let footprint = hit.t * pixel_angle / cos_view;
     let surf = world.surface(&hit, footprint);
     let n = hit.normal;
     let n_dot_l = n.dot(sun).max(0.0);
-    let lit = if n_dot_l > 0.0 && !world.occluded(hit.point + n * 0.02, sun, 500.0) {
-        n_dot_l
-    } else {
-        0.0
-    };
+    let sunlit = n_dot_l > 0.0
+        && sun_hint.unwrap_or_else(|| !world.occluded(hit.point + n * 0.02, sun, 500.0));
+    let lit = if sunlit { n_dot_l } else { 0.0 };
     let sun_color = Vec3::new(1.0, 0.96, 0.88) * 2.2;
     let ambient = Vec3::new(0.55, 0.62, 0.75) * (0.55 + 0.45 * n.z.max(-0.5));
     let color = surf.albedo * (ambient + sun_color * lit);
     // Aerial perspective.
     let fog = 1.0 - (-hit.t / 700.0).exp();
     let horizon = Vec3::new(0.78, 0.84, 0.92);
-    (color + (horizon - color) * fog, hit.primitive)
+    (
+        color + (horizon - color) * fog,
+        hit.primitive,
+        if sunlit { LIT } else { SHADOW },
+    )
 }
 
 /// Approximately standard-normal noise for the three channels of a pixel: each the sum of four
@@ -190,25 +233,29 @@ pub fn render(
     let shade = |k: usize| {
         let d = rays.dirs[k];
         if d == Vec3::ZERO {
-            return (Vec3::ZERO, INVALID);
+            return (Vec3::ZERO, INVALID, NO_SUN);
         }
-        radiance(world, origin, rot * d, rays.pixel_angle, candidate(d))
+        let hit = world.trace_with(origin, rot * d, SKY_DISTANCE_M, candidate(d));
+        shade_hit(world, rot * d, hit, rays.pixel_angle, None)
     };
     // Pass 1: shade the anchors, every other pixel of every other row.
     let mut anchor_rad = vec![Vec3::ZERO; w * h];
     let mut anchor_prim = vec![INVALID; w * h];
+    let mut anchor_sun = vec![NO_SUN; w * h];
     anchor_rad
         .par_chunks_mut(w)
         .zip(anchor_prim.par_chunks_mut(w))
+        .zip(anchor_sun.par_chunks_mut(w))
         .enumerate()
         .filter(|(y, _)| y % 2 == 0)
-        .for_each(|(y, (row, prow))| {
+        .for_each(|(y, ((row, prow), srow))| {
             for x in (0..w).step_by(2) {
-                (row[x], prow[x]) = shade(y * w + x);
+                (row[x], prow[x], srow[x]) = shade(y * w + x);
             }
         });
     // Pass 2: every other pixel is interpolated from its two or four anchors when they see the
-    // same primitive as the pixel's own ray and agree in colour; otherwise it is shaded.
+    // same primitive as the pixel's own ray and agree in colour; otherwise it is shaded, without
+    // a shadow ray when those anchors agree on the sun.
     let mut radiance_buf = vec![Vec3::ZERO; w * h];
     let mut prim = vec![INVALID; w * h];
     radiance_buf
@@ -222,33 +269,42 @@ pub fn render(
                     (row[x], prow[x]) = (anchor_rad[k], anchor_prim[k]);
                     continue;
                 }
+                let d = rays.dirs[k];
                 let xs: &[usize] = if x % 2 == 0 { &[x] } else { &[x - 1, x + 1] };
                 let ys: &[usize] = if y % 2 == 0 { &[y] } else { &[y - 1, y + 1] };
-                let interpolated = (|| {
-                    if xs.iter().any(|&ax| ax >= w) || ys.iter().any(|&ay| ay >= h) {
-                        return None;
+                if d == Vec3::ZERO || xs.iter().any(|&ax| ax >= w) || ys.iter().any(|&ay| ay >= h) {
+                    (row[x], prow[x]) = {
+                        let (c, p, _) = shade(k);
+                        (c, p)
+                    };
+                    continue;
+                }
+                let dir = rot * d;
+                let hit = world.trace_with(origin, dir, SKY_DISTANCE_M, candidate(d));
+                let own = hit.map_or(SKY, |h| h.primitive);
+                let (mut lo, mut hi, mut sum) = (Vec3::MAX, Vec3::MIN, Vec3::ZERO);
+                let mut same_face = true;
+                let first_sun = anchor_sun[ys[0] * w + xs[0]];
+                let mut same_sun = true;
+                for &ay in ys {
+                    for &ax in xs {
+                        let a = ay * w + ax;
+                        same_face &= anchor_prim[a] == own;
+                        same_sun &= anchor_sun[a] == first_sun;
+                        let c = anchor_rad[a];
+                        (lo, hi, sum) = (lo.min(c), hi.max(c), sum + c);
                     }
-                    let d = rays.dirs[k];
-                    let own =
-                        world.first_primitive(origin, rot * d, SKY_DISTANCE_M, candidate(d))?;
-                    let own = own.map_or(SKY, |p| p);
-                    let (mut lo, mut hi, mut sum) = (Vec3::MAX, Vec3::MIN, Vec3::ZERO);
-                    for &ay in ys {
-                        for &ax in xs {
-                            let a = ay * w + ax;
-                            if anchor_prim[a] != own {
-                                return None;
-                            }
-                            let c = anchor_rad[a];
-                            (lo, hi, sum) = (lo.min(c), hi.max(c), sum + c);
-                        }
-                    }
-                    let n = (xs.len() * ys.len()) as f32;
-                    let spread = (hi - lo).max_element();
-                    (spread <= SMOOTH_RELATIVE * hi.max_element() + SMOOTH_ABSOLUTE)
-                        .then_some((sum / n, own))
-                })();
-                (row[x], prow[x]) = interpolated.unwrap_or_else(|| shade(k));
+                }
+                let n = (xs.len() * ys.len()) as f32;
+                let spread = (hi - lo).max_element();
+                if same_face && spread <= SMOOTH_RELATIVE * hi.max_element() + SMOOTH_ABSOLUTE {
+                    (row[x], prow[x]) = (sum / n, own);
+                } else {
+                    let hint =
+                        (same_face && same_sun && first_sun != NO_SUN).then_some(first_sun == LIT);
+                    let (c, p, _) = shade_hit(world, dir, hit, rays.pixel_angle, hint);
+                    (row[x], prow[x]) = (c, p);
+                }
             }
         });
     // Pass 3: 4 sub-samples where a neighbour hit another primitive.
@@ -280,14 +336,15 @@ pub fn render(
     }
     // Exposure, tone, vignetting, noise, gamma.
     let (cx, cy) = (intr.cx as f32, intr.cy as f32);
-    let diag = ((w * w + h * h) as f32).sqrt() * 0.5;
+    // (2 r / diagonal)², so the vignette needs no square root.
+    let inv_diag2 = 4.0 / (w * w + h * h) as f32;
     let tint = Vec3::from_array(exposure.tint);
     let gamma = Gamma::new();
     let mut img = RgbImage::new(w as u32, h as u32);
     img.par_chunks_mut(3 * w).enumerate().for_each(|(y, row)| {
         for x in 0..w {
-            let r = (((x as f32 - cx).powi(2) + (y as f32 - cy).powi(2)).sqrt() / diag).min(1.5);
-            let vignette = 1.0 - 0.25 * r * r;
+            let r2 = (((x as f32 - cx).powi(2) + (y as f32 - cy).powi(2)) * inv_diag2).min(2.25);
+            let vignette = 1.0 - 0.25 * r2;
             let c = radiance_buf[y * w + x] * exposure.gain * tint * vignette * 0.8;
             let noise = gaussian3(x as u32, y as u32, exposure.seed);
             for ch in 0..3 {

@@ -550,20 +550,6 @@ impl World {
             .unwrap_or_else(|| self.trace(origin, dir, t_max))
     }
 
-    /// The primitive [`World::trace_with`] would report (the ground is `u32::MAX`, `Some(None)`
-    /// is nothing within range), from the candidate and at most one exact intersection; `None`
-    /// when that takes a BVH trace.
-    pub fn first_primitive(
-        &self,
-        origin: Vec3,
-        dir: Vec3,
-        t_max: f32,
-        candidate: Candidate,
-    ) -> Option<Option<u32>> {
-        self.resolve(origin, dir, t_max, candidate)
-            .map(|hit| hit.map(|h| h.primitive))
-    }
-
     /// The first surface from a rasterised candidate and at most one exact intersection
     /// (`Some(None)`: nothing within range), or `None` when only a BVH trace can tell.
     fn resolve(
