@@ -51,6 +51,12 @@ fn main() {
                 .map(|i| lidar_sim::simulate_sweep(&world, l, &traj, i * 100_000_000, 5).unwrap())
                 .collect();
             let sign = if k == 0 { perturbation } else { -perturbation };
+            // With RIGCAL_ROOT set the first LiDAR is the frozen root, left at the truth.
+            let sign = if k == 0 && std::env::var("RIGCAL_ROOT").is_ok() {
+                0.0
+            } else {
+                sign
+            };
             LidarData {
                 name: l.name.clone(),
                 initial: l.vehicle_from_lidar.perturbed_right(
@@ -68,7 +74,14 @@ fn main() {
     );
     let truth: Vec<_> = rig.lidars.iter().map(|l| l.vehicle_from_lidar).collect();
     let config = DepthCalibConfig {
+        frozen_sensor: std::env::var("RIGCAL_ROOT")
+            .is_ok()
+            .then(|| rig.lidars[0].name.clone()),
         iterations,
+        registration_steps: std::env::var("RIGCAL_REGISTRATION")
+            .ok()
+            .and_then(|v| v.parse().ok())
+            .unwrap_or(defaults.registration_steps),
         beta_init,
         regulariser_weight,
         ..defaults

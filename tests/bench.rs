@@ -43,7 +43,7 @@ fn tiny_suite() -> Suite {
         sweeps_per_lidar: 1,
         camera_frames: 1,
         camera_scale: 0.25,
-        pose_trim_quantile: 0.95,
+        newton_lidar_poses: false,
         lidar_supervision: true,
         alignment: AlignmentLoss::SurfaceAlignment,
     });

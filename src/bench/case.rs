@@ -24,6 +24,7 @@ use crate::sim::rigs::{RigPreset, SimRig};
 use crate::sim::synth::{SynthConfig, perturb_rig, synthesize};
 use crate::unical::calibrator::UnicalLidarStage;
 use crate::unical::depth_calib::DepthCalibConfig;
+use crate::unical::pose_newton::{NewtonConfig, PoseUpdate};
 
 /// One sensor's error against the reference after root alignment.
 #[derive(Clone, Debug, PartialEq, Serialize)]
@@ -291,7 +292,11 @@ fn unical_stage(
         pose_warmup: s.pose_warmup,
         rays_per_sensor: if lidar { s.rays_per_sensor } else { 0 },
         rays_per_camera: s.rays_per_camera,
-        pose_trim_quantile: s.pose_trim_quantile,
+        lidar_pose_update: if s.newton_lidar_poses {
+            PoseUpdate::Newton(NewtonConfig::default())
+        } else {
+            PoseUpdate::Adam
+        },
         alignment: s.alignment,
         seed,
         ..DepthCalibConfig::default()

@@ -105,8 +105,8 @@ pub struct UnicalSettings {
     pub camera_frames: usize,
     /// Image scale the cameras train at.
     pub camera_scale: f64,
-    /// Quantile of depth residuals that steer the poses (1.0: every ray).
-    pub pose_trim_quantile: f32,
+    /// LiDAR poses by preconditioned steps (`unical::pose_newton`); false: the paper's Adam.
+    pub newton_lidar_poses: bool,
     /// LiDAR depth, intensity, regulariser and geometry initialisation on. Off (camera-only):
     /// no LiDAR ray is rendered and LiDAR extrinsics stay as they are; the LiDAR returns still
     /// place the occupancy grid the camera rays are sampled in.
@@ -200,7 +200,7 @@ impl Suite {
             sweeps_per_lidar: 3,
             camera_frames: 2,
             camera_scale: 0.25,
-            pose_trim_quantile: 0.95,
+            newton_lidar_poses: false,
             lidar_supervision: true,
             alignment: AlignmentLoss::SurfaceAlignment,
         };
@@ -247,7 +247,7 @@ impl Suite {
             sweeps_per_lidar: 8,
             camera_frames: 4,
             camera_scale: 0.25,
-            pose_trim_quantile: 0.95,
+            newton_lidar_poses: false,
             lidar_supervision: true,
             alignment: AlignmentLoss::SurfaceAlignment,
         };
@@ -275,7 +275,7 @@ impl Suite {
                     frames: 4,
                     max_steps: 300,
                 },
-                ablations: &["no geometry initialisation", "no pose trim"],
+                ablations: &["no geometry initialisation", "preconditioned LiDAR poses"],
                 correspondence_on_log: true,
             },
             pandaset,
@@ -388,7 +388,7 @@ impl Suite {
                     ..s.unical.clone()
                 },
                 _ => UnicalSettings {
-                    pose_trim_quantile: 1.0,
+                    newton_lidar_poses: true,
                     ..s.unical.clone()
                 },
             };

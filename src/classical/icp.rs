@@ -326,7 +326,7 @@ impl IcpProblem {
             ..IcpStats::default()
         };
         let step = if inliers >= 6 {
-            solve6(h, g.map(|v| -v))
+            crate::geometry::spd::solve6(h, g.map(|v| -v))
         } else {
             None
         };
@@ -359,36 +359,6 @@ impl IcpProblem {
         }
         self.last
     }
-}
-
-/// Solve the symmetric positive definite system `H x = b` (6 × 6, row-major) by Cholesky.
-fn solve6(h: [f64; 36], b: [f64; 6]) -> Option<[f64; 6]> {
-    let mut l = [0.0f64; 36];
-    for i in 0..6 {
-        for j in 0..=i {
-            let sum: f64 = (0..j).map(|k| l[i * 6 + k] * l[j * 6 + k]).sum();
-            if i == j {
-                let d = h[i * 6 + i] - sum;
-                if d <= 1e-12 {
-                    return None;
-                }
-                l[i * 6 + i] = d.sqrt();
-            } else {
-                l[i * 6 + j] = (h[i * 6 + j] - sum) / l[j * 6 + j];
-            }
-        }
-    }
-    let mut y = [0.0f64; 6];
-    for i in 0..6 {
-        let sum: f64 = (0..i).map(|k| l[i * 6 + k] * y[k]).sum();
-        y[i] = (b[i] - sum) / l[i * 6 + i];
-    }
-    let mut x = [0.0f64; 6];
-    for i in (0..6).rev() {
-        let sum: f64 = (i + 1..6).map(|k| l[k * 6 + i] * x[k]).sum();
-        x[i] = (y[i] - sum) / l[i * 6 + i];
-    }
-    Some(x)
 }
 
 #[cfg(test)]
@@ -530,29 +500,5 @@ mod tests {
                 (b, g) => assert_eq!(b, g),
             }
         }
-    }
-
-    #[test]
-    fn the_normal_equations_solve_exactly() {
-        // H = AᵀA + I for a fixed A; x = H⁻¹ b checked by multiplication.
-        let mut h = [0.0; 36];
-        for i in 0..6 {
-            for j in 0..6 {
-                h[i * 6 + j] =
-                    ((i + 1) * (j + 2) % 5) as f64 * 0.1 + if i == j { 2.0 } else { 0.0 };
-            }
-        }
-        for i in 0..6 {
-            for j in 0..i {
-                h[i * 6 + j] = h[j * 6 + i];
-            }
-        }
-        let b = [1.0, -2.0, 0.5, 3.0, 0.0, -1.0];
-        let x = solve6(h, b).unwrap_or([f64::NAN; 6]);
-        for i in 0..6 {
-            let hx: f64 = (0..6).map(|j| h[i * 6 + j] * x[j]).sum();
-            assert!((hx - b[i]).abs() < 1e-9);
-        }
-        assert!(solve6([0.0; 36], b).is_none());
     }
 }

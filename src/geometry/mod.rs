@@ -10,6 +10,7 @@ pub mod projection;
 pub mod rigid;
 pub mod rot6d;
 pub mod so3;
+pub mod spd;
 pub mod trajectory;
 
 pub use rigid::{RigError, Rigid, rig_errors};

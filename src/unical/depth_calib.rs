@@ -26,6 +26,7 @@ use super::intensity::{IntensityDecoder, IntensityMap, normaliser};
 use super::lidar_terms::{DepthRay, LidarModel, LidarWeights, lidar_step};
 use super::occupancy::OccupancyGrid;
 use super::pose::PoseParams;
+use super::pose_newton::{NewtonConfig, NewtonState, PoseUpdate, TangentSystem, robust_system};
 use super::sdf_init::{PointIndex, SdfRay, sdf_fit_step};
 use super::surface_align::{
     AlignCamera, AlignRay, AlignSettings, AlignStep, AlignmentLoss, projected_ray_step,
@@ -61,13 +62,18 @@ pub struct DepthCalibConfig {
     pub depth_weight: f32,
     pub intensity_weight: f32,
     pub regulariser_weight: f32,
-    /// Rays whose depth residual is above this quantile of the previous step's residuals (per
-    /// LiDAR) still train the scene but do not steer the pose. Returns at depth
-    /// discontinuities the scene cannot resolve yet render metres off, and squared they would
-    /// dominate the pose gradient (method.md §8: neurad-unisim drops the worst 5 % of depth
-    /// residuals altogether; dropping them from the scene too leaves its free space
-    /// uncorrected, see BENCHMARKS.md). 1.0 keeps every ray.
-    pub pose_trim_quantile: f32,
+    /// Registration phase (iterations after the pose warm-up): until it ends only the anchor
+    /// LiDAR (the frozen root if it is a LiDAR, else the first) initialises and trains the
+    /// scene, and the other LiDARs track it without shaping it; then every sensor trains the
+    /// scene as in the paper. A scene trained by all LiDARs from a wrong start follows each
+    /// one's error wherever it sees most, and the relative signal fades (BENCHMARKS.md). 0: no
+    /// such phase. Only with preconditioned LiDAR pose steps (with Adam a LiDAR that places no
+    /// surface gets no pose gradient).
+    pub registration_steps: usize,
+    /// How LiDAR poses move: the paper's Adam, or preconditioned steps (the objective's
+    /// gradient scaled by the rendered depth's curvature, [`super::pose_newton`]). Cameras
+    /// always use Adam.
+    pub lidar_pose_update: PoseUpdate,
     /// Camera rays are sampled up to this distance (the scene box clips them further).
     pub camera_far_m: f64,
     /// The background model beyond the scene box for camera rays (`None`: the sky feature
@@ -114,7 +120,8 @@ impl Default for DepthCalibConfig {
             depth_weight: 0.1,
             intensity_weight: 0.1,
             regulariser_weight: 0.01,
-            pose_trim_quantile: 0.95,
+            lidar_pose_update: PoseUpdate::Adam,
+            registration_steps: 0,
             camera_far_m: 120.0,
             background: Some(BackgroundConfig::default()),
             frozen_sensor: None,
@@ -148,6 +155,8 @@ impl DepthCalibConfig {
             rays_per_sensor: 625,
             rays_per_camera: 625,
             lr_pose: 1e-4,
+            lidar_pose_update: PoseUpdate::Adam,
+            registration_steps: 0,
             geometry_init_steps: 0,
             pose_warmup: 0,
             iterations: 30_000,
@@ -157,21 +166,16 @@ impl DepthCalibConfig {
 
     fn lidar_weights(&self) -> LidarWeights {
         LidarWeights {
-            pose_trim_m: f32::INFINITY,
+            pose_rows: match self.lidar_pose_update {
+                PoseUpdate::Newton(n) => Some(n),
+                PoseUpdate::Adam => None,
+            },
+            free_space_only: false,
             depth: self.depth_weight,
             intensity: self.intensity_weight,
             regulariser: self.regulariser_weight,
         }
     }
-}
-
-/// The `q`-quantile of `values` (`INFINITY` for q ≥ 1 or no values).
-fn quantile(mut values: Vec<f32>, q: f32) -> f32 {
-    if q >= 1.0 || values.is_empty() {
-        return f32::INFINITY;
-    }
-    let k = ((values.len() - 1) as f32 * q.max(0.0)).round() as usize;
-    *values.select_nth_unstable_by(k, f32::total_cmp).1
 }
 
 /// One LiDAR's data.
@@ -249,9 +253,10 @@ pub struct DepthCalibration {
     /// Per LiDAR: the factor that normalises its intensities to [0, 1] (`None`: no intensity).
     intensity_norm: Vec<Option<f32>>,
     intensity_maps: Vec<IntensityMap>,
-    /// Per LiDAR: the depth residual above which rays leave the depth term (from the previous
-    /// step's residuals, [`DepthCalibConfig::pose_trim_quantile`]).
-    pose_trim_m: Vec<f32>,
+    /// The LiDAR that alone shapes the scene during the registration phase.
+    anchor: usize,
+    /// Per LiDAR: the state of its preconditioned pose steps (unused with Adam).
+    newton: Vec<NewtonState>,
     intensity_map_opt: Vec<DenseAdam>,
     decoder: IntensityDecoder,
     decoder_params: Vec<f32>,
@@ -401,19 +406,28 @@ fn pose_grad_flat(g: &super::pose::PoseGrad, w: f64) -> [f32; 9] {
 impl DepthCalibration {
     /// Build the scene box and occupancy from the sweeps under the initial extrinsics.
     pub fn new(config: DepthCalibConfig, trajectory: Trajectory, lidars: Vec<LidarData>) -> Self {
+        let anchor = lidars
+            .iter()
+            .position(|l| config.frozen_sensor.as_deref() == Some(l.name.as_str()))
+            .unwrap_or(0);
         let mut points = Vec::new();
-        for l in &lidars {
+        let mut anchor_points = Vec::new();
+        for (k, l) in lidars.iter().enumerate() {
             for s in &l.sweeps {
                 let Ok(wv) = trajectory.world_from_vehicle(s.stamp_nanos) else {
                     continue;
                 };
                 let world_from_lidar = wv * l.initial;
                 for p in s.points_in_sensor.iter().step_by(4) {
-                    points.push(world_from_lidar.transform_point(DVec3::new(
+                    let x = world_from_lidar.transform_point(DVec3::new(
                         p[0] as f64,
                         p[1] as f64,
                         p[2] as f64,
-                    )));
+                    ));
+                    points.push(x);
+                    if k == anchor {
+                        anchor_points.push(x);
+                    }
                 }
             }
         }
@@ -435,16 +449,27 @@ impl DepthCalibration {
             .collect();
         let decoder = IntensityDecoder::new(config.field.feature_dim, config.seed);
         let decoder_params = mlp_flat(&decoder.mlp);
-        let aggregated = if config.geometry_init_steps > 0 {
-            points
-        } else {
-            Vec::new()
+        let registering =
+            config.registration_steps > 0 && config.lidar_pose_update != PoseUpdate::Adam;
+        let aggregated = match (config.geometry_init_steps, registering) {
+            (0, _) => Vec::new(),
+            (_, false) => points,
+            (_, true) => anchor_points,
         };
         Self {
+            anchor,
             aggregated,
             point_index: None,
             intensity_maps: vec![IntensityMap::default(); lidars.len()],
-            pose_trim_m: vec![f32::INFINITY; lidars.len()],
+            newton: lidars
+                .iter()
+                .map(|_| {
+                    NewtonState::new(match config.lidar_pose_update {
+                        PoseUpdate::Newton(n) => n,
+                        PoseUpdate::Adam => NewtonConfig::default(),
+                    })
+                })
+                .collect(),
             intensity_map_opt: lidars
                 .iter()
                 .map(|_| DenseAdam::new(2, AdamConfig::STANDARD))
@@ -553,6 +578,15 @@ impl DepthCalibration {
             );
         }
         out
+    }
+
+    /// Whether LiDAR `s` shapes the scene at this iteration (outside the registration phase
+    /// every LiDAR does; inside it only the anchor).
+    fn shapes_scene(&self, s: usize) -> bool {
+        s == self.anchor
+            || self.iteration >= self.config.pose_warmup + self.config.registration_steps
+            || self.config.registration_steps == 0
+            || self.config.lidar_pose_update == PoseUpdate::Adam
     }
 
     fn is_frozen(&self, name: &str) -> bool {
@@ -933,6 +967,9 @@ impl DepthCalibration {
         let per_sensor = self.config.geometry_init_rays.div_ceil(lidars);
         let mut rays = Vec::with_capacity(per_sensor * lidars);
         for s in 0..self.lidars.len() {
+            if !self.shapes_scene(s) {
+                continue;
+            }
             let pose = self.poses[s];
             let mut drawn = 0;
             for _ in 0..2 * per_sensor {
@@ -1022,6 +1059,48 @@ impl DepthCalibration {
             .collect()
     }
 
+    /// Diagnostics: `count` rays of LiDAR `sensor` drawn under its current pose (their sample
+    /// distances fixed), to evaluate [`DepthCalibration::lidar_objective`] on one batch.
+    pub fn lidar_batch(&mut self, sensor: usize, count: usize) -> Vec<DepthRay> {
+        self.draw_rays(sensor, count)
+    }
+
+    /// Diagnostics: the weighted LiDAR objective of `rays` (depth, intensity, regulariser) with
+    /// `sensor` at `pose`, its gradient with respect to that pose, and (with preconditioned
+    /// pose steps) the robust point-to-plane system those steps solve.
+    pub fn lidar_objective(
+        &self,
+        sensor: usize,
+        pose: &PoseParams,
+        rays: &[DepthRay],
+    ) -> (f64, super::pose::PoseGrad, TangentSystem) {
+        let model = LidarModel {
+            field: &self.field,
+            beta: self.beta(),
+            decoder: self.intensity_norm[sensor].map(|_| &self.decoder),
+        };
+        let weights = self.config.lidar_weights();
+        let mut sink: Option<super::hash_grid::SparseGrad> = None;
+        let part = lidar_step(
+            model,
+            pose,
+            &self.intensity_maps[sensor],
+            &weights,
+            rays,
+            &mut sink,
+        );
+        let loss = weights.depth as f64 * part.depth_loss
+            + weights.intensity as f64 * part.intensity_loss
+            + weights.regulariser as f64 * part.regulariser_loss;
+        let system = match self.config.lidar_pose_update {
+            PoseUpdate::Newton(n) => {
+                robust_system(&part.pose_rows, n.robust_scale, n.robust_floor_m)
+            }
+            PoseUpdate::Adam => TangentSystem::default(),
+        };
+        (loss, part.pose, system)
+    }
+
     /// Whether the next step is still part of the geometry initialisation.
     pub fn initialising_geometry(&self) -> bool {
         self.iteration < self.config.geometry_init_steps
@@ -1073,8 +1152,10 @@ impl DepthCalibration {
                 decoder: self.intensity_norm[s].map(|_| &self.decoder),
             };
             let (pose, map) = (&self.poses[s], &self.intensity_maps[s]);
+            // Registration phase: a LiDAR other than the anchor clears free space in front of
+            // its returns and tracks the anchor's surfaces, but places none of its own.
             let weights = LidarWeights {
-                pose_trim_m: self.pose_trim_m[s],
+                free_space_only: !self.shapes_scene(s),
                 ..base_weights
             };
             let total_rays = rays.len() as f64;
@@ -1095,9 +1176,8 @@ impl DepthCalibration {
                 .collect();
             let mut pose_grad = [0.0f32; 9];
             let mut map_grad = [0.0f32; 2];
-            let mut abs_errors = Vec::with_capacity(rays.len());
-            for (n, part) in parts {
-                abs_errors.extend_from_slice(&part.abs_errors_m);
+            let mut rows = Vec::new();
+            for (n, mut part) in parts {
                 let share = n as f64 / total_rays / lidars;
                 loss += part.depth_loss * share;
                 mae += part.mean_abs_error_m * share * lidars;
@@ -1110,15 +1190,26 @@ impl DepthCalibration {
                 pose_grad.iter_mut().zip(g).for_each(|(a, b)| *a += b);
                 map_grad[0] += (part.intensity_map[0] * share) as f32;
                 map_grad[1] += (part.intensity_map[1] * share) as f32;
+                rows.append(&mut part.pose_rows);
             }
-            self.pose_trim_m[s] = quantile(abs_errors, self.config.pose_trim_quantile);
             if !self.is_frozen(&self.lidars[s].name) {
-                pose_step(
-                    &mut self.pose_opt[s],
-                    &mut self.poses[s],
-                    &pose_grad,
-                    lr_pose,
-                );
+                match self.config.lidar_pose_update {
+                    PoseUpdate::Adam => pose_step(
+                        &mut self.pose_opt[s],
+                        &mut self.poses[s],
+                        &pose_grad,
+                        lr_pose,
+                    ),
+                    // The step fraction follows the pose learning rate's schedule.
+                    // Full steps after the warm-up: each solves the gathered rows, which
+                    // already average the batches' noise (no learning-rate decay).
+                    PoseUpdate::Newton(_) if lr_pose > 0.0 => {
+                        if self.newton[s].gather(&mut rows) {
+                            self.newton[s].step(&mut self.poses[s], 1.0);
+                        }
+                    }
+                    PoseUpdate::Newton(_) => {}
+                }
             }
             if self.intensity_norm[s].is_some() {
                 let m = &mut self.intensity_maps[s];

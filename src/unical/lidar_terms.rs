@@ -24,7 +24,10 @@ use super::hash_grid::GradSink;
 use super::intensity::{IntensityDecoder, IntensityMap};
 use super::mlp::MlpGrad;
 use super::pose::{PoseGrad, PoseParams};
-use super::regulariser::{NEAR_HIT_M, eikonal, weight_suppression};
+use super::pose_newton::{NewtonConfig, PoseRow, plane_row};
+use super::regulariser::{
+    NEAR_HIT_M, eikonal, free_space_suppression, smoothed_gradient, weight_suppression,
+};
 use crate::geometry::Rigid;
 
 /// One LiDAR ray ready to render.
@@ -47,11 +50,14 @@ pub struct LidarWeights {
     pub depth: f32,
     pub intensity: f32,
     pub regulariser: f32,
-    /// Rays whose |rendered − measured range| exceeds this still shape the scene but do not
-    /// steer the pose (a robust cut in the spirit of neurad-unisim's dropping the worst 5 % of
-    /// depth residuals, method.md §8; the caller passes a batch quantile, `INFINITY` keeps
-    /// every ray).
-    pub pose_trim_m: f32,
+    /// Whether to also gather each ray's point-to-plane row against the rendered surface for
+    /// the preconditioned pose steps ([`super::pose_newton`]), with their settings (`None`: not
+    /// gathered).
+    pub pose_rows: Option<NewtonConfig>,
+    /// Registration phase for a LiDAR that does not shape the scene yet: only free space well
+    /// in front of its returns is trained (weight suppression at the depth weight,
+    /// [`super::regulariser::free_space_suppression`]); no depth, intensity or Eikonal term.
+    pub free_space_only: bool,
 }
 
 impl LidarWeights {
@@ -59,7 +65,8 @@ impl LidarWeights {
         depth: 0.1,
         intensity: 0.1,
         regulariser: 0.01,
-        pose_trim_m: f32::INFINITY,
+        pose_rows: None,
+        free_space_only: false,
     };
 }
 
@@ -76,8 +83,8 @@ pub struct LidarStep {
     pub intensity_map: [f64; 2],
     pub beta_grad: f64,
     pub pose: PoseGrad,
-    /// |rendered − measured range| of every ray, in batch order (for the next trim).
-    pub abs_errors_m: Vec<f32>,
+    /// Point-to-plane rows of the rays that reach a surface (when asked).
+    pub pose_rows: Vec<PoseRow>,
 }
 
 /// What a LiDAR batch renders with: the scene, β and the shared intensity decoder (`None`:
@@ -128,7 +135,7 @@ pub fn lidar_step(
         intensity_map: [0.0; 2],
         beta_grad: 0.0,
         pose: PoseGrad::default(),
-        abs_errors_m: Vec::with_capacity(rays.len()),
+        pose_rows: Vec::new(),
     };
     let n = rays.len().max(1) as f64;
     let with_intensity = rays.iter().filter(|r| r.intensity.is_some()).count();
@@ -149,7 +156,10 @@ pub fn lidar_step(
             .iter()
             .map(|s| alpha_from_sdf(s.sdf(), model.beta).0)
             .collect();
-        let decode = model.decoder.zip(ray.intensity);
+        let decode = model
+            .decoder
+            .zip(ray.intensity)
+            .filter(|_| !weights.free_space_only);
         let (features, fdim) = if decode.is_some() {
             let f: Vec<f32> = samples
                 .iter()
@@ -164,8 +174,11 @@ pub fn lidar_step(
         let r = (c.depth_m - ray.range_m) as f64;
         out.depth_loss += r * r / n;
         out.mean_abs_error_m += r.abs() / n;
-        out.abs_errors_m.push(r.abs() as f32);
-        let d_depth = (weights.depth as f64 * 2.0 * r / n) as f32;
+        let d_depth = if weights.free_space_only {
+            0.0
+        } else {
+            (weights.depth as f64 * 2.0 * r / n) as f32
+        };
         // Intensity.
         let mut d_feature = Vec::new();
         let mut d_d_sh = DVec3::ZERO;
@@ -188,7 +201,13 @@ pub fn lidar_step(
         }
         // Regulariser: weight suppression away from the hit, Eikonal near it.
         let mut d_weights = Vec::new();
-        if weights.regulariser != 0.0 {
+        if weights.free_space_only {
+            let carve = (weights.depth as f64 / n) as f32;
+            let (penalty, d_w) =
+                free_space_suppression(&c.weights, &ray.taus_m, ray.range_m, carve);
+            out.regulariser_loss += penalty / n;
+            d_weights = d_w;
+        } else if weights.regulariser != 0.0 {
             let (suppression, d_w) =
                 weight_suppression(&c.weights, &ray.taus_m, ray.range_m, reg_weight);
             out.regulariser_loss += suppression / n;
@@ -216,13 +235,29 @@ pub fn lidar_step(
             &mut out.mlp,
         );
         out.beta_grad += d_beta;
-        if r.abs() <= weights.pose_trim_m as f64 {
-            out.pose.add(&pose.ray_backward(
-                ray.world_from_vehicle,
-                ray.dir_in_sensor,
-                d_o,
-                d_d + d_d_sh,
-            ));
+        out.pose.add(&pose.ray_backward(
+            ray.world_from_vehicle,
+            ray.dir_in_sensor,
+            d_o,
+            d_d + d_d_sh,
+        ));
+        if let Some(rows) = weights.pose_rows {
+            // The rendered surface point (D/A) and the SDF's normal there.
+            if c.accumulation > 0.5 {
+                let depth = (c.depth_m / c.accumulation) as f64;
+                let normal = smoothed_gradient(field, o + d * depth, rows.normal_stencil_m);
+                let (wv, u) = (ray.world_from_vehicle, ray.dir_in_sensor);
+                out.pose_rows.extend(plane_row(
+                    wv,
+                    pose,
+                    u,
+                    d,
+                    normal,
+                    depth,
+                    ray.range_m as f64,
+                    rows.min_incidence_cos,
+                ));
+            }
         }
     }
     out
@@ -280,7 +315,8 @@ mod tests {
             depth: 1.0,
             intensity: 2.0,
             regulariser: 0.0,
-            pose_trim_m: f32::INFINITY,
+            pose_rows: None,
+            free_space_only: false,
         };
         let model = |beta| LidarModel {
             field: &field,
@@ -356,7 +392,8 @@ mod tests {
             depth: 0.5,
             intensity: 1.0,
             regulariser: 2.0,
-            pose_trim_m: f32::INFINITY,
+            pose_rows: None,
+            free_space_only: false,
         };
         let map = IntensityMap::default();
         let run = |f: &SceneField, dec: &IntensityDecoder| {
@@ -414,7 +451,8 @@ mod tests {
             depth: 1.0,
             intensity: 0.0,
             regulariser: 0.0,
-            pose_trim_m: f32::INFINITY,
+            pose_rows: None,
+            free_space_only: false,
         };
         let model = LidarModel {
             field: &field,
@@ -436,62 +474,51 @@ mod tests {
         }
     }
 
-    /// A ray whose residual exceeds the trim still trains the scene but leaves the pose
-    /// gradient: the pose gradient is the sum over the kept rays only.
+    /// Rows are gathered only when asked, at most one per ray, with the sign of the rendered
+    /// surface's distance from the return; nothing else of the step changes.
     #[test]
-    fn trimmed_rays_do_not_steer_the_pose() {
-        let (field, _, pose, rays) = setup();
+    fn pose_rows_are_gathered_on_request_and_change_nothing_else() {
+        let (field, decoder, pose, rays) = setup();
         let model = LidarModel {
             field: &field,
             beta: 3.0,
-            decoder: None,
+            decoder: Some(&decoder),
         };
-        let run = |trim, rays: &[DepthRay]| {
-            let w = LidarWeights {
-                depth: 1.0,
-                intensity: 0.0,
-                regulariser: 0.0,
-                pose_trim_m: trim,
-            };
-            let map = IntensityMap::default();
-            lidar_step(model, &pose, &map, &w, rays, &mut SparseGrad::default())
+        let w = LidarWeights {
+            depth: 1.0,
+            intensity: 2.0,
+            regulariser: 0.1,
+            pose_rows: Some(NewtonConfig {
+                min_incidence_cos: 0.0,
+                ..NewtonConfig::default()
+            }),
+            free_space_only: false,
         };
-        let all = run(f32::INFINITY, &rays);
-        assert!(all.depth_loss > 0.0 && all.abs_errors_m.len() == rays.len());
-        let mut sorted = all.abs_errors_m.clone();
-        sorted.sort_by(f32::total_cmp);
-        let trim = sorted[sorted.len() - 2];
-        let trimmed = run(trim, &rays);
-        assert_eq!(trimmed.depth_loss, all.depth_loss);
-        assert_eq!(trimmed.mlp.weights, all.mlp.weights);
-        // Expected: each kept ray alone (a batch of one: scale by 1/n).
-        let n = rays.len() as f64;
-        let mut expected = PoseGrad::default();
-        for (ray, e) in rays.iter().zip(&all.abs_errors_m) {
-            if *e <= trim {
-                let one = run(f32::INFINITY, std::slice::from_ref(ray)).pose;
-                expected
-                    .r6
-                    .iter_mut()
-                    .zip(one.r6)
-                    .for_each(|(a, b)| *a += b / n);
-                expected.translation_m += one.translation_m / n;
+        let map = IntensityMap::default();
+        let step = lidar_step(model, &pose, &map, &w, &rays, &mut SparseGrad::default());
+        assert!(!step.pose_rows.is_empty() && step.pose_rows.len() <= rays.len());
+        for ray in &rays {
+            let c = render_composite(&field, 3.0, &pose, ray);
+            if c.accumulation > 0.5 {
+                let r = (c.depth_m / c.accumulation - ray.range_m) as f64;
+                assert!(step.pose_rows.iter().any(|row| row.residual_m * r >= 0.0));
             }
         }
-        let close = |a: f64, b: f64| (a - b).abs() <= 1e-6 * (1.0 + b.abs());
-        assert!(
-            trimmed
-                .pose
-                .r6
-                .iter()
-                .zip(expected.r6)
-                .all(|(a, b)| close(*a, b))
-                && (trimmed.pose.translation_m - expected.translation_m).length() < 1e-6,
-            "{:?} vs {expected:?}",
-            trimmed.pose
+        let plain = lidar_step(
+            model,
+            &pose,
+            &map,
+            &LidarWeights {
+                pose_rows: None,
+                free_space_only: false,
+                ..w
+            },
+            &rays,
+            &mut SparseGrad::default(),
         );
-        assert_ne!(trimmed.pose.r6, all.pose.r6);
-        let none = run(-1.0, &rays);
-        assert!(none.pose.r6.iter().all(|g| *g == 0.0) && none.pose.translation_m == DVec3::ZERO);
+        assert!(plain.pose_rows.is_empty());
+        assert_eq!(plain.pose, step.pose);
+        assert_eq!(plain.mlp.weights, step.mlp.weights);
+        assert_eq!(plain.depth_loss, step.depth_loss);
     }
 }

@@ -20,6 +20,8 @@
 //!   camera ray, uniform in disparity).
 //! - [`depth_calib`]: the LiDAR stage: scene + every LiDAR extrinsic from depth (a full step).
 //! - [`calibrator`]: that stage prepared from a drive as an `optim::runner::Calibrator`.
+//! - [`pose_newton`]: preconditioned LiDAR pose steps (the objective's gradient, the rendered
+//!   depth's point-to-plane curvature).
 //! - [`composite`]: SDF → opacity and front-to-back compositing of depth, opacity and features
 //!   (Eq. 2), with a division-free backward pass.
 
@@ -37,6 +39,7 @@ pub mod lidar_terms;
 pub mod mlp;
 pub mod occupancy;
 pub mod pose;
+pub mod pose_newton;
 pub mod regulariser;
 pub mod sdf_init;
 pub mod surface_align;

@@ -1,0 +1,78 @@
+//! Symmetric positive definite linear systems by Cholesky: the 6 × 6 normal equations of ICP
+//! and of UniCal's LiDAR pose steps, and the larger ones of pose graphs.
+
+/// Solve `A x = b` for a symmetric positive definite `A` (n × n, row-major, `a.len() == n²`).
+/// `None` when `A` is not positive definite (to rounding) or the sizes disagree.
+pub fn solve(a: &[f64], b: &[f64]) -> Option<Vec<f64>> {
+    let n = b.len();
+    if a.len() != n * n {
+        return None;
+    }
+    let mut l = vec![0.0f64; n * n];
+    for i in 0..n {
+        for j in 0..=i {
+            let sum: f64 = (0..j).map(|k| l[i * n + k] * l[j * n + k]).sum();
+            if i == j {
+                let d = a[i * n + i] - sum;
+                if d.is_nan() || d <= 1e-12 {
+                    return None;
+                }
+                l[i * n + i] = d.sqrt();
+            } else {
+                l[i * n + j] = (a[i * n + j] - sum) / l[j * n + j];
+            }
+        }
+    }
+    let mut y = vec![0.0f64; n];
+    for i in 0..n {
+        let sum: f64 = (0..i).map(|k| l[i * n + k] * y[k]).sum();
+        y[i] = (b[i] - sum) / l[i * n + i];
+    }
+    let mut x = vec![0.0f64; n];
+    for i in (0..n).rev() {
+        let sum: f64 = (i + 1..n).map(|k| l[k * n + i] * x[k]).sum();
+        x[i] = (y[i] - sum) / l[i * n + i];
+    }
+    Some(x)
+}
+
+/// [`solve`] for the 6 × 6 systems of rigid-body steps.
+pub fn solve6(a: [f64; 36], b: [f64; 6]) -> Option<[f64; 6]> {
+    let x = solve(&a, &b)?;
+    let mut out = [0.0; 6];
+    out.copy_from_slice(&x);
+    Some(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn solves_a_known_system_and_refuses_an_indefinite_one() {
+        // A = M Mᵀ + I for a fixed M; x known, b = A x.
+        let n = 5;
+        let m: Vec<f64> = (0..n * n)
+            .map(|i| ((i * 7 + 3) % 11) as f64 - 5.0)
+            .collect();
+        let mut a = vec![0.0; n * n];
+        for i in 0..n {
+            for j in 0..n {
+                a[i * n + j] = (0..n).map(|k| m[i * n + k] * m[j * n + k]).sum::<f64>()
+                    + if i == j { 1.0 } else { 0.0 };
+            }
+        }
+        let x: Vec<f64> = (0..n).map(|i| i as f64 - 1.5).collect();
+        let b: Vec<f64> = (0..n)
+            .map(|i| (0..n).map(|j| a[i * n + j] * x[j]).sum())
+            .collect();
+        let solved = solve(&a, &b).unwrap_or_default();
+        assert_eq!(solved.len(), n);
+        for (s, e) in solved.iter().zip(&x) {
+            assert!((s - e).abs() < 1e-9, "{s} vs {e}");
+        }
+        assert!(solve(&[1.0, 2.0, 2.0, 1.0], &[1.0, 1.0]).is_none());
+        assert!(solve(&[1.0, 0.0, 0.0], &[1.0, 1.0]).is_none());
+        assert!(solve6([0.0; 36], [1.0; 6]).is_none());
+    }
+}
