@@ -82,6 +82,18 @@ fn main() {
             .ok()
             .and_then(|v| v.parse().ok())
             .unwrap_or(defaults.registration_steps),
+        coarse_to_fine: std::env::var("RIGCAL_C2F").ok().and_then(|v| {
+            let (a, b) = v.split_once(',')?;
+            Some(rigcal::unical::depth_calib::CoarseToFine {
+                start_levels: a.parse().ok()?,
+                end_fraction: b.parse().ok()?,
+            })
+        }),
+        lidar_pose_update: if std::env::var("RIGCAL_NEWTON").is_ok() {
+            rigcal::unical::pose_newton::PoseUpdate::Newton(Default::default())
+        } else {
+            rigcal::unical::pose_newton::PoseUpdate::Adam
+        },
         beta_init,
         regulariser_weight,
         ..defaults

@@ -70,6 +70,9 @@ pub struct DepthCalibConfig {
     /// such phase. Only with preconditioned LiDAR pose steps (with Adam a LiDAR that places no
     /// surface gets no pose gradient).
     pub registration_steps: usize,
+    /// Coarse-to-fine hash grid (BARF): the scene starts with this many open levels and
+    /// opens the rest evenly until this fraction of the iterations (`None`: all open).
+    pub coarse_to_fine: Option<CoarseToFine>,
     /// How LiDAR poses move: the paper's Adam, or preconditioned steps (the objective's
     /// gradient scaled by the rendered depth's curvature, [`super::pose_newton`]). Cameras
     /// always use Adam.
@@ -122,6 +125,7 @@ impl Default for DepthCalibConfig {
             regulariser_weight: 0.01,
             lidar_pose_update: PoseUpdate::Adam,
             registration_steps: 0,
+            coarse_to_fine: None,
             camera_far_m: 120.0,
             background: Some(BackgroundConfig::default()),
             frozen_sensor: None,
@@ -134,6 +138,13 @@ impl Default for DepthCalibConfig {
             heatmap_uniform_share: 0.2,
         }
     }
+}
+
+/// A coarse-to-fine schedule of the scene's hash-grid levels.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CoarseToFine {
+    pub start_levels: f32,
+    pub end_fraction: f32,
 }
 
 impl DepthCalibConfig {
@@ -1109,6 +1120,13 @@ impl DepthCalibration {
     /// One optimisation step over every sensor: the same number of rays from each LiDAR (depth)
     /// and each camera (colour), gradients weighted by the objective's λs (§8).
     pub fn step(&mut self) -> DepthReport {
+        if let Some(c2f) = self.config.coarse_to_fine {
+            let levels = self.field.grid.config.levels as f32;
+            let end = (c2f.end_fraction * self.config.iterations as f32).max(1.0);
+            let progress = (self.iteration as f32 / end).min(1.0);
+            let active = c2f.start_levels + (levels - c2f.start_levels) * progress;
+            self.field.grid.set_active_levels(active);
+        }
         if self.initialising_geometry() {
             return self.geometry_init_step();
         }

@@ -56,6 +56,9 @@ pub struct HashGrid {
     levels: Vec<Level>,
     /// `entries · F` features, f32.
     pub params: Vec<f32>,
+    /// Per level, the factor its features enter the encoding with (1: fully open; see
+    /// [`HashGrid::set_active_levels`]).
+    level_weights: Vec<f32>,
 }
 
 /// Gradients of a batch with respect to table entries: (entry, dL/d features), unsorted, with
@@ -247,10 +250,36 @@ impl HashGrid {
             })
             .collect();
         Self {
+            level_weights: vec![1.0; levels.len()],
             config,
             levels,
             params,
         }
+    }
+
+    /// Coarse-to-fine (BARF, Lin et al. 2021): with `active` levels in `[0, L]`, level `l` is
+    /// weighted by `(1 − cos(π·clamp(active − l, 0, 1)))/2`, so levels open one after another
+    /// (fully open at `active ≥ L`). Closed levels are skipped in every pass.
+    pub fn set_active_levels(&mut self, active: f32) {
+        for (l, w) in self.level_weights.iter_mut().enumerate() {
+            let t = (active - l as f32).clamp(0.0, 1.0);
+            *w = (1.0 - (std::f32::consts::PI * t).cos()) * 0.5;
+        }
+    }
+
+    /// Level `l`'s gradient scaled by its weight, `None` when nothing flows through it.
+    #[inline]
+    fn level_grad(&self, l: usize, d_out: &[f32]) -> Option<[f32; F]> {
+        let w = self.level_weights[l];
+        let g = &d_out[l * F..(l + 1) * F];
+        if w == 0.0 || g.iter().all(|v| *v == 0.0) {
+            return None;
+        }
+        let mut out = [0f32; F];
+        for f in 0..F {
+            out[f] = g[f] * w;
+        }
+        Some(out)
     }
 
     /// Output width `L·F`.
@@ -313,6 +342,11 @@ impl HashGrid {
     /// Encode `x` ∈ [0,1]³ into `out` (length `L·F`).
     pub fn encode(&self, x: [f32; 3], out: &mut [f32]) {
         for (l, level) in self.levels.iter().enumerate() {
+            let w = self.level_weights[l];
+            if w == 0.0 {
+                out[l * F..(l + 1) * F].fill(0.0);
+                continue;
+            }
             let c = self.corners(level, x);
             let mut acc = [0f32; F];
             for k in 0..8 {
@@ -321,17 +355,18 @@ impl HashGrid {
                     acc[f] += c.weight[k] * self.params[base + f];
                 }
             }
-            out[l * F..(l + 1) * F].copy_from_slice(&acc);
+            for f in 0..F {
+                out[l * F + f] = w * acc[f];
+            }
         }
     }
 
     /// Accumulate d(loss)/d(entries) for one point given d(loss)/d(encoding).
     pub fn backward(&self, x: [f32; 3], d_out: &[f32], grad: &mut SparseGrad) {
         for (l, level) in self.levels.iter().enumerate() {
-            let g = &d_out[l * F..(l + 1) * F];
-            if g.iter().all(|v| *v == 0.0) {
+            let Some(g) = self.level_grad(l, d_out) else {
                 continue;
-            }
+            };
             let c = self.corners(level, x);
             for k in 0..8 {
                 let mut e = [0f32; F];
@@ -359,10 +394,9 @@ impl HashGrid {
     ) -> [f32; 3] {
         let mut gx = [0f32; 3];
         for (l, level) in self.levels.iter().enumerate() {
-            let g = &d_out[l * F..(l + 1) * F];
-            if g.iter().all(|v| *v == 0.0) {
+            let Some(g) = self.level_grad(l, d_out) else {
                 continue;
-            }
+            };
             let c = self.corners(level, x);
             if let Some(grad) = grad.as_deref_mut() {
                 for k in 0..8 {
@@ -500,6 +534,35 @@ mod tests {
                 );
             }
         }
+    }
+
+    /// Coarse-to-fine weights: closed levels give zeros and no gradient, a half-open level
+    /// scales both its features and their gradients.
+    #[test]
+    fn level_weights_scale_features_and_gradients() {
+        let mut grid = small();
+        let x = [0.31, 0.52, 0.77];
+        let mut full = vec![0.0; grid.output_dim()];
+        grid.encode(x, &mut full);
+        grid.set_active_levels(1.5);
+        let mut part = vec![0.0; grid.output_dim()];
+        grid.encode(x, &mut part);
+        assert_eq!(&part[..F], &full[..F]);
+        assert!((part[F] - 0.5 * full[F]).abs() < 1e-7);
+        assert!(part[2 * F..].iter().all(|v| *v == 0.0));
+        let d_out = vec![1.0; grid.output_dim()];
+        let mut g = SparseGrad::default();
+        grid.backward(x, &d_out, &mut g);
+        // Two open levels × 8 corners, the second at half weight.
+        assert_eq!(g.entries.len(), 16);
+        // Trilinear weights sum to one: level 0 passes the gradient whole, level 1 half.
+        let sum = |es: &[(u32, [f32; F])]| es.iter().map(|(_, e)| e[0]).sum::<f32>();
+        assert!((sum(&g.entries[..8]) - 1.0).abs() < 1e-6);
+        assert!((sum(&g.entries[8..]) - 0.5).abs() < 1e-6);
+        grid.set_active_levels(100.0);
+        let mut again = vec![0.0; grid.output_dim()];
+        grid.encode(x, &mut again);
+        assert_eq!(again, full);
     }
 
     #[test]
