@@ -21,6 +21,7 @@ pub enum Method {
     EdgeAlign,
     Icp,
     MutualInformation,
+    Target,
     UnicalLidar,
     Unical,
 }
@@ -32,6 +33,9 @@ impl Method {
             Method::Icp => "Point-to-plane ICP (LiDARs vs the reference LiDAR)",
             Method::MutualInformation => {
                 "Mutual information (cameras vs LiDAR reflectivity, ±2° / ±20 cm)"
+            }
+            Method::Target => {
+                "Checkerboards, edge-and-plane (cameras vs LiDAR; checkerboard scenes)"
             }
             Method::UnicalLidar => "UniCal, LiDAR terms (scene + LiDARs; slow on CPU)",
             Method::Unical => "UniCal, LiDARs + cameras (1/8-size images; slowest)",
@@ -211,6 +215,28 @@ pub fn start(studio: &mut Studio) {
         }));
         return;
     }
+    if method == Method::Target {
+        studio.optimiser.message = Some(format!(
+            "finding checkerboards in {} camera(s) and {lidar}…",
+            cameras.len()
+        ));
+        let config = crate::classical::target::TargetConfig {
+            frames,
+            ..Default::default()
+        };
+        studio.optimiser.run = Some(Run::spawn_with(move || {
+            crate::classical::target_calibrator::TargetCalibrator::from_drive(
+                &drive,
+                &prepare_rig,
+                &lidar,
+                &cameras,
+                &segments,
+                config,
+            )
+            .map(|c| Box::new(c) as Box<dyn Calibrator>)
+        }));
+        return;
+    }
     if method == Method::MutualInformation {
         studio.optimiser.run = Some(Run::spawn_with(move || {
             crate::classical::mi_calibrator::MiCalibrator::from_drive(
@@ -247,6 +273,7 @@ pub fn optimiser_ui(studio: &mut Studio, ui: &mut egui::Ui) {
                     Method::EdgeAlign,
                     Method::Icp,
                     Method::MutualInformation,
+                    Method::Target,
                     Method::UnicalLidar,
                     Method::Unical,
                 ] {

@@ -2,10 +2,15 @@
 //! (point-to-plane ICP for LiDAR–LiDAR pairs) and `icp_calibrator` (it as a runner
 //! `Calibrator`: every LiDAR against a reference LiDAR); `mutual_info` (LiDAR reflectivity
 //! against image grey level, Pandey et al.) and `mi_calibrator` (every camera against a
-//! reference LiDAR). The checkerboard edge-and-plane method and pose-graph unification are to
-//! come (issue 8).
+//! reference LiDAR); `target` (checkerboard edge-and-plane: boards found in images by
+//! `features::chessboard` and posed by planar PnP, the same boards' planes and ring-end edge
+//! points in LiDAR, one robust solve per camera over many board views) and
+//! `target_calibrator` (every camera against a reference LiDAR). Pose-graph unification is still
+//! to come (issue 8).
 
 pub mod icp;
 pub mod icp_calibrator;
 pub mod mi_calibrator;
 pub mod mutual_info;
+pub mod target;
+pub mod target_calibrator;

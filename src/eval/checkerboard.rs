@@ -105,6 +105,15 @@ const ROW_POINTS: usize = 8;
 
 /// Boards among `points` (a frame whose +z is up, e.g. the vehicle or world frame).
 pub fn boards_in_points(points: &[DVec3], spec: &BoardSpec) -> Vec<BoardPose> {
+    boards_with_points(points, spec)
+        .into_iter()
+        .map(|(pose, _)| pose)
+        .collect()
+}
+
+/// [`boards_in_points`] with each board's plane inliers (the board's own returns, its stand
+/// excluded).
+pub fn boards_with_points(points: &[DVec3], spec: &BoardSpec) -> Vec<(BoardPose, Vec<DVec3>)> {
     if points.len() < 20 {
         return Vec::new();
     }
@@ -185,13 +194,26 @@ pub fn boards_in_points(points: &[DVec3], spec: &BoardSpec) -> Vec<BoardPose> {
         if !(0.9 * w..=1.1 * w).contains(&ext_u) || !(0.6 * h..=1.1 * h).contains(&ext_v) {
             continue;
         }
-        boards.push(BoardPose {
-            center: mean + u * (a0 + a1) / 2.0 + v * (b0 + b1) / 2.0,
-            u,
-            v,
-            normal,
-            inliers: inliers.len(),
-        });
+        // The board's own returns: within its rows and columns (a stand crossing the board's
+        // extended plane below it is not the board).
+        let board_points = inliers
+            .iter()
+            .zip(&coords)
+            .filter(|(_, (a, b))| {
+                *a >= a0 - 0.01 && *a <= a1 + 0.01 && *b >= b0 - 0.01 && *b <= b1 + 0.01
+            })
+            .map(|(&i, _)| pts[i])
+            .collect();
+        boards.push((
+            BoardPose {
+                center: mean + u * (a0 + a1) / 2.0 + v * (b0 + b1) / 2.0,
+                u,
+                v,
+                normal,
+                inliers: inliers.len(),
+            },
+            board_points,
+        ));
     }
     boards
 }

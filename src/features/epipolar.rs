@@ -128,7 +128,7 @@ fn eight_point(pairs: &[(DVec3, DVec3)]) -> Option<DMat3> {
             }
         }
     }
-    let (values, vectors) = jacobi_eigen(ata);
+    let (values, vectors) = crate::geometry::spd::symmetric_eigen(ata);
     let k = (0..9).min_by(|&i, &j| values[i].total_cmp(&values[j]))?;
     let e: Vec<f64> = (0..9).map(|r| vectors[r][k]).collect();
     // Row-major e → columns of the matrix.
@@ -148,7 +148,7 @@ fn project_essential(m: DMat3) -> Option<DMat3> {
         [mtm.x_axis.y, mtm.y_axis.y, mtm.z_axis.y],
         [mtm.x_axis.z, mtm.y_axis.z, mtm.z_axis.z],
     ];
-    let (values, vectors) = jacobi_eigen(arr);
+    let (values, vectors) = crate::geometry::spd::symmetric_eigen(arr);
     let mut order = [0usize, 1, 2];
     order.sort_by(|&i, &j| values[j].total_cmp(&values[i]));
     let mut out = DMat3::ZERO;
@@ -159,55 +159,6 @@ fn project_essential(m: DMat3) -> Option<DMat3> {
         out += DMat3::from_cols(u * v.x, u * v.y, u * v.z);
     }
     Some(out)
-}
-
-/// Eigenvalues and eigenvectors (columns) of a symmetric matrix by cyclic Jacobi rotations.
-fn jacobi_eigen<const N: usize>(mut a: [[f64; N]; N]) -> ([f64; N], [[f64; N]; N]) {
-    let mut v = [[0.0; N]; N];
-    for (i, row) in v.iter_mut().enumerate() {
-        row[i] = 1.0;
-    }
-    for _sweep in 0..60 {
-        let off: f64 = (0..N)
-            .flat_map(|i| (0..N).filter(move |&j| j != i).map(move |j| (i, j)))
-            .map(|(i, j)| a[i][j] * a[i][j])
-            .sum();
-        if off < 1e-30 {
-            break;
-        }
-        for p in 0..N {
-            for q in p + 1..N {
-                if a[p][q].abs() < 1e-300 {
-                    continue;
-                }
-                let theta = (a[q][q] - a[p][p]) / (2.0 * a[p][q]);
-                let t = theta.signum() / (theta.abs() + (theta * theta + 1.0).sqrt());
-                let t = if theta == 0.0 { 1.0 } else { t };
-                let c = 1.0 / (t * t + 1.0).sqrt();
-                let s = t * c;
-                for k in 0..N {
-                    let (akp, akq) = (a[k][p], a[k][q]);
-                    a[k][p] = c * akp - s * akq;
-                    a[k][q] = s * akp + c * akq;
-                }
-                for k in 0..N {
-                    let (apk, aqk) = (a[p][k], a[q][k]);
-                    a[p][k] = c * apk - s * aqk;
-                    a[q][k] = s * apk + c * aqk;
-                }
-                for row in v.iter_mut() {
-                    let (vkp, vkq) = (row[p], row[q]);
-                    row[p] = c * vkp - s * vkq;
-                    row[q] = s * vkp + c * vkq;
-                }
-            }
-        }
-    }
-    let mut values = [0.0; N];
-    for (i, val) in values.iter_mut().enumerate() {
-        *val = a[i][i];
-    }
-    (values, v)
 }
 
 #[cfg(test)]
@@ -221,18 +172,6 @@ mod tests {
             DVec3::new(-t.z, 0.0, t.x),
             DVec3::new(t.y, -t.x, 0.0),
         )
-    }
-
-    #[test]
-    fn jacobi_diagonalises_a_symmetric_matrix() {
-        let a = [[4.0, 1.0, 2.0], [1.0, 3.0, 0.5], [2.0, 0.5, 5.0]];
-        let (values, v) = jacobi_eigen(a);
-        for k in 0..3 {
-            for i in 0..3 {
-                let av: f64 = (0..3).map(|j| a[i][j] * v[j][k]).sum();
-                assert!((av - values[k] * v[i][k]).abs() < 1e-10);
-            }
-        }
     }
 
     #[test]

@@ -6,6 +6,7 @@
 
 pub mod camera;
 pub mod motion;
+pub mod pnp;
 pub mod projection;
 pub mod rigid;
 pub mod rot6d;

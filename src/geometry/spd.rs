@@ -1,5 +1,6 @@
-//! Symmetric positive definite linear systems by Cholesky: the 6 × 6 normal equations of ICP
-//! and of UniCal's LiDAR pose steps, and the larger ones of pose graphs.
+//! Symmetric matrices: positive definite linear systems by Cholesky (the 6 × 6 normal equations
+//! of ICP and of UniCal's LiDAR pose steps, the larger ones of pose graphs) and eigen-systems
+//! by cyclic Jacobi rotations (essential matrices, homographies).
 
 /// Solve `A x = b` for a symmetric positive definite `A` (n × n, row-major, `a.len() == n²`).
 /// `None` when `A` is not positive definite (to rounding) or the sizes disagree.
@@ -44,6 +45,55 @@ pub fn solve6(a: [f64; 36], b: [f64; 6]) -> Option<[f64; 6]> {
     Some(out)
 }
 
+/// Eigenvalues and eigenvectors (columns) of a symmetric matrix by cyclic Jacobi rotations.
+pub fn symmetric_eigen<const N: usize>(mut a: [[f64; N]; N]) -> ([f64; N], [[f64; N]; N]) {
+    let mut v = [[0.0; N]; N];
+    for (i, row) in v.iter_mut().enumerate() {
+        row[i] = 1.0;
+    }
+    for _sweep in 0..60 {
+        let off: f64 = (0..N)
+            .flat_map(|i| (0..N).filter(move |&j| j != i).map(move |j| (i, j)))
+            .map(|(i, j)| a[i][j] * a[i][j])
+            .sum();
+        if off < 1e-30 {
+            break;
+        }
+        for p in 0..N {
+            for q in p + 1..N {
+                if a[p][q].abs() < 1e-300 {
+                    continue;
+                }
+                let theta = (a[q][q] - a[p][p]) / (2.0 * a[p][q]);
+                let t = theta.signum() / (theta.abs() + (theta * theta + 1.0).sqrt());
+                let t = if theta == 0.0 { 1.0 } else { t };
+                let c = 1.0 / (t * t + 1.0).sqrt();
+                let s = t * c;
+                for k in 0..N {
+                    let (akp, akq) = (a[k][p], a[k][q]);
+                    a[k][p] = c * akp - s * akq;
+                    a[k][q] = s * akp + c * akq;
+                }
+                for k in 0..N {
+                    let (apk, aqk) = (a[p][k], a[q][k]);
+                    a[p][k] = c * apk - s * aqk;
+                    a[q][k] = s * apk + c * aqk;
+                }
+                for row in v.iter_mut() {
+                    let (vkp, vkq) = (row[p], row[q]);
+                    row[p] = c * vkp - s * vkq;
+                    row[q] = s * vkp + c * vkq;
+                }
+            }
+        }
+    }
+    let mut values = [0.0; N];
+    for (i, val) in values.iter_mut().enumerate() {
+        *val = a[i][i];
+    }
+    (values, v)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -74,5 +124,17 @@ mod tests {
         assert!(solve(&[1.0, 2.0, 2.0, 1.0], &[1.0, 1.0]).is_none());
         assert!(solve(&[1.0, 0.0, 0.0], &[1.0, 1.0]).is_none());
         assert!(solve6([0.0; 36], [1.0; 6]).is_none());
+    }
+
+    #[test]
+    fn jacobi_diagonalises_a_symmetric_matrix() {
+        let a = [[4.0, 1.0, 2.0], [1.0, 3.0, 0.5], [2.0, 0.5, 5.0]];
+        let (values, v) = symmetric_eigen(a);
+        for k in 0..3 {
+            for i in 0..3 {
+                let av: f64 = (0..3).map(|j| a[i][j] * v[j][k]).sum();
+                assert!((av - values[k] * v[i][k]).abs() < 1e-10);
+            }
+        }
     }
 }
