@@ -498,8 +498,20 @@ fn the_export_panel_writes_every_format_and_a_urdf_loads_back_as_an_undoable_edi
     h.run_steps(2);
     let dir = std::env::temp_dir().join(format!("rigcal-studio-export-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
+    let cameras: Vec<String> = h
+        .state()
+        .current
+        .cameras()
+        .map(|c| c.name.clone())
+        .collect();
     for format in ExportFormat::ALL {
         h.state_mut().export.format = Some(format);
+        // A KITTI file holds three cameras: the panel leaves the others out.
+        h.state_mut().export.left_out = if format == ExportFormat::Kitti {
+            cameras[3..].to_vec()
+        } else {
+            Vec::new()
+        };
         h.run_steps(2);
         // The button says where it writes: a folder for the per-camera formats.
         let button = if format.is_directory() {
@@ -513,7 +525,14 @@ fn the_export_panel_writes_every_format_and_a_urdf_loads_back_as_an_undoable_edi
             other => panic!("{}: {other:?}", format.name()),
         };
         assert_eq!(export.format, format);
-        // PandaSet's cameras are undistorted pinholes, so every format can take the whole rig.
+        if format == ExportFormat::Kitti {
+            let text = export.preview();
+            assert!(
+                text.starts_with("P0: ") && text.contains("\nP3: "),
+                "{text}"
+            );
+        }
+        // PandaSet's cameras are undistorted pinholes, so every format takes them.
         let out = dir.join(format.default_file_name());
         let files = write(&export, &out).unwrap();
         assert!(!files.is_empty() && files.iter().all(|f| f.metadata().unwrap().len() > 0));

@@ -15,6 +15,8 @@ pub struct ExportPanel {
     /// Reference LiDAR (OpenCV, KITTI) and camera (KITTI, Kalibr); `None`: the first.
     pub lidar: Option<String>,
     pub camera: Option<String>,
+    /// Sensors left out of the export (by name); empty: every sensor.
+    pub left_out: Vec<String>,
     /// The last export and what it was made from (an MCAP export writes a file: not every frame).
     cache: Option<(String, Result<Export, String>)>,
 }
@@ -118,6 +120,34 @@ pub(crate) fn export_ui(studio: &mut Studio, ui: &mut egui::Ui) {
         });
     studio.export.format = Some(format);
     let rig = studio.rig_for(which).clone();
+    ui.label("sensors to write:");
+    ui.horizontal_wrapped(|ui| {
+        for sensor in &rig.sensors {
+            let mut on = !studio.export.left_out.contains(&sensor.name);
+            if ui.checkbox(&mut on, &sensor.name).changed() {
+                if on {
+                    studio.export.left_out.retain(|n| *n != sensor.name);
+                } else {
+                    studio.export.left_out.push(sensor.name.clone());
+                }
+            }
+        }
+    });
+    let sensors: Vec<String> = rig
+        .sensors
+        .iter()
+        .filter(|s| !studio.export.left_out.contains(&s.name))
+        .map(|s| s.name.clone())
+        .collect();
+    if sensors.is_empty() {
+        ui.colored_label(egui::Color32::LIGHT_RED, "tick at least one sensor");
+        return;
+    }
+    let sensors = if sensors.len() == rig.sensors.len() {
+        Vec::new()
+    } else {
+        sensors
+    };
     if matches!(format, ExportFormat::OpenCv | ExportFormat::Kitti) {
         let lidars: Vec<String> = rig.lidars().map(|s| s.name.clone()).collect();
         reference_combo(ui, "reference LiDAR", &mut studio.export.lidar, &lidars);
@@ -139,7 +169,7 @@ pub(crate) fn export_ui(studio: &mut Studio, ui: &mut egui::Ui) {
     );
     let doc = document(studio, &rig, which);
     let options = ExportOptions {
-        sensors: Vec::new(),
+        sensors,
         lidar: studio.export.lidar.clone(),
         camera: studio.export.camera.clone(),
     };

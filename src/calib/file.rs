@@ -152,13 +152,9 @@ impl CalibrationFile {
                     None => {
                         return Err(invalid(format!("camera '{}' has no camera: block", s.name)));
                     }
-                    Some(c) if !(c.fx > 0.0 && c.fy > 0.0) || c.width == 0 || c.height == 0 => {
-                        return Err(invalid(format!(
-                            "camera '{}': fx, fy, width and height must be positive",
-                            s.name
-                        )));
-                    }
-                    Some(_) => {}
+                    Some(c) => c
+                        .validate()
+                        .map_err(|e| invalid(format!("camera '{}': {e}", s.name)))?,
                 }
             }
             sensors.push(Sensor {
@@ -173,6 +169,16 @@ impl CalibrationFile {
                 vehicle_from_sensor,
                 camera: s.camera.clone(),
             });
+        }
+        // Every exported TF tree names sensors by frame: two sensors on one frame would be one
+        // node with two parents' worth of transforms.
+        for (i, s) in sensors.iter().enumerate() {
+            if let Some(o) = sensors[..i].iter().find(|o| o.frame_id == s.frame_id) {
+                return Err(invalid(format!(
+                    "sensors '{}' and '{}' have the same frame_id '{}'",
+                    o.name, s.name, s.frame_id
+                )));
+            }
         }
         Ok(Rig {
             vehicle_frame: self.vehicle_frame.clone(),
@@ -300,6 +306,35 @@ mod tests {
         let mut file = CalibrationFile::from_rig(&sample_rig());
         file.sensors[1].name = "lidar_top".into();
         assert!(file.to_rig(p).unwrap_err().to_string().contains("twice"));
+        let mut file = CalibrationFile::from_rig(&sample_rig());
+        file.sensors[1].frame_id = file.sensors[0].frame_id.clone();
+        let err = file.to_rig(p).unwrap_err().to_string();
+        assert!(err.contains("same frame_id"), "{err}");
+        for bad in [f64::NAN, f64::INFINITY, 0.0] {
+            let mut file = CalibrationFile::from_rig(&sample_rig());
+            let cam = file
+                .sensors
+                .iter_mut()
+                .find(|s| s.camera.is_some())
+                .unwrap();
+            let name = cam.name.clone();
+            cam.camera.as_mut().unwrap().fx = bad;
+            let err = file.to_rig(p).unwrap_err().to_string();
+            assert!(err.contains(&name) && err.contains("focal"), "{err}");
+        }
+        let mut file = CalibrationFile::from_rig(&sample_rig());
+        let cam = file
+            .sensors
+            .iter_mut()
+            .find(|s| s.camera.is_some())
+            .unwrap();
+        cam.camera.as_mut().unwrap().cy = f64::NAN;
+        assert!(
+            file.to_rig(p)
+                .unwrap_err()
+                .to_string()
+                .contains("principal point")
+        );
         let mut file = CalibrationFile::from_rig(&sample_rig());
         file.rigcal_calibration = 2;
         assert!(file.to_rig(p).is_err());

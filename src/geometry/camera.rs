@@ -102,6 +102,43 @@ impl CameraIntrinsics {
         }
     }
 
+    /// Why these intrinsics cannot be used, if they cannot: focal lengths must be finite and
+    /// positive (an uncalibrated ROS driver publishes K = 0), the principal point and every
+    /// distortion coefficient finite, the image non-empty, and no more coefficients than the
+    /// model has.
+    pub fn validate(&self) -> Result<(), String> {
+        if !(self.fx.is_finite() && self.fy.is_finite() && self.fx > 0.0 && self.fy > 0.0) {
+            return Err(format!(
+                "focal lengths must be finite and positive (fx = {}, fy = {}); an uncalibrated camera publishes zeros",
+                self.fx, self.fy
+            ));
+        }
+        if !(self.cx.is_finite() && self.cy.is_finite()) {
+            return Err(format!(
+                "principal point must be finite (cx = {}, cy = {})",
+                self.cx, self.cy
+            ));
+        }
+        if self.width == 0 || self.height == 0 {
+            return Err(format!(
+                "image size must be positive ({} × {})",
+                self.width, self.height
+            ));
+        }
+        if let Some(v) = self.distortion.iter().find(|v| !v.is_finite()) {
+            return Err(format!("distortion coefficient {v} is not finite"));
+        }
+        let most = self.model.ros_distortion_len();
+        if self.distortion.len() > most && self.distortion[most..].iter().any(|&v| v != 0.0) {
+            return Err(format!(
+                "{} takes {most} distortion coefficients, got {} non-zero beyond them",
+                self.model.as_str(),
+                self.distortion.len() - most
+            ));
+        }
+        Ok(())
+    }
+
     /// The ROS `distortion_model` name and coefficients padded to its length: a pinhole is
     /// written as `plumb_bob` with five zeros, as ROS drivers do.
     pub fn ros_distortion(&self) -> (&'static str, Vec<f64>) {
@@ -385,6 +422,22 @@ fn solve2(m: &Mat2, r: DVec2) -> Option<DVec2> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn validation_names_what_is_wrong() {
+        assert!(plumb_bob_wide().validate().is_ok());
+        let with = |f: &dyn Fn(&mut CameraIntrinsics)| {
+            let mut c = plumb_bob_wide();
+            f(&mut c);
+            c.validate().unwrap_err()
+        };
+        assert!(with(&|c| c.fx = 0.0).contains("focal"));
+        assert!(with(&|c| c.fy = f64::INFINITY).contains("focal"));
+        assert!(with(&|c| c.cx = f64::NAN).contains("principal point"));
+        assert!(with(&|c| c.height = 0).contains("image size"));
+        assert!(with(&|c| c.distortion[2] = f64::NAN).contains("not finite"));
+        assert!(with(&|c| c.distortion.extend([0.0, 0.3])).contains("plumb_bob takes 5"));
+    }
 
     fn plumb_bob_wide() -> CameraIntrinsics {
         CameraIntrinsics {

@@ -1,20 +1,46 @@
 //! Autoware `sensor_kit_calibration.yaml` (the tier4 calibration manager's layout).
 //!
-//! One root key, the vehicle frame, whose children are the sensors' poses in it:
-//! `parent_from_child` as `x y z` (m) and URDF fixed-axis `roll pitch yaw` (rad). Autoware
-//! names a camera by its body frame (`<camera>_link`, x forward), not its optical frame, so a
-//! camera's entry is `vehicle_from_body` (REP-103).
+//! One root key, `sensor_kit_base_link`, whose children are the sensors' poses in it:
+//! `parent_from_child` as `x y z` (m) and URDF fixed-axis `roll pitch yaw` (rad). rigcal's
+//! sensor kit frame is the rig's vehicle frame (the comment at the top says so). Children are
+//! named as Autoware's sensor kits name them: a LiDAR `<frame>_base_link`, a camera by its
+//! body frame `<camera>/camera_link` (x forward), not its optical frame, so a camera's entry is
+//! `vehicle_from_body` (REP-103).
 
 use super::frames;
 use super::numbers::num;
+use super::text::{comment, yaml_str};
 use crate::calib::{Rig, SensorKind};
 use crate::geometry::Rigid;
+
+/// The root key of the file.
+pub const ROOT: &str = "sensor_kit_base_link";
+
+/// Autoware's name for a LiDAR's frame: `<frame>_base_link`.
+pub fn lidar_key(frame_id: &str) -> String {
+    if frame_id.ends_with("_base_link") {
+        frame_id.to_string()
+    } else {
+        format!("{frame_id}_base_link")
+    }
+}
+
+/// Autoware's name for a camera's body frame: `<camera>/camera_link`.
+pub fn camera_key(frame_id: &str) -> String {
+    let body = frames::body_link(frame_id);
+    if body.ends_with("/camera_link") {
+        return body;
+    }
+    let stem = body.strip_suffix("_link").unwrap_or(&body);
+    format!("{stem}/camera_link")
+}
 
 fn entry(out: &mut String, child: &str, t: Rigid) {
     let [r, p, y] = t.roll_pitch_yaw_rad();
     let v = t.translation;
     out.push_str(&format!(
-        "  {child}:\n    x: {}\n    y: {}\n    z: {}\n    roll: {}\n    pitch: {}\n    yaw: {}\n",
+        "  {}:\n    x: {}\n    y: {}\n    z: {}\n    roll: {}\n    pitch: {}\n    yaw: {}\n",
+        yaml_str(child),
         num(v.x),
         num(v.y),
         num(v.z),
@@ -29,20 +55,22 @@ pub fn export(rig: &Rig) -> String {
         "# Autoware sensor_kit_calibration.yaml, written by rigcal {}.\n\
          # Each entry is the child frame's pose in the root frame, parent_from_child:\n\
          # p_root = R p_child + (x, y, z); metres; radians; URDF fixed-axis roll-pitch-yaw,\n\
-         # R = Rz(yaw) Ry(pitch) Rx(roll). Root: the rig's vehicle frame '{}' (rename it to\n\
-         # sensor_kit_base_link only if that is the same frame on your vehicle).\n\
-         # Cameras are given by their body frame <camera>_link (x forward, y left, z up), not the\n\
-         # optical frame, as Autoware expects.\n{}:\n",
+         # R = Rz(yaw) Ry(pitch) Rx(roll). Root: {ROOT}, which here is the rig's\n\
+         # vehicle frame '{}': sensor_kit_base_link_from_child = {}_from_child. If your sensor\n\
+         # kit frame is not the vehicle frame, compose with sensor_kit_from_vehicle first.\n\
+         # LiDARs are <frame>_base_link; cameras are given by their body frame\n\
+         # <camera>/camera_link (x forward, y left, z up), not the optical frame, as Autoware\n\
+         # expects.\n{ROOT}:\n",
         env!("CARGO_PKG_VERSION"),
-        rig.vehicle_frame,
-        rig.vehicle_frame
+        comment(&rig.vehicle_frame),
+        comment(&rig.vehicle_frame)
     );
     for s in &rig.sensors {
         match s.kind {
-            SensorKind::Lidar => entry(&mut out, &s.frame_id, s.vehicle_from_sensor),
+            SensorKind::Lidar => entry(&mut out, &lidar_key(&s.frame_id), s.vehicle_from_sensor),
             SensorKind::Camera => entry(
                 &mut out,
-                &frames::body_link(&s.frame_id),
+                &camera_key(&s.frame_id),
                 frames::vehicle_from_body(s),
             ),
         }
@@ -61,13 +89,11 @@ mod tests {
         let rig = test_rig::rig();
         let text = export(&rig);
         let y: serde_yaml::Value = serde_yaml::from_str(&text).unwrap();
-        let root = &y["base_link"];
+        let root = &y["sensor_kit_base_link"];
         for s in &rig.sensors {
             let (key, expected) = match s.kind {
-                SensorKind::Lidar => (s.frame_id.clone(), s.vehicle_from_sensor),
-                SensorKind::Camera => {
-                    (frames::body_link(&s.frame_id), frames::vehicle_from_body(s))
-                }
+                SensorKind::Lidar => (lidar_key(&s.frame_id), s.vehicle_from_sensor),
+                SensorKind::Camera => (camera_key(&s.frame_id), frames::vehicle_from_body(s)),
             };
             let e = &root[key.as_str()];
             let f = |k: &str| e[k].as_f64().unwrap();
@@ -78,5 +104,20 @@ mod tests {
             let (r, d) = t.difference(expected);
             assert!(r < 1e-12 && d < 1e-12, "{key}");
         }
+    }
+
+    #[test]
+    fn keys_follow_autoware_sensor_kits() {
+        assert_eq!(lidar_key("velodyne_top"), "velodyne_top_base_link");
+        assert_eq!(
+            lidar_key("velodyne_top_base_link"),
+            "velodyne_top_base_link"
+        );
+        assert_eq!(
+            camera_key("camera0/camera_optical_link"),
+            "camera0/camera_link"
+        );
+        assert_eq!(camera_key("front_camera"), "front_camera/camera_link");
+        assert_eq!(camera_key("front_optical_frame"), "front/camera_link");
     }
 }

@@ -10,6 +10,7 @@ use serde::Deserialize;
 
 use super::ExportedFile;
 use super::numbers::list;
+use super::text::{comment, yaml_str};
 use crate::calib::{Rig, Sensor};
 use crate::geometry::camera::{CameraIntrinsics, CameraModel};
 
@@ -28,14 +29,15 @@ pub fn text(camera: &Sensor, c: &CameraIntrinsics) -> String {
         "# ROS camera_info for camera '{name}' (images stamped in frame '{frame}', the OpenCV optical\n\
          # frame: x right, y down, z forward). Intrinsics only; written by rigcal {version}.\n\
          # camera_matrix K = [fx 0 cx; 0 fy cy; 0 0 1]; projection_matrix P = [K | 0] (unrectified).\n\
-         image_width: {w}\nimage_height: {h}\ncamera_name: {name}\n\
+         image_width: {w}\nimage_height: {h}\ncamera_name: {yaml_name}\n\
          camera_matrix:\n  rows: 3\n  cols: 3\n  data: {k}\n\
          distortion_model: {model}\n\
          distortion_coefficients:\n  rows: 1\n  cols: {nd}\n  data: {d}\n\
          rectification_matrix:\n  rows: 3\n  cols: 3\n  data: {r}\n\
          projection_matrix:\n  rows: 3\n  cols: 4\n  data: {p}\n",
-        name = camera.name,
-        frame = camera.frame_id,
+        name = comment(&camera.name),
+        yaml_name = yaml_str(&camera.name),
+        frame = comment(&camera.frame_id),
         version = env!("CARGO_PKG_VERSION"),
         w = c.width,
         h = c.height,
@@ -125,19 +127,18 @@ pub fn parse(text: &str, path: &Path) -> Result<(Option<String>, CameraIntrinsic
     }
     // A pinhole written as plumb_bob with zeros reads back as pinhole.
     let (model, distortion) = model.normalized(distortion);
-    Ok((
-        y.camera_name.filter(|n| !n.is_empty()),
-        CameraIntrinsics {
-            width: y.image_width,
-            height: y.image_height,
-            model,
-            fx,
-            fy,
-            cx: k[2],
-            cy: k[5],
-            distortion,
-        },
-    ))
+    let intrinsics = CameraIntrinsics {
+        width: y.image_width,
+        height: y.image_height,
+        model,
+        fx,
+        fy,
+        cx: k[2],
+        cy: k[5],
+        distortion,
+    };
+    intrinsics.validate().map_err(|e| format!("{file}: {e}"))?;
+    Ok((y.camera_name.filter(|n| !n.is_empty()), intrinsics))
 }
 
 #[cfg(test)]

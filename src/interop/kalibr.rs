@@ -8,6 +8,7 @@
 
 use super::numbers::{list, num};
 use super::pick;
+use super::text::{comment, yaml_str};
 use crate::calib::{Rig, Sensor, SensorKind};
 use crate::geometry::Rigid;
 use crate::geometry::camera::{CameraIntrinsics, CameraModel};
@@ -70,8 +71,8 @@ pub fn export(rig: &Rig, reference: Option<&str>) -> Result<String, String> {
          # (4x4, row-major, metres). cam0 is '{}'; its pose in the vehicle frame '{}',\n\
          # vehicle_from_cam0: translation [{}, {}, {}], rotation xyzw [{}, {}, {}, {}].\n",
         env!("CARGO_PKG_VERSION"),
-        first.name,
-        rig.vehicle_frame,
+        comment(&first.name),
+        comment(&rig.vehicle_frame),
         num(x),
         num(y),
         num(z),
@@ -94,8 +95,8 @@ pub fn export(rig: &Rig, reference: Option<&str>) -> Result<String, String> {
             let t = s.vehicle_from_sensor.inverse() * cams[i - 1].vehicle_from_sensor;
             out.push_str(&format!(
                 "  # {}_from_{}\n  T_cn_cnm1:\n{}",
-                s.name,
-                cams[i - 1].name,
+                comment(&s.name),
+                comment(&cams[i - 1].name),
                 matrix(t)
             ));
         }
@@ -105,7 +106,12 @@ pub fn export(rig: &Rig, reference: Option<&str>) -> Result<String, String> {
             list(&coeffs),
             c.width,
             c.height,
-            s.topics.first().cloned().unwrap_or_else(|| format!("/{}/image_raw", s.name)),
+            yaml_str(
+                &s.topics
+                    .first()
+                    .cloned()
+                    .unwrap_or_else(|| format!("/{}/image_raw", s.name))
+            ),
             overlap.join(", ")
         ));
     }

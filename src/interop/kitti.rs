@@ -1,12 +1,17 @@
-//! KITTI object calib (`calib/XXXXXX.txt`): `P0 … Pn`, `R0_rect`, `Tr_velo_to_cam`,
-//! `Tr_imu_to_velo`, each a row-major list of numbers.
+//! KITTI object calib (`calib/XXXXXX.txt`): exactly the seven lines `P0`, `P1`, `P2`, `P3`,
+//! `R0_rect`, `Tr_velo_to_cam`, `Tr_imu_to_velo`, in that order, each a row-major list of
+//! numbers (readers such as OpenPCDet pick lines by index, so there are no comment lines).
 //!
 //! Directions are in the keys: `Tr_velo_to_cam` = `cam0_from_lidar`, `Tr_imu_to_velo` =
-//! `lidar_from_vehicle` (the vehicle frame stands in for KITTI's IMU). `P_i = K_i [R | t]` with
-//! `[R | t]` = `cami_from_cam0`, so `y = P_i · R0_rect · Tr_velo_to_cam · x` projects a LiDAR
-//! point into camera i exactly as in KITTI (`R0_rect = I`). The format has no distortion: a
-//! camera with non-zero distortion coefficients is refused by name (its images would have to be
-//! rectified first).
+//! `lidar_from_vehicle` (the vehicle frame stands in for KITTI's IMU). The chosen camera is
+//! KITTI's reference: its optical frame is cam0, and it is both `P0` and `P2` (the left colour
+//! camera every KITTI consumer projects into) as `K [I | 0]`. Up to two more cameras take `P3`
+//! and then `P1` as `K_i [R | t]` with `[R | t]` = `cami_from_cam0`; slots left free repeat the
+//! reference (`P1 = P0`, `P3 = P2`). So `y = P_i · R0_rect · Tr_velo_to_cam · x` projects a
+//! LiDAR point into camera i exactly, with `R0_rect = I`. KITTI's rectified pairs have `R = I`;
+//! for cameras that are not rectified to the reference `R` is their real rotation. The format
+//! has no distortion: a camera with non-zero distortion coefficients is refused by name (its
+//! images would have to be rectified first), and so is a fourth camera.
 
 use super::numbers::{rows_3x4, spaced};
 use super::pick;
@@ -24,7 +29,13 @@ fn projection(cam: &Sensor, cam0: &Sensor) -> Result<[f64; 12], String> {
             c.model.as_str()
         ));
     }
-    let rt = rows_3x4(cam.vehicle_from_sensor.inverse() * cam0.vehicle_from_sensor);
+    // The reference camera gets an exact identity, not a product that rounds.
+    let cam_from_cam0 = if cam.name == cam0.name {
+        Rigid::IDENTITY
+    } else {
+        cam.vehicle_from_sensor.inverse() * cam0.vehicle_from_sensor
+    };
+    let rt = rows_3x4(cam_from_cam0);
     let k = [[c.fx, 0.0, c.cx], [0.0, c.fy, c.cy], [0.0, 0.0, 1.0]];
     let mut p = [0.0; 12];
     for r in 0..3 {
@@ -35,11 +46,28 @@ fn projection(cam: &Sensor, cam0: &Sensor) -> Result<[f64; 12], String> {
     Ok(p)
 }
 
-pub fn export(rig: &Rig, camera: Option<&str>, lidar: Option<&str>) -> Result<String, String> {
+/// The camera in each of the slots P0..P3: the reference in P0 and P2, the next camera in P3,
+/// the one after in P1.
+pub fn slots<'a>(rig: &'a Rig, camera: Option<&str>) -> Result<[&'a Sensor; 4], String> {
     let cam0 = pick(rig, SensorKind::Camera, camera)?;
+    let others: Vec<&Sensor> = rig.cameras().filter(|c| c.name != cam0.name).collect();
+    if others.len() > 2 {
+        let names: Vec<&str> = rig.cameras().map(|c| c.name.as_str()).collect();
+        return Err(format!(
+            "a KITTI calib file holds at most three cameras (P0/P2, P3, P1); the calibration has {} ({}): choose with --sensors",
+            names.len(),
+            names.join(", ")
+        ));
+    }
+    let p3 = others.first().copied().unwrap_or(cam0);
+    let p1 = others.get(1).copied().unwrap_or(cam0);
+    Ok([cam0, p1, cam0, p3])
+}
+
+pub fn export(rig: &Rig, camera: Option<&str>, lidar: Option<&str>) -> Result<String, String> {
+    let cams = slots(rig, camera)?;
+    let cam0 = cams[0];
     let velo = pick(rig, SensorKind::Lidar, lidar)?;
-    let mut cams = vec![cam0];
-    cams.extend(rig.cameras().filter(|c| c.name != cam0.name));
     let mut out = String::new();
     for (i, cam) in cams.iter().enumerate() {
         out.push_str(&format!("P{i}: {}\n", spaced(&projection(cam, cam0)?)));
@@ -82,7 +110,10 @@ mod tests {
     #[test]
     fn projects_lidar_points_like_the_rig() {
         let mut rig = test_rig::rig();
-        let e = export(&rig, None, None).unwrap_err();
+        let mut two = rig.clone();
+        two.sensors
+            .retain(|s| ["front_camera", "left_camera", "lidar_top"].contains(&s.name.as_str()));
+        let e = export(&two, None, None).unwrap_err();
         assert!(e.contains("left_camera") && e.contains("plumb_bob"), "{e}");
         rig.sensors
             .retain(|s| s.camera.as_ref().is_none_or(|c| c.distortion.is_empty()));
@@ -93,11 +124,29 @@ mod tests {
             * Rigid::new(glam::DQuat::from_rotation_y(0.3), DVec3::new(0.5, 0.0, 0.0));
         rig.sensors.push(other);
         let text = export(&rig, Some("front_camera"), Some("lidar_front")).unwrap();
+        let keys: Vec<&str> = text.lines().filter_map(|l| l.split(':').next()).collect();
+        assert_eq!(
+            keys,
+            [
+                "P0",
+                "P1",
+                "P2",
+                "P3",
+                "R0_rect",
+                "Tr_velo_to_cam",
+                "Tr_imu_to_velo"
+            ]
+        );
         let m = read(&text);
         let velo = rig.sensor("lidar_front").unwrap();
         let tr = &m["Tr_velo_to_cam"];
-        for (i, name) in ["front_camera", "front_right"].iter().enumerate() {
-            let p = &m[&format!("P{i}")];
+        for (slot, name) in [
+            (0, "front_camera"),
+            (1, "front_camera"),
+            (2, "front_camera"),
+            (3, "front_right"),
+        ] {
+            let p = &m[&format!("P{slot}")];
             let cam = rig.sensor(name).unwrap();
             let x = DVec3::new(12.0, -1.5, 0.7); // a point in the LiDAR frame
             let in_cam0 = DVec3::new(
@@ -127,5 +176,22 @@ mod tests {
         let imu = &m["Tr_imu_to_velo"];
         let expected = rows_3x4(velo.vehicle_from_sensor.inverse());
         assert!(imu.iter().zip(expected).all(|(a, b)| (a - b).abs() < 1e-12));
+    }
+
+    #[test]
+    fn a_fourth_camera_is_refused_by_name() {
+        let mut rig = test_rig::rig();
+        for c in rig.sensors.iter_mut() {
+            if let Some(cam) = c.camera.as_mut() {
+                cam.distortion.clear();
+            }
+        }
+        let e = export(&rig, None, None).unwrap_err();
+        assert!(
+            e.contains("at most three cameras") && e.contains("back_camera"),
+            "{e}"
+        );
+        let slots = slots(&rig, Some("left_camera"));
+        assert!(slots.is_err());
     }
 }

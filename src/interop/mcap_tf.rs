@@ -21,19 +21,19 @@ pub fn camera_info_topic(s: &crate::calib::Sensor) -> String {
         .unwrap_or_else(|| format!("/{}/camera_info", s.name))
 }
 
-/// The MCAP's bytes (written through a temporary file, read back, removed).
+/// The MCAP's bytes (written through a private temporary directory, read back, removed).
 pub fn export(rig: &Rig) -> Result<Vec<u8>, String> {
-    let dir = std::env::temp_dir().join(format!("rigcal-export-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
-    let path = dir.join(format!(
-        "tf-{}.mcap",
-        std::time::SystemTime::now()
-            .duration_since(std::time::UNIX_EPOCH)
-            .map_or(0, |d| d.as_nanos())
+    static CALLS: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+    let dir = std::env::temp_dir().join(format!(
+        "rigcal-export-{}-{}",
+        std::process::id(),
+        CALLS.fetch_add(1, std::sync::atomic::Ordering::Relaxed)
     ));
+    std::fs::create_dir_all(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+    let path = dir.join("tf.mcap");
     let result = write(rig, &path)
         .and_then(|()| std::fs::read(&path).map_err(|e| format!("{}: {e}", path.display())));
-    let _ = std::fs::remove_file(&path);
+    let _ = std::fs::remove_dir_all(&dir);
     result
 }
 

@@ -23,6 +23,7 @@ pub mod numbers;
 pub mod nuscenes;
 pub mod opencv;
 pub mod ros_tf;
+pub mod text;
 pub mod urdf;
 
 use std::path::{Path, PathBuf};
@@ -139,7 +140,7 @@ impl ExportFormat {
                 "The same publishers as a ROS 2 XML launch file: parent = the vehicle frame, child = the sensor frame, transform = vehicle_from_sensor."
             }
             Self::Autoware => {
-                "Each sensor's pose in the vehicle frame (parent_from_child) as x y z roll pitch yaw (URDF fixed-axis); cameras by their body frame <camera>_link, as Autoware expects."
+                "Each sensor's pose under sensor_kit_base_link (= the vehicle frame; parent_from_child) as x y z roll pitch yaw (URDF fixed-axis); LiDARs as <frame>_base_link, cameras by their body frame <camera>/camera_link, as Autoware expects."
             }
             Self::OpenCv => {
                 "One file per camera: CameraExtrinsicMat = lidar_from_camera (the camera's pose in the reference LiDAR's frame), CameraMat, DistCoeff, ImageSize."

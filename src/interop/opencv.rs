@@ -8,6 +8,7 @@
 
 use super::camera_info::{file_stem, k_matrix};
 use super::numbers::{list, rows_4x4};
+use super::text::comment;
 use super::{ExportedFile, pick};
 use crate::calib::{Rig, SensorKind};
 use crate::geometry::Rigid;
@@ -39,9 +40,9 @@ pub fn export(rig: &Rig, lidar: Option<&str>) -> Result<Vec<ExportedFile>, Strin
              # CameraExtrinsicMat is {reference}_from_camera: the camera's pose in the frame of '{reference}',\n\
              # p_{reference} = M p_camera (4x4 row-major, metres; camera frame = OpenCV optical frame:\n\
              # x right, y down, z forward). Its inverse maps {reference} points into the camera.\n",
-            cam = cam.name,
+            cam = comment(&cam.name),
             version = env!("CARGO_PKG_VERSION"),
-            reference = ref_name,
+            reference = comment(&ref_name),
         );
         text.push_str(&matrix(
             "CameraExtrinsicMat",
@@ -64,7 +65,8 @@ pub fn export(rig: &Rig, lidar: Option<&str>) -> Result<Vec<ExportedFile>, Strin
         ));
         if reference.is_some() {
             text.push_str(&format!(
-                "# VehicleFromLidar ('{ref_name}'): p_vehicle = M p_lidar.\n"
+                "# VehicleFromLidar ('{}'): p_vehicle = M p_lidar.\n",
+                comment(&ref_name)
             ));
             text.push_str(&matrix(
                 "VehicleFromLidar",

@@ -7,7 +7,31 @@
 //! and later) with a quaternion avoids the legacy positional form's yaw-pitch-roll order.
 
 use super::numbers::num;
+use super::text::comment;
 use crate::calib::{Rig, Sensor};
+
+/// `word` as one POSIX shell word: unchanged when it is plainly safe, else single-quoted (also
+/// how ROS 2 launch splits `args`, with shlex).
+pub fn shell_word(word: &str) -> String {
+    let safe = |c: char| c.is_ascii_alphanumeric() || "_-./:@%+=,".contains(c);
+    if !word.is_empty() && word.chars().all(safe) {
+        word.to_string()
+    } else {
+        format!("'{}'", word.replace('\'', "'\\''"))
+    }
+}
+
+/// Text safe inside an XML comment: no control characters and no `--`.
+fn xml_comment(text: &str) -> String {
+    let mut t = comment(text).replace('&', "&amp;").replace('<', "&lt;");
+    while t.contains("--") {
+        t = t.replace("--", "- -");
+    }
+    if t.ends_with('-') {
+        t.push(' ');
+    }
+    t
+}
 
 fn args(rig: &Rig, s: &Sensor) -> String {
     let t = s.vehicle_from_sensor;
@@ -21,8 +45,8 @@ fn args(rig: &Rig, s: &Sensor) -> String {
         num(q.y),
         num(q.z),
         num(q.w),
-        rig.vehicle_frame,
-        s.frame_id
+        shell_word(&rig.vehicle_frame),
+        shell_word(&s.frame_id)
     )
 }
 
@@ -39,13 +63,13 @@ pub fn script(rig: &Rig) -> String {
         if s.frame_id == rig.vehicle_frame {
             out.push_str(&format!(
                 "# {}: its frame is the vehicle frame (identity): nothing to publish\n",
-                s.name
+                comment(&s.name)
             ));
             continue;
         }
         out.push_str(&format!(
             "# {} ({}): vehicle_from_sensor\nros2 run tf2_ros static_transform_publisher {} &\n",
-            s.name,
+            comment(&s.name),
             s.kind.as_str(),
             args(rig, s)
         ));
@@ -78,15 +102,25 @@ pub fn launch(rig: &Rig) -> String {
         env!("CARGO_PKG_VERSION"),
         DIRECTION
     );
+    let mut names: Vec<String> = Vec::new();
     for s in rig
         .sensors
         .iter()
         .filter(|s| s.frame_id != rig.vehicle_frame)
     {
+        // Distinct sensor names can map to one node name ("a-b", "a_b"): number the repeats.
+        let base = node_name(&s.name);
+        let mut name = base.clone();
+        let mut n = 2;
+        while names.contains(&name) {
+            name = format!("{base}{n}");
+            n += 1;
+        }
+        names.push(name.clone());
         out.push_str(&format!(
             "  <!-- {}: vehicle_from_sensor -->\n  <node pkg=\"tf2_ros\" exec=\"static_transform_publisher\" name=\"{}\" args=\"{}\"/>\n",
-            esc(&s.name).replace("--", "- -"),
-            node_name(&s.name),
+            xml_comment(&s.name),
+            name,
             esc(&args(rig, s))
         ));
     }
@@ -96,13 +130,13 @@ pub fn launch(rig: &Rig) -> String {
 
 /// `(parent, child, translation, quaternion xyzw)` read back from the flag form, for tests.
 pub fn parse_args(line: &str) -> Option<(String, String, [f64; 3], [f64; 4])> {
-    let words: Vec<&str> = line.split_whitespace().collect();
+    let words = shell_words(line)?;
     let get = |flag: &str| {
         words
             .iter()
             .position(|w| *w == flag)
             .and_then(|i| words.get(i + 1))
-            .copied()
+            .cloned()
     };
     let f = |flag: &str| get(flag).and_then(|v| v.parse::<f64>().ok());
     Some((
@@ -111,6 +145,32 @@ pub fn parse_args(line: &str) -> Option<(String, String, [f64; 3], [f64; 4])> {
         [f("--x")?, f("--y")?, f("--z")?],
         [f("--qx")?, f("--qy")?, f("--qz")?, f("--qw")?],
     ))
+}
+
+/// Split a line into shell words (plain words and single-quoted ones), as written by
+/// [`shell_word`]; `None` on an unterminated quote.
+pub fn shell_words(line: &str) -> Option<Vec<String>> {
+    let mut words = Vec::new();
+    let mut word: Option<String> = None;
+    let mut chars = line.chars();
+    while let Some(c) = chars.next() {
+        match c {
+            '\'' => {
+                let w = word.get_or_insert_with(String::new);
+                loop {
+                    match chars.next()? {
+                        '\'' => break,
+                        q => w.push(q),
+                    }
+                }
+            }
+            '\\' => word.get_or_insert_with(String::new).push(chars.next()?),
+            c if c.is_whitespace() => words.extend(word.take()),
+            c => word.get_or_insert_with(String::new).push(c),
+        }
+    }
+    words.extend(word);
+    Some(words)
 }
 
 #[cfg(test)]
@@ -163,6 +223,56 @@ mod tests {
             &rig,
         );
         assert_eq!(node_name("cam/0"), "rigcal_cam_0_tf");
+        for w in ["base_link", "it's here", "a b", "$(rm -rf ~)", ""] {
+            assert_eq!(
+                shell_words(&shell_word(w)).unwrap(),
+                vec![w.to_string()],
+                "{w}"
+            );
+        }
         assert_eq!(node_name("0cam"), "rigcal__0cam_tf");
+    }
+
+    #[test]
+    fn hostile_names_stay_names() {
+        let mut rig = test_rig::rig();
+        rig.sensors[0].name = "evil\nrm -rf ~ --".into();
+        rig.sensors[0].frame_id = "it's; $(reboot)".into();
+        rig.sensors[1].name = "lidar-front".into();
+        rig.sensors[2].name = "lidar_front".into();
+        let sh = script(&rig);
+        // Every line is a comment, a publisher, or the script's own framing.
+        for line in sh.lines() {
+            assert!(
+                line.starts_with('#')
+                    || line.starts_with("ros2 run")
+                    || ["set -e", "trap 'kill 0' INT TERM", "wait"].contains(&line),
+                "{line}"
+            );
+        }
+        check(
+            sh.lines()
+                .filter(|l| l.starts_with("ros2 run"))
+                .filter_map(parse_args)
+                .collect(),
+            &rig,
+        );
+        let xml = launch(&rig);
+        let doc = roxmltree::Document::parse(&xml).unwrap();
+        let names: Vec<&str> = doc
+            .descendants()
+            .filter(|n| n.has_tag_name("node"))
+            .filter_map(|n| n.attribute("name"))
+            .collect();
+        let mut unique = names.clone();
+        unique.sort();
+        unique.dedup();
+        assert_eq!(unique.len(), names.len(), "{names:?}");
+        let args: Vec<_> = doc
+            .descendants()
+            .filter(|n| n.has_tag_name("node"))
+            .filter_map(|n| n.attribute("args").and_then(parse_args))
+            .collect();
+        check(args, &rig);
     }
 }

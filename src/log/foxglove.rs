@@ -121,19 +121,21 @@ fn calibration(
     let model = CameraModel::parse(model)
         .ok_or_else(|| DecodeError::new(format!("unknown distortion_model '{model}'")))?;
     let (model, distortion) = model.normalized(d);
+    let intrinsics = CameraIntrinsics {
+        width,
+        height,
+        model,
+        fx: k[0],
+        fy: k[4],
+        cx: k[2],
+        cy: k[5],
+        distortion,
+    };
+    intrinsics.validate().map_err(DecodeError::new)?;
     Ok(Decoded::CameraInfo(CameraInfoMsg {
         stamp_nanos: stamp,
         frame_id,
-        intrinsics: CameraIntrinsics {
-            width,
-            height,
-            model,
-            fx: k[0],
-            fy: k[4],
-            cx: k[2],
-            cy: k[5],
-            distortion,
-        },
+        intrinsics,
     }))
 }
 

@@ -124,19 +124,21 @@ pub fn decode(kind: Ros2Type, payload: &[u8]) -> DecodeResult<Decoded<'_>> {
                 DecodeError::new(format!("unknown distortion_model '{model_name}'"))
             })?;
             let (model, distortion) = model.normalized(d);
+            let intrinsics = CameraIntrinsics {
+                width,
+                height,
+                model,
+                fx: k[0],
+                fy: k[4],
+                cx: k[2],
+                cy: k[5],
+                distortion,
+            };
+            intrinsics.validate().map_err(DecodeError::new)?;
             Decoded::CameraInfo(CameraInfoMsg {
                 stamp_nanos: h.stamp_nanos,
                 frame_id: h.frame_id,
-                intrinsics: CameraIntrinsics {
-                    width,
-                    height,
-                    model,
-                    fx: k[0],
-                    fy: k[4],
-                    cx: k[2],
-                    cy: k[5],
-                    distortion,
-                },
+                intrinsics,
             })
         }
         Ros2Type::PointCloud2 => {

@@ -232,10 +232,14 @@ def check_launch(rig, out):
 def check_autoware(rig, out):
     with open(out) as f:
         doc = yaml.safe_load(f)
-    root = doc[rig.vehicle]
+    root = doc["sensor_kit_base_link"]
     for s in rig.sensors:
         camera = s["kind"] == "camera"
-        key = body_link(s["frame_id"]) if camera else s["frame_id"]
+        if camera:
+            stem = body_link(s["frame_id"])
+            key = stem if stem.endswith("/camera_link") else stem[: -len("_link")] + "/camera_link"
+        else:
+            key = s["frame_id"] if s["frame_id"].endswith("_base_link") else s["frame_id"] + "_base_link"
         e = root[key]
         t = rigid(rpy_to_matrix(e["roll"], e["pitch"], e["yaw"]), [e["x"], e["y"], e["z"]])
         expected = s["T"] @ np.linalg.inv(BODY_FROM_OPTICAL) if camera else s["T"]
@@ -279,6 +283,18 @@ def check_kalibr(rig, out, names):
             f"kalibr: cam{i} ({cam['name']}) chain and intrinsics",
             close(cn_from_c0, expected) and close(entry["intrinsics"], [c["fx"], c["fy"], c["cx"], c["cy"]]) and entry["resolution"] == [c["width"], c["height"]],
         )
+        # Kalibr's names: radtan is plumb_bob's k1 k2 p1 p2 (k3 must be 0), equidistant the same
+        # four Kannala-Brandt coefficients, a pinhole has none.
+        d = list(c.get("distortion", [])) + [0.0] * 5
+        model, coeffs = {
+            "pinhole": ("none", []),
+            "plumb_bob": ("radtan", d[:4]),
+            "equidistant": ("equidistant", d[:4]),
+        }[c["model"]]
+        check(
+            f"kalibr: cam{i} ({cam['name']}) distortion is {model} {coeffs}",
+            entry["camera_model"] == "pinhole" and entry["distortion_model"] == model and close(entry["distortion_coeffs"], coeffs) if coeffs else entry["distortion_model"] == model,
+        )
 
 
 def check_kitti(rig, out, camera_names, lidar):
@@ -292,7 +308,11 @@ def check_kitti(rig, out, camera_names, lidar):
     r0[:3, :3] = calib["R0_rect"].reshape(3, 3)
     velo = rig.by_name(lidar)
     point = np.array([12.0, -1.5, 0.7, 1.0])  # in the LiDAR frame
-    for i, name in enumerate(camera_names):
+    check("kitti: exactly P0 P1 P2 P3 R0_rect Tr_velo_to_cam Tr_imu_to_velo, in order", list(calib) == ["P0", "P1", "P2", "P3", "R0_rect", "Tr_velo_to_cam", "Tr_imu_to_velo"])
+    # The reference camera is P0 and P2, the next P3, the one after P1 (free slots repeat it).
+    ref = camera_names[0]
+    slots = [camera_names[2] if len(camera_names) > 2 else ref, ref, camera_names[1] if len(camera_names) > 1 else ref]
+    for i, name in [(0, ref), (1, slots[0]), (2, ref), (3, slots[2])]:
         cam = rig.by_name(name)
         y = calib[f"P{i}"].reshape(3, 4) @ r0 @ tr @ point
         in_cam = np.linalg.inv(cam["T"]) @ velo["T"] @ point
