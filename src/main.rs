@@ -41,7 +41,7 @@ enum Command {
     /// Calibrate a drive and write the native calibration file.
     Calibrate {
         log: PathBuf,
-        /// unical | icp | mi | target | edge (pose-graph: not in this build yet)
+        /// unical | icp | mi | target | pose-graph | edge
         #[arg(long)]
         method: String,
         /// Initial guess: a native calibration file, URDF, ROS camera_info YAML (or a directory

@@ -85,8 +85,13 @@ fn bad_arguments_fail_with_one_line() {
             String::from_utf8_lossy(&o.stderr).to_string(),
         )
     };
-    let (ok, err) = run(&["--method", "pose-graph"]);
-    assert!(!ok && err.contains("not in this build"), "{err}");
+    let (ok, err) = run(&["--method", "nope"]);
+    assert!(!ok && err.contains("unknown --method 'nope'"), "{err}");
+    let (ok, err) = run(&["--method", "pose-graph", "--root", "front_camera"]);
+    assert!(
+        !ok && err.contains("'front_camera' is not a LiDAR"),
+        "{err}"
+    );
     let (ok, err) = run(&["--method", "edge", "--sensors", "nope"]);
     assert!(!ok && err.contains("'nope'"), "{err}");
     let (ok, err) = run(&["--method", "unical", "--root", "roof"]);

@@ -22,6 +22,7 @@ pub enum Method {
     Icp,
     MutualInformation,
     Target,
+    PoseGraph,
     UnicalLidar,
     Unical,
 }
@@ -36,6 +37,9 @@ impl Method {
             }
             Method::Target => {
                 "Checkerboards, edge-and-plane (cameras vs LiDAR; checkerboard scenes)"
+            }
+            Method::PoseGraph => {
+                "Pairwise + pose graph (ICP, checkerboards or MI; every sensor, reference fixed)"
             }
             Method::UnicalLidar => "UniCal, LiDAR terms (scene + LiDARs; slow on CPU)",
             Method::Unical => "UniCal, LiDARs + cameras (1/8-size images; slowest)",
@@ -215,6 +219,26 @@ pub fn start(studio: &mut Studio) {
         }));
         return;
     }
+    if method == Method::PoseGraph {
+        studio.optimiser.message = Some(format!(
+            "preparing every LiDAR pair and camera–LiDAR pair ({lidar} fixed)…"
+        ));
+        let config = crate::classical::pose_graph_calibrator::PoseGraphConfig {
+            frames,
+            ..Default::default()
+        };
+        studio.optimiser.run = Some(Run::spawn_with(move || {
+            crate::classical::pose_graph_calibrator::PoseGraphCalibrator::from_drive(
+                &drive,
+                &prepare_rig,
+                &lidar,
+                &segments,
+                config,
+            )
+            .map(|c| Box::new(c) as Box<dyn Calibrator>)
+        }));
+        return;
+    }
     if method == Method::Target {
         studio.optimiser.message = Some(format!(
             "finding checkerboards in {} camera(s) and {lidar}…",
@@ -274,6 +298,7 @@ pub fn optimiser_ui(studio: &mut Studio, ui: &mut egui::Ui) {
                     Method::Icp,
                     Method::MutualInformation,
                     Method::Target,
+                    Method::PoseGraph,
                     Method::UnicalLidar,
                     Method::Unical,
                 ] {

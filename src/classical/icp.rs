@@ -23,6 +23,8 @@ use rayon::prelude::*;
 use crate::eval::registration::plane_normal;
 use crate::geometry::{Rigid, so3};
 
+/// How many independent residuals an ICP result's information counts its points as.
+pub const EFFECTIVE_POINTS: f64 = 200.0;
 /// Radius of the neighbourhood a target normal is fitted to (m).
 const NORMAL_RADIUS_M: f64 = 0.5;
 /// A static k-d tree over the target points for nearest-neighbour queries: an implicit
@@ -264,19 +266,17 @@ impl IcpProblem {
     }
 
     /// One Gauss–Newton step at the current level; moves to the next level when converged.
-    pub fn step(&mut self) -> IcpStats {
-        if self.done || self.level >= self.config.levels.len() {
-            self.done = true;
-            return self.last;
-        }
-        let max_d = self.config.levels[self.level].1;
+    /// The Huber-weighted normal equations at the current extrinsic on `level`'s points and
+    /// correspondence distance: (JᵀWJ row-major, JᵀWr, Σ r², inliers).
+    fn normal_equations(&self, level: usize) -> ([f64; 36], [f64; 6], f64, usize) {
+        let max_d = self.config.levels[level].1;
         let tree = &self.tree;
         let x = self.vehicle_from_source;
         let huber = self.config.huber_m;
-        let source = &self.sources[self.level];
+        let source = &self.sources[level];
         let (target, normals) = (&self.target, &self.normals);
         // Per point: (H upper 6×6 as 36, g 6, weighted squared residual sum, count).
-        let (h, g, sq, inliers) = source
+        source
             .par_iter()
             .fold(
                 || ([0.0f64; 36], [0.0f64; 6], 0.0f64, 0usize),
@@ -313,7 +313,35 @@ impl IcpProblem {
                     a.1.iter_mut().zip(b.1).for_each(|(x, y)| *x += y);
                     (a.0, a.1, a.2 + b.2, a.3 + b.3)
                 },
-            );
+            )
+    }
+
+    /// Information of the result for a pose graph, in the update's tangent (left perturbation
+    /// of `vehicle_from_source` in the vehicle frame, rotation first): `JᵀWJ / σ²` on the finest
+    /// level, σ the inlier RMS (at least 1 cm), with the points counted as
+    /// [`EFFECTIVE_POINTS`] independent ones (neighbouring LiDAR points share their errors, so
+    /// 10⁵ points do not make a 10⁻⁵ m answer).
+    pub fn information(&self) -> [f64; 36] {
+        let level = self.config.levels.len().saturating_sub(1);
+        if self.sources.is_empty() {
+            return [0.0; 36];
+        }
+        let (h, _, sq, n) = self.normal_equations(level);
+        if n == 0 {
+            return [0.0; 36];
+        }
+        let sigma_sq = (sq / n as f64).max(0.01 * 0.01);
+        let scale = (EFFECTIVE_POINTS / n as f64).min(1.0) / sigma_sq;
+        h.map(|v| v * scale)
+    }
+
+    pub fn step(&mut self) -> IcpStats {
+        if self.done || self.level >= self.config.levels.len() {
+            self.done = true;
+            return self.last;
+        }
+        let (h, g, sq, inliers) = self.normal_equations(self.level);
+        let source = &self.sources[self.level];
         let mut stats = IcpStats {
             fitness: inliers as f64 / source.len().max(1) as f64,
             inlier_rmse_m: if inliers > 0 {

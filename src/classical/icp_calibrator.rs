@@ -107,6 +107,11 @@ impl IcpCalibrator {
         })
     }
 
+    /// Each registered LiDAR's problem.
+    pub fn problems(&self) -> &[(String, IcpProblem)] {
+        &self.problems
+    }
+
     fn rig_now(&self) -> Rig {
         let mut rig = self.rig.clone();
         for (name, p) in &self.problems {

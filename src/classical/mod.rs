@@ -5,12 +5,16 @@
 //! reference LiDAR); `target` (checkerboard edge-and-plane: boards found in images by
 //! `features::chessboard` and posed by planar PnP, the same boards' planes and ring-end edge
 //! points in LiDAR, one robust solve per camera over many board views) and
-//! `target_calibrator` (every camera against a reference LiDAR). Pose-graph unification is still
-//! to come (issue 8).
+//! `target_calibrator` (every camera against a reference LiDAR); `pose_graph` (pairwise
+//! results as edges with information matrices, one robust Levenberg–Marquardt solve) and
+//! `pose_graph_calibrator` (every LiDAR pair by ICP, every camera–LiDAR pair by checkerboards
+//! or mutual information, unified by the graph).
 
 pub mod icp;
 pub mod icp_calibrator;
 pub mod mi_calibrator;
 pub mod mutual_info;
+pub mod pose_graph;
+pub mod pose_graph_calibrator;
 pub mod target;
 pub mod target_calibrator;

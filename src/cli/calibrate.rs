@@ -8,8 +8,9 @@
 //! `icp`: every LiDAR against the reference LiDAR (`--root`, default the first) by
 //! point-to-plane ICP on three sweeps each. `mi`: every camera against the reference LiDAR by
 //! mutual information. `target`: every camera against the reference LiDAR by checkerboard
-//! edges and planes. `pose-graph` is named by the contract and refused with a clear message
-//! until it lands.
+//! edges and planes. `pose-graph`: every LiDAR pair by ICP and every camera–LiDAR pair by
+//! checkerboards (or mutual information where there are none), unified by a pose graph with the
+//! reference LiDAR fixed.
 
 use std::path::PathBuf;
 
@@ -18,6 +19,7 @@ use crate::classical::icp::IcpConfig;
 use crate::classical::icp_calibrator::IcpCalibrator;
 use crate::classical::mi_calibrator::MiCalibrator;
 use crate::classical::mutual_info::MiConfig;
+use crate::classical::pose_graph_calibrator::{PoseGraphCalibrator, PoseGraphConfig};
 use crate::classical::target::TargetConfig;
 use crate::classical::target_calibrator::TargetCalibrator;
 use crate::log::Drive;
@@ -95,119 +97,132 @@ pub fn calibrate(
         Some(s) => vec![parse_segment(s, t0)?],
         None => Vec::new(),
     };
-    let mut calibrator: Box<dyn Calibrator> = match args.method.as_str() {
-        "edge" => {
-            let lidar = rig
-                .lidars()
-                .map(|l| l.name.clone())
-                .find(|l| args.sensors.is_empty() || !args.sensors.contains(l))
-                .or_else(|| rig.lidars().next().map(|l| l.name.clone()))
-                .ok_or("the log has no LiDAR")?;
-            let cameras: Vec<String> = rig
-                .cameras()
-                .filter(|c| c.camera.is_some())
-                .map(|c| c.name.clone())
-                .filter(|c| args.sensors.is_empty() || args.sensors.contains(c))
-                .collect();
-            Box::new(
-                EdgeRefiner::new(&drive, &rig, &lidar, &cameras, 4, &segments)
-                    .map_err(|e| e.to_string())?,
-            )
-        }
-        "unical" => {
-            let config = DepthCalibConfig {
-                iterations: args.iterations.unwrap_or(300),
-                seed: args.seed,
-                frozen_sensor: args.root.clone(),
-                alignment: args.alignment,
-                ..DepthCalibConfig::default()
-            };
-            Box::new(
-                UnicalLidarStage::from_drive(&drive, &rig, 4, &segments, config)?.with_cameras(
+    let mut calibrator: Box<dyn Calibrator> =
+        match args.method.as_str() {
+            "edge" => {
+                let lidar = rig
+                    .lidars()
+                    .map(|l| l.name.clone())
+                    .find(|l| args.sensors.is_empty() || !args.sensors.contains(l))
+                    .or_else(|| rig.lidars().next().map(|l| l.name.clone()))
+                    .ok_or("the log has no LiDAR")?;
+                let cameras: Vec<String> = rig
+                    .cameras()
+                    .filter(|c| c.camera.is_some())
+                    .map(|c| c.name.clone())
+                    .filter(|c| args.sensors.is_empty() || args.sensors.contains(c))
+                    .collect();
+                Box::new(
+                    EdgeRefiner::new(&drive, &rig, &lidar, &cameras, 4, &segments)
+                        .map_err(|e| e.to_string())?,
+                )
+            }
+            "unical" => {
+                let config = DepthCalibConfig {
+                    iterations: args.iterations.unwrap_or(300),
+                    seed: args.seed,
+                    frozen_sensor: args.root.clone(),
+                    alignment: args.alignment,
+                    ..DepthCalibConfig::default()
+                };
+                Box::new(
+                    UnicalLidarStage::from_drive(&drive, &rig, 4, &segments, config)?
+                        .with_cameras(&drive, args.camera_frames, &segments, 0.125)?,
+                )
+            }
+            "icp" => {
+                let reference = match &args.root {
+                    Some(r) => r.clone(),
+                    None => rig
+                        .lidars()
+                        .next()
+                        .map(|l| l.name.clone())
+                        .ok_or("the log has no LiDAR")?,
+                };
+                Box::new(IcpCalibrator::from_drive(
                     &drive,
-                    args.camera_frames,
+                    &rig,
+                    &reference,
+                    3,
                     &segments,
-                    0.125,
-                )?,
-            )
-        }
-        "icp" => {
-            let reference = match &args.root {
-                Some(r) => r.clone(),
-                None => rig
-                    .lidars()
-                    .next()
-                    .map(|l| l.name.clone())
-                    .ok_or("the log has no LiDAR")?,
-            };
-            Box::new(IcpCalibrator::from_drive(
-                &drive,
-                &rig,
-                &reference,
-                3,
-                &segments,
-                IcpConfig::default(),
-            )?)
-        }
-        "mi" => {
-            let reference = match &args.root {
-                Some(r) => r.clone(),
-                None => rig
-                    .lidars()
-                    .next()
-                    .map(|l| l.name.clone())
-                    .ok_or("the log has no LiDAR")?,
-            };
-            let cameras: Vec<String> = rig
-                .cameras()
-                .filter(|c| c.camera.is_some())
-                .map(|c| c.name.clone())
-                .filter(|c| args.sensors.is_empty() || args.sensors.contains(c))
-                .collect();
-            let config = MiConfig {
-                iterations: args.iterations.unwrap_or(MiConfig::default().iterations),
-                ..MiConfig::default()
-            };
-            Box::new(MiCalibrator::from_drive(
-                &drive, &rig, &reference, &cameras, 3, &segments, config,
-            )?)
-        }
-        "target" => {
-            let reference = match &args.root {
-                Some(r) => r.clone(),
-                None => rig
-                    .lidars()
-                    .next()
-                    .map(|l| l.name.clone())
-                    .ok_or("the log has no LiDAR")?,
-            };
-            let cameras: Vec<String> = rig
-                .cameras()
-                .filter(|c| c.camera.is_some())
-                .map(|c| c.name.clone())
-                .filter(|c| args.sensors.is_empty() || args.sensors.contains(c))
-                .collect();
-            let config = TargetConfig {
-                iterations: args
-                    .iterations
-                    .unwrap_or(TargetConfig::default().iterations),
-                ..TargetConfig::default()
-            };
-            Box::new(TargetCalibrator::from_drive(
-                &drive, &rig, &reference, &cameras, &segments, config,
-            )?)
-        }
-        m @ "pose-graph" => {
-            return Err(format!(
-                "--method {m} is not in this build yet (available: unical, icp, mi, target, edge)"
-            ));
-        }
-        m => {
-            return Err(format!(
-                "unknown --method '{m}' (expected unical, icp, mi, target, pose-graph or edge)"
-            ));
-        }
-    };
+                    IcpConfig::default(),
+                )?)
+            }
+            "mi" => {
+                let reference = match &args.root {
+                    Some(r) => r.clone(),
+                    None => rig
+                        .lidars()
+                        .next()
+                        .map(|l| l.name.clone())
+                        .ok_or("the log has no LiDAR")?,
+                };
+                let cameras: Vec<String> = rig
+                    .cameras()
+                    .filter(|c| c.camera.is_some())
+                    .map(|c| c.name.clone())
+                    .filter(|c| args.sensors.is_empty() || args.sensors.contains(c))
+                    .collect();
+                let config = MiConfig {
+                    iterations: args.iterations.unwrap_or(MiConfig::default().iterations),
+                    ..MiConfig::default()
+                };
+                Box::new(MiCalibrator::from_drive(
+                    &drive, &rig, &reference, &cameras, 3, &segments, config,
+                )?)
+            }
+            "target" => {
+                let reference = match &args.root {
+                    Some(r) => r.clone(),
+                    None => rig
+                        .lidars()
+                        .next()
+                        .map(|l| l.name.clone())
+                        .ok_or("the log has no LiDAR")?,
+                };
+                let cameras: Vec<String> = rig
+                    .cameras()
+                    .filter(|c| c.camera.is_some())
+                    .map(|c| c.name.clone())
+                    .filter(|c| args.sensors.is_empty() || args.sensors.contains(c))
+                    .collect();
+                let config = TargetConfig {
+                    iterations: args
+                        .iterations
+                        .unwrap_or(TargetConfig::default().iterations),
+                    ..TargetConfig::default()
+                };
+                Box::new(TargetCalibrator::from_drive(
+                    &drive, &rig, &reference, &cameras, &segments, config,
+                )?)
+            }
+            "pose-graph" => {
+                let reference = match &args.root {
+                    Some(r) => r.clone(),
+                    None => rig
+                        .lidars()
+                        .next()
+                        .map(|l| l.name.clone())
+                        .ok_or("the log has no LiDAR")?,
+                };
+                let cal = PoseGraphCalibrator::from_drive(
+                    &drive,
+                    &rig,
+                    &reference,
+                    &segments,
+                    PoseGraphConfig::default(),
+                )?;
+                for s in cal.skipped() {
+                    eprintln!("pose-graph: skipped {s}");
+                }
+                Box::new(cal)
+            }
+            m => {
+                return Err(format!(
+                    "unknown --method '{m}' (expected unical, icp, mi, target, pose-graph or edge)"
+                ));
+            }
+        };
     let max_steps = match (args.method.as_str(), args.iterations) {
         ("edge", Some(n)) => n.min(calibrator.max_steps()),
         _ => calibrator.max_steps(),
