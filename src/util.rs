@@ -21,6 +21,10 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
         let mut f = std::fs::File::create(&tmp)?;
         f.write_all(bytes)?;
         f.sync_all()?;
+        // A replaced file keeps its permissions (an executable script stays executable).
+        if let Ok(old) = std::fs::metadata(path) {
+            std::fs::set_permissions(&tmp, old.permissions())?;
+        }
         std::fs::rename(&tmp, path)
     })();
     if result.is_err() {

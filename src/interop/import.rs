@@ -115,6 +115,16 @@ fn from_native(text: &str, path: &Path, base: &Rig) -> Result<(Rig, Vec<String>)
     let other = CalibrationFile::parse(text, path)
         .and_then(|f| f.to_rig(path))
         .map_err(|e| ImportError::Invalid(e.to_string()))?;
+    // Extrinsics are relative to the vehicle frame: another frame's numbers would be wrong here.
+    let frame = |f: &str| f.trim_start_matches('/').to_string();
+    if frame(&other.vehicle_frame) != frame(&base.vehicle_frame) {
+        return Err(ImportError::Invalid(format!(
+            "{}: its extrinsics are in the vehicle frame '{}', the rig's are in '{}' (convert it, or set vehicle_frame if they are the same frame)",
+            path.display(),
+            other.vehicle_frame,
+            base.vehicle_frame
+        )));
+    }
     let mut rig = base.clone();
     let mut matched = Vec::new();
     for s in &other.sensors {
@@ -366,6 +376,11 @@ mod tests {
                 "f.yaml",
                 "rigcal_calibration: 1\nvehicle_frame: base_link\nsensors:\n  - name: nobody\n    kind: lidar\n    vehicle_from_sensor: {translation_m: [0, 0, 0], rotation_xyzw: [0, 0, 0, 1]}\n",
                 "matches none",
+            ),
+            (
+                "g.yaml",
+                "rigcal_calibration: 1\nvehicle_frame: ego\nsensors:\n  - name: lidar_top\n    kind: lidar\n    vehicle_from_sensor: {translation_m: [0, 0, 0], rotation_xyzw: [0, 0, 0, 1]}\n",
+                "vehicle frame 'ego', the rig's are in 'base_link'",
             ),
         ];
         for (name, text, expected) in cases {

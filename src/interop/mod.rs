@@ -250,10 +250,28 @@ pub fn export(
         format: format.name(),
         what,
     };
-    let full = doc
-        .to_rig(Path::new("the calibration"))
-        .map_err(|e| unsupported(e.to_string()))?;
-    let rig = select(&full, &options.sensors).map_err(unsupported)?;
+    // The chosen sensors only: a sensor left out cannot stop the export (a camera without
+    // intrinsics, a second topic on the same frame).
+    let rig = {
+        let mut chosen = doc.clone();
+        if let Some(missing) = options
+            .sensors
+            .iter()
+            .find(|n| !doc.sensors.iter().any(|s| s.name == **n))
+        {
+            let known: Vec<&str> = doc.sensors.iter().map(|s| s.name.as_str()).collect();
+            return Err(unsupported(format!(
+                "'{missing}' is not a sensor of the calibration (it has: {})",
+                known.join(", ")
+            )));
+        }
+        chosen
+            .sensors
+            .retain(|s| options.sensors.is_empty() || options.sensors.contains(&s.name));
+        chosen
+            .to_rig(Path::new("the calibration"))
+            .map_err(|e| unsupported(e.to_string()))?
+    };
     let one = |text: String| {
         vec![ExportedFile {
             name: format.default_file_name().to_string(),
@@ -287,7 +305,37 @@ pub fn export(
         }
         ExportFormat::Nuscenes => one(nuscenes::export(&rig)),
     };
+    distinct_names(format, &files).map_err(unsupported)?;
     Ok(Export { format, files })
+}
+
+/// Names derived from sensor names must not collide: two cameras written to one file, a URDF
+/// link that is the child of two joints, an Autoware key given twice.
+fn distinct_names(format: ExportFormat, files: &[ExportedFile]) -> Result<(), String> {
+    for (i, f) in files.iter().enumerate() {
+        if files[..i].iter().any(|o| o.name == f.name) {
+            return Err(format!(
+                "two cameras would both be written to '{}' (their names differ only in characters a file name cannot hold): rename one or export them separately with --sensors",
+                f.name
+            ));
+        }
+    }
+    let text = || String::from_utf8_lossy(&files[0].bytes).into_owned();
+    match format {
+        ExportFormat::Urdf if !files.is_empty() => {
+            urdf::parse_joints(&text(), Path::new("the URDF"))
+                .map(|_| ())
+                .map_err(|e| format!("{e} (two sensors map to one link: rename one)"))
+        }
+        ExportFormat::Autoware if !files.is_empty() => {
+            serde_yaml::from_str::<serde_yaml::Value>(&text())
+                .map(|_| ())
+                .map_err(|e| {
+                    format!("two sensors map to one Autoware frame name ({e}): rename one")
+                })
+        }
+        _ => Ok(()),
+    }
 }
 
 fn one_binary(format: ExportFormat, bytes: Vec<u8>) -> Vec<ExportedFile> {
@@ -295,26 +343,6 @@ fn one_binary(format: ExportFormat, bytes: Vec<u8>) -> Vec<ExportedFile> {
         name: format.default_file_name().to_string(),
         bytes,
     }]
-}
-
-/// The sensors named in `names` (all when empty), in the rig's order.
-fn select(rig: &Rig, names: &[String]) -> Result<Rig, String> {
-    if let Some(missing) = names.iter().find(|n| rig.sensor(n).is_none()) {
-        let known: Vec<&str> = rig.sensors.iter().map(|s| s.name.as_str()).collect();
-        return Err(format!(
-            "'{missing}' is not a sensor of the calibration (it has: {})",
-            known.join(", ")
-        ));
-    }
-    Ok(Rig {
-        vehicle_frame: rig.vehicle_frame.clone(),
-        sensors: rig
-            .sensors
-            .iter()
-            .filter(|s| names.is_empty() || names.contains(&s.name))
-            .cloned()
-            .collect(),
-    })
 }
 
 /// The sensor named `name` of `kind`, or the rig's first of that kind.
@@ -368,9 +396,105 @@ pub fn write(export: &Export, out: &Path) -> Result<Vec<PathBuf>, ExportError> {
         }
         let bytes = export.files.first().map_or(&[][..], |f| &f.bytes);
         crate::util::write_atomic(out, bytes).map_err(|e| err(out, e.to_string()))?;
+        // The static-transform script has a shebang: make it runnable.
+        #[cfg(unix)]
+        if export.format == ExportFormat::Ros2StaticTf {
+            use std::os::unix::fs::PermissionsExt;
+            let mut p = std::fs::metadata(out)
+                .map_err(|e| err(out, e.to_string()))?
+                .permissions();
+            p.set_mode(p.mode() | 0o111);
+            std::fs::set_permissions(out, p).map_err(|e| err(out, e.to_string()))?;
+        }
         Ok(vec![out.to_path_buf()])
     }
 }
 
 #[cfg(test)]
 pub(crate) mod test_rig;
+
+#[cfg(test)]
+mod collision_tests {
+    use super::*;
+
+    #[test]
+    fn left_out_sensors_cannot_stop_an_export_and_colliding_names_are_refused() {
+        let mut rig = test_rig::rig();
+        // A camera without intrinsics and a LiDAR on another sensor's frame.
+        let mut bare = rig.sensor("front_camera").unwrap().clone();
+        bare.name = "bare_camera".into();
+        bare.frame_id = "bare_camera".into();
+        bare.camera = None;
+        let mut twin = rig.sensor("lidar_top").unwrap().clone();
+        twin.name = "lidar_twin".into();
+        rig.sensors.push(bare);
+        rig.sensors.push(twin);
+        let doc = CalibrationFile::from_rig(&rig);
+        let all = export(&doc, ExportFormat::Urdf, &ExportOptions::default());
+        assert!(all.is_err());
+        let chosen: Vec<String> = test_rig::rig()
+            .sensors
+            .iter()
+            .map(|s| s.name.clone())
+            .collect();
+        let options = ExportOptions {
+            sensors: chosen,
+            ..Default::default()
+        };
+        for format in [
+            ExportFormat::Urdf,
+            ExportFormat::Ros2StaticTf,
+            ExportFormat::Native,
+        ] {
+            assert!(export(&doc, format, &options).is_ok(), "{}", format.name());
+        }
+        // Two camera names that become one file name; a LiDAR named like a camera's body link.
+        let mut collide = test_rig::rig();
+        let mut c2 = collide.sensor("front_camera").unwrap().clone();
+        c2.name = "front camera".into();
+        c2.frame_id = "front_camera_b".into();
+        collide.sensors.push(c2);
+        let doc = CalibrationFile::from_rig(&collide);
+        let e = export(&doc, ExportFormat::CameraInfo, &ExportOptions::default())
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("front_camera.yaml"), "{e}");
+        let mut links = test_rig::rig();
+        let mut lidar = links.sensor("lidar_top").unwrap().clone();
+        lidar.name = "lidar_link_clash".into();
+        lidar.frame_id = "front_camera_link".into();
+        links.sensors.push(lidar);
+        let doc = CalibrationFile::from_rig(&links);
+        let e = export(&doc, ExportFormat::Urdf, &ExportOptions::default())
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("front_camera_link"), "{e}");
+        let mut keys = test_rig::rig();
+        let mut lidar = keys.sensor("lidar_top").unwrap().clone();
+        lidar.name = "lidar_top_again".into();
+        lidar.frame_id = "lidar_top_base_link".into();
+        keys.sensors.push(lidar);
+        let doc = CalibrationFile::from_rig(&keys);
+        let e = export(&doc, ExportFormat::Autoware, &ExportOptions::default())
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("Autoware"), "{e}");
+    }
+
+    #[cfg(unix)]
+    #[test]
+    fn the_static_tf_script_is_executable() {
+        use std::os::unix::fs::PermissionsExt;
+        let dir = std::env::temp_dir().join(format!("rigcal-tf-exec-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let doc = CalibrationFile::from_rig(&test_rig::rig());
+        let e = export(&doc, ExportFormat::Ros2StaticTf, &ExportOptions::default()).unwrap();
+        let out = dir.join("static_tf.sh");
+        write(&e, &out).unwrap();
+        assert_ne!(
+            std::fs::metadata(&out).unwrap().permissions().mode() & 0o100,
+            0
+        );
+        let _ = std::fs::remove_dir_all(dir);
+    }
+}
