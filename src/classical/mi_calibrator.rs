@@ -11,6 +11,8 @@ use crate::optim::runner::{Calibrator, StepReport};
 
 pub struct MiCalibrator {
     rig: Rig,
+    /// Cameras that could not be set up, with the reason.
+    pub skipped: Vec<String>,
     problems: Vec<(MiProblem, MiSearch)>,
     max_steps: usize,
 }
@@ -40,13 +42,24 @@ impl MiCalibrator {
                 let search = MiSearch::new(&p, start, &config);
                 Ok((p, search))
             })
-            .collect::<Result<Vec<_>, String>>()?;
-        if problems.is_empty() {
+            .collect::<Vec<Result<_, String>>>();
+        if cameras.is_empty() {
             return Err("no camera selected".into());
+        }
+        // Cameras that cannot be set up (no overlap with the LiDAR) are skipped and named;
+        // only when none can is it an error.
+        let mut skipped = Vec::new();
+        let problems: Vec<_> = problems
+            .into_iter()
+            .filter_map(|r| r.map_err(|e| skipped.push(e)).ok())
+            .collect();
+        if problems.is_empty() {
+            return Err(skipped.join("; "));
         }
         Ok(Self {
             rig: rig.clone(),
             problems,
+            skipped,
             max_steps: config.iterations,
         })
     }

@@ -12,6 +12,8 @@ use crate::optim::runner::{Calibrator, StepReport};
 
 pub struct TargetCalibrator {
     rig: Rig,
+    /// Cameras that could not be set up, with the reason.
+    pub skipped: Vec<String>,
     problems: Vec<(TargetProblem, TargetSearch)>,
     max_steps: usize,
 }
@@ -38,13 +40,24 @@ impl TargetCalibrator {
                 let search = TargetSearch::new(&p, start);
                 Ok((p, search))
             })
-            .collect::<Result<Vec<_>, String>>()?;
-        if problems.is_empty() {
+            .collect::<Vec<Result<_, String>>>();
+        if cameras.is_empty() {
             return Err("no camera selected".into());
+        }
+        // Cameras that cannot be set up (no overlap with the LiDAR) are skipped and named;
+        // only when none can is it an error.
+        let mut skipped = Vec::new();
+        let problems: Vec<_> = problems
+            .into_iter()
+            .filter_map(|r| r.map_err(|e| skipped.push(e)).ok())
+            .collect();
+        if problems.is_empty() {
+            return Err(skipped.join("; "));
         }
         Ok(Self {
             rig: rig.clone(),
             problems,
+            skipped,
             max_steps: config.iterations,
         })
     }
