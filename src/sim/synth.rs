@@ -150,7 +150,13 @@ pub fn synthesize(
     let poses: Vec<(i64, Rigid)> = samples.iter().map(|(t, p)| (start + t, *p)).collect();
     let trajectory = Trajectory::new(poses.clone());
     let path = trajectories::path_polyline(&traj_cfg, 1.0);
-    let world = World::build(cfg.scene, &path, cfg.seed);
+    // Boards for tall rigs: how far the highest LiDAR sits above a car's (1.9 m).
+    let highest_lidar_m = rig
+        .lidars
+        .iter()
+        .map(|l| l.vehicle_from_lidar.translation.z)
+        .fold(0.0, f64::max);
+    let world = World::build_for_rig(cfg.scene, &path, cfg.seed, highest_lidar_m - 1.9);
 
     // Sweep stamps: every LiDAR period inside [margin + period/2, margin + duration - period/2].
     let lidar_hz = rig

@@ -488,6 +488,13 @@ const FACADE_COLORS: [[f32; 3]; 6] = [
 impl World {
     /// Build a scene around the driven path (points in the world frame, z ignored).
     pub fn build(kind: SceneKind, path: &[DVec3], seed: u64) -> Self {
+        Self::build_for_rig(kind, path, seed, 0.0)
+    }
+
+    /// [`Self::build`] for a rig whose highest LiDAR is `raised_m` above a car's (1.9 m): the
+    /// checkerboard scene then adds a second ring of boards that much higher and farther, in
+    /// the dense middle beams of tall LiDARs (a truck's), leaving a car's scene unchanged.
+    pub fn build_for_rig(kind: SceneKind, path: &[DVec3], seed: u64, raised_m: f64) -> Self {
         let path: Vec<Vec3> = path
             .iter()
             .map(|p| Vec3::new(p.x as f32, p.y as f32, 0.0))
@@ -508,7 +515,7 @@ impl World {
             SceneKind::ParkingLot => add_parking_lot(&mut b, &path, &ground, &mut rng),
             SceneKind::Featureless => add_featureless(&mut b, &path, &ground, &mut rng),
             SceneKind::Checkerboard => {
-                boards = add_checkerboards(&mut b, &path, &mut rng);
+                boards = add_checkerboards(&mut b, &path, &mut rng, raised_m.max(0.0) as f32);
                 add_urban(&mut b, &path, &ground, &mut rng);
             }
         }
@@ -1200,7 +1207,14 @@ fn add_featureless(b: &mut Builder, path: &[Vec3], ground: &GroundMap, rng: &mut
 }
 
 /// Stationary scene: boards in front of and beside the vehicle, facing it, in varied poses.
-fn add_checkerboards(b: &mut Builder, path: &[Vec3], rng: &mut Rng) -> Vec<Checkerboard> {
+fn add_checkerboards(
+    b: &mut Builder,
+    path: &[Vec3],
+    rng: &mut Rng,
+    raised_m: f32,
+) -> Vec<Checkerboard> {
+    // Only a clearly taller rig gets the second ring (a car's scene stays exactly as it was).
+    let raised_m = if raised_m > 0.3 { raised_m } else { 0.0 };
     // The stationary vehicle stands in the middle of its short road.
     let mid = path.len() / 2;
     let origin = path.get(mid).copied().unwrap_or(Vec3::ZERO);
@@ -1223,13 +1237,28 @@ fn add_checkerboards(b: &mut Builder, path: &[Vec3], rng: &mut Rng) -> Vec<Check
         (-90.0, 6.0, 1.5, -5.0, 0.0),
         (180.0, 7.0, 1.5, 0.0, 15.0),
     ];
-    for (k, (bearing, dist, height, tilt, swing)) in layout.into_iter().enumerate() {
+    // A tall rig's ring: the same poses turned 20° (not hidden behind the first ring), 1.5×
+    // as far and raised (its stands are taller).
+    let raised = layout.map(|(bearing, dist, height, tilt, swing)| {
+        (bearing + 20.0, dist * 1.5, height + raised_m, tilt, swing)
+    });
+    let rings = if raised_m > 0.0 {
+        layout
+            .iter()
+            .chain(raised.iter())
+            .copied()
+            .collect::<Vec<_>>()
+    } else {
+        layout.to_vec()
+    };
+    for (k, (bearing, dist, height, tilt, swing)) in rings.into_iter().enumerate() {
         let bearing = heading + (bearing as f32 + rng.range(-4.0, 4.0)).to_radians();
         let center = origin
             + Vec3::new(bearing.cos(), bearing.sin(), 0.0) * dist
             + Vec3::new(0.0, 0.0, height);
-        // Board normal points back at the vehicle, then swung and tilted.
-        let toward = (origin + Vec3::new(0.0, 0.0, 1.5) - center).normalize_or_zero();
+        // Board normal points back at the vehicle (at its sensors' height), then swung and
+        // tilted.
+        let toward = (origin + Vec3::new(0.0, 0.0, 1.5 + raised_m) - center).normalize_or_zero();
         let yaw = toward.y.atan2(toward.x) + (swing as f32).to_radians();
         let pitch = (tilt as f32).to_radians();
         let normal = Vec3::new(
