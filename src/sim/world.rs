@@ -1213,8 +1213,9 @@ fn add_checkerboards(
     rng: &mut Rng,
     raised_m: f32,
 ) -> Vec<Checkerboard> {
-    // Only a clearly taller rig gets the second ring (a car's scene stays exactly as it was).
-    let raised_m = if raised_m > 0.3 { raised_m } else { 0.0 };
+    // Only a clearly taller rig gets the second ring (a car's scene stays exactly as it was:
+    // PandaSet's PandarGT sits 0.3 m above the Pandar64).
+    let raised_m = if raised_m > 0.6 { raised_m } else { 0.0 };
     // The stationary vehicle stands in the middle of its short road.
     let mid = path.len() / 2;
     let origin = path.get(mid).copied().unwrap_or(Vec3::ZERO);
@@ -1345,6 +1346,16 @@ mod tests {
             .count();
         assert!(hits >= 10, "{hits}");
         assert_eq!(w.ground.abs_distance(0.0, 3.0).round(), 3.0);
+    }
+
+    #[test]
+    fn a_tall_rig_gets_a_raised_ring_of_boards_and_a_car_does_not() {
+        let car = World::build_for_rig(SceneKind::Checkerboard, &straight_path(), 3, 0.32);
+        let truck = World::build_for_rig(SceneKind::Checkerboard, &straight_path(), 3, 1.45);
+        assert_eq!(car.boards.len(), 8);
+        assert_eq!(truck.boards.len(), 16);
+        let highest = |w: &World| w.boards.iter().map(|b| b.origin.z).fold(0.0f32, f32::max);
+        assert!(highest(&truck) > highest(&car) + 1.0);
     }
 
     #[test]
