@@ -4,7 +4,8 @@
 //! How it works. The target LiDAR (fixed, usually the root) gives a cloud in the world frame:
 //! every point moved with the trajectory at its own firing time (deskewed), voxel-downsampled
 //! to [`IcpConfig::target_voxel_m`] (voxel centroids), each point with the normal of the least-squares plane of
-//! its neighbours within 0.5 m (flat neighbourhoods only: [`crate::eval::registration`]). The
+//! its neighbours within 0.4 m (flat neighbourhoods only: [`crate::eval::registration`]; one pass
+//! over the neighbourhood's moments, and only for target points a source point can reach). The
 //! source LiDAR keeps its points in its own frame `p_i`, each with the vehicle pose `W_i` at its
 //! firing time, so the unknown extrinsic `X = vehicle_from_source` enters every point as
 //! `W_i X p_i` and a moving drive needs no per-sweep rigid approximation.
@@ -15,18 +16,28 @@
 //! `[v × m, m]`; Huber weights (δ = [`IcpConfig::huber_m`]) make it robust, and the 6 × 6
 //! normal equations are solved by Cholesky. Levels go coarse to fine: the source is thinned
 //! by a voxel grid of each level's size and the correspondence distance shrinks with it (nearest
-//! target points from a k-d tree built once); a level ends when the update is below 1e-6 rad / 1e-6 m or after its iteration budget.
+//! target points from a k-d tree built once, with ≤ 8-point leaves scanned linearly, each search
+//! starting from the point's previous nearest neighbour); a level ends when the update is below 1e-6 rad / 1e-6 m or after its iteration budget.
+
+use std::sync::atomic::{AtomicU32, Ordering};
 
 use glam::DVec3;
 use rayon::prelude::*;
 
-use crate::eval::registration::plane_normal;
+use crate::eval::registration::plane_normal_from_moments;
 use crate::geometry::{Rigid, so3};
 
+/// How far beyond the widest correspondence distance a source point may move during a run (m):
+/// target points farther than both from every starting source point get no normal.
+const REACH_MARGIN_M: f64 = 2.0;
 /// How many independent residuals an ICP result's information counts its points as.
 pub const EFFECTIVE_POINTS: f64 = 200.0;
 /// Radius of the neighbourhood a target normal is fitted to (m).
-const NORMAL_RADIUS_M: f64 = 0.5;
+const NORMAL_RADIUS_M: f64 = 0.4;
+/// Ranges this small are scanned linearly instead of descended (any order of a range is valid:
+/// the tree is implicit in the array).
+const LEAF: usize = 8;
+
 /// A static k-d tree over the target points for nearest-neighbour queries: an implicit
 /// balanced tree over a reordered array (the node of a range is its middle element, split on
 /// the axis of the range's largest extent), built once by median selection.
@@ -75,39 +86,78 @@ impl KdTree {
         Self::build(&mut rest[1..], &mut rest_axis[1..]);
     }
 
+    /// [`Self::nearest`] starting from the point found last time for the same query point
+    /// (`hint`, a position in the tree's order, updated): after the first iterations the
+    /// answer barely moves, and a tight starting bound prunes most of the descent.
+    fn nearest_hinted(&self, p: DVec3, max_m: f64, hint: &AtomicU32) -> Option<u32> {
+        let mut best = (max_m * max_m, u32::MAX);
+        let h = hint.load(Ordering::Relaxed);
+        if let Some(q) = self.points.get(h as usize) {
+            let d2 = q.distance_squared(p);
+            if d2 <= best.0 {
+                best = (d2, h);
+            }
+        }
+        self.search(0, self.points.len(), p, &mut best);
+        hint.store(best.1, Ordering::Relaxed);
+        (best.1 != u32::MAX).then(|| self.index[best.1 as usize])
+    }
+
     /// Original index of the nearest point within `max_m` of `p`.
+    #[cfg(test)]
     fn nearest(&self, p: DVec3, max_m: f64) -> Option<u32> {
         let mut best = (max_m * max_m, u32::MAX);
         self.search(0, self.points.len(), p, &mut best);
         (best.1 != u32::MAX).then(|| self.index[best.1 as usize])
     }
 
-    /// Every point within `radius_m` of `p`, appended to `out`.
-    fn within(&self, p: DVec3, radius_m: f64, out: &mut Vec<DVec3>) {
-        self.range(0, self.points.len(), p, radius_m * radius_m, out);
+    /// Count, `Σ (q − p)` and `Σ (q − p)(q − p)ᵀ` over the points `q` within `radius_m` of `p`.
+    fn moments(&self, p: DVec3, radius_m: f64) -> (usize, DVec3, glam::DMat3) {
+        let mut m = (0, DVec3::ZERO, glam::DMat3::ZERO);
+        self.moments_in(0, self.points.len(), p, radius_m * radius_m, &mut m);
+        m
     }
 
-    fn range(&self, lo: usize, hi: usize, p: DVec3, r2: f64, out: &mut Vec<DVec3>) {
-        if lo >= hi {
+    fn moments_in(
+        &self,
+        lo: usize,
+        hi: usize,
+        p: DVec3,
+        r2: f64,
+        m: &mut (usize, DVec3, glam::DMat3),
+    ) {
+        let mut add = |q: DVec3| {
+            let d = q - p;
+            if d.length_squared() <= r2 {
+                m.0 += 1;
+                m.1 += d;
+                m.2 += glam::DMat3::from_cols(d * d.x, d * d.y, d * d.z);
+            }
+        };
+        if hi - lo <= LEAF {
+            self.points[lo..hi].iter().for_each(|q| add(*q));
             return;
         }
-        let m = lo + (hi - lo) / 2;
-        let q = self.points[m];
-        if q.distance_squared(p) <= r2 {
-            out.push(q);
-        }
-        let a = self.axis[m] as usize;
-        let diff = p[a] - q[a];
+        let mid = lo + (hi - lo) / 2;
+        add(self.points[mid]);
+        let a = self.axis[mid] as usize;
+        let diff = p[a] - self.points[mid][a];
         if diff < 0.0 || diff * diff <= r2 {
-            self.range(lo, m, p, r2, out);
+            self.moments_in(lo, mid, p, r2, m);
         }
         if diff >= 0.0 || diff * diff <= r2 {
-            self.range(m + 1, hi, p, r2, out);
+            self.moments_in(mid + 1, hi, p, r2, m);
         }
     }
 
     fn search(&self, lo: usize, hi: usize, p: DVec3, best: &mut (f64, u32)) {
-        if lo >= hi {
+        if hi - lo <= LEAF {
+            for (k, q) in self.points[lo..hi].iter().enumerate() {
+                let d2 = q.distance_squared(p);
+                if d2 <= best.0 {
+                    *best = (d2, (lo + k) as u32);
+                }
+            }
             return;
         }
         let m = lo + (hi - lo) / 2;
@@ -179,6 +229,9 @@ pub struct IcpProblem {
     normals: Vec<DVec3>,
     /// Source points per level (voxel-thinned).
     sources: Vec<Vec<SourcePoint>>,
+    /// Per level and source point: its last nearest target (tree order), to start the next
+    /// search from.
+    hints: Vec<Vec<AtomicU32>>,
     pub config: IcpConfig,
     pub vehicle_from_source: Rigid,
     pub level: usize,
@@ -189,7 +242,7 @@ pub struct IcpProblem {
 
 /// One point per occupied voxel (the first one seen: deterministic, and a real point).
 pub fn voxel_thin<T: Copy>(points: &[T], voxel_m: f64, position: impl Fn(&T) -> DVec3) -> Vec<T> {
-    let mut seen = std::collections::HashSet::new();
+    let mut seen = crate::util::FastSet::default();
     points
         .iter()
         .filter(|p| seen.insert((position(p) / voxel_m).floor().as_ivec3().to_array()))
@@ -200,7 +253,7 @@ pub fn voxel_thin<T: Copy>(points: &[T], voxel_m: f64, position: impl Fn(&T) -> 
 /// The centroid of the points in each occupied voxel (in order of first appearance): noise
 /// averages out of the target surface (as Open3D's voxel downsampling does).
 pub fn voxel_centroids(points: &[DVec3], voxel_m: f64) -> Vec<DVec3> {
-    let mut slot: std::collections::HashMap<[i32; 3], usize> = Default::default();
+    let mut slot: crate::util::FastMap<[i32; 3], usize> = Default::default();
     let mut sums: Vec<(DVec3, u32)> = Vec::new();
     for p in points {
         let key = (*p / voxel_m).floor().as_ivec3().to_array();
@@ -225,30 +278,59 @@ impl IcpProblem {
     ) -> Self {
         let thinned = voxel_centroids(target_world, config.target_voxel_m);
         let all = KdTree::new(&thinned);
+        // Normals only where the source can reach: target points farther from every source
+        // point (under the start) than the widest correspondence distance plus a margin for
+        // the extrinsic's change can never be a nearest neighbour. Cells of that size, each
+        // source cell with its 26 neighbours, contain every point that can.
+        let reach_m = config.levels.iter().map(|l| l.1).fold(0.0, f64::max) + REACH_MARGIN_M;
+        let mut reachable = crate::util::FastSet::default();
+        for s in source {
+            let w = s
+                .world_from_vehicle
+                .transform_point(start.transform_point(s.in_sensor));
+            let c = (w / reach_m).floor().as_ivec3();
+            if reachable.contains(&c.to_array()) {
+                continue;
+            }
+            for dx in -1..=1 {
+                for dy in -1..=1 {
+                    for dz in -1..=1 {
+                        reachable.insert((c + glam::IVec3::new(dx, dy, dz)).to_array());
+                    }
+                }
+            }
+        }
         let with_normals: Vec<(DVec3, DVec3)> = thinned
             .par_iter()
-            .map_init(Vec::new, |neighbours, p| {
-                neighbours.clear();
-                all.within(*p, NORMAL_RADIUS_M, neighbours);
-                Some((*p, plane_normal(neighbours)?))
+            .filter(|p| reachable.contains(&(**p / reach_m).floor().as_ivec3().to_array()))
+            .filter_map(|p| {
+                let (n, sum, outer) = all.moments(*p, NORMAL_RADIUS_M);
+                Some((*p, plane_normal_from_moments(n, sum, outer)?))
             })
-            .flatten()
             .collect();
         let target: Vec<DVec3> = with_normals.iter().map(|(p, _)| *p).collect();
         // Thin the source in the world under the starting extrinsic (close enough to decide
         // which points are redundant).
         let sources = config
             .levels
-            .iter()
+            .par_iter()
             .map(|(voxel, _)| {
                 voxel_thin(source, *voxel, |s| {
                     s.world_from_vehicle
                         .transform_point(start.transform_point(s.in_sensor))
                 })
             })
+            .collect::<Vec<_>>();
+        let tree = KdTree::new(&target);
+        let hints = sources
+            .iter()
+            .map(|level: &Vec<SourcePoint>| {
+                (0..level.len()).map(|_| AtomicU32::new(u32::MAX)).collect()
+            })
             .collect();
         Self {
-            tree: KdTree::new(&target),
+            tree,
+            hints,
             normals: with_normals.iter().map(|(_, n)| *n).collect(),
             target,
             sources,
@@ -274,16 +356,18 @@ impl IcpProblem {
         let x = self.vehicle_from_source;
         let huber = self.config.huber_m;
         let source = &self.sources[level];
+        let hints = &self.hints[level];
         let (target, normals) = (&self.target, &self.normals);
         // Per point: (H upper 6×6 as 36, g 6, weighted squared residual sum, count).
         source
             .par_iter()
+            .zip(hints.par_iter())
             .fold(
                 || ([0.0f64; 36], [0.0f64; 6], 0.0f64, 0usize),
-                |(mut h, mut g, mut sq, mut n), s| {
+                |(mut h, mut g, mut sq, mut n), (s, hint)| {
                     let v = x.transform_point(s.in_sensor);
                     let w = s.world_from_vehicle.transform_point(v);
-                    if let Some(i) = tree.nearest(w, max_d) {
+                    if let Some(i) = tree.nearest_hinted(w, max_d, hint) {
                         let (q, normal) = (target[i as usize], normals[i as usize]);
                         let r = normal.dot(w - q);
                         let m = s.world_from_vehicle.rotation.inverse() * normal;
