@@ -105,7 +105,14 @@ fn main() -> Result<()> {
             * truth.rotation,
         truth.translation + DVec3::new(0.6, 0.7, -0.4).normalize_or_zero() * 0.10,
     );
-    let config = IcpConfig::default();
+    let mut config = IcpConfig::default();
+    // For experiments: RIGCAL_ICP_FLATNESS overrides the flatness test of target normals.
+    if let Some(f) = std::env::var("RIGCAL_ICP_FLATNESS")
+        .ok()
+        .and_then(|v| v.parse().ok())
+    {
+        config.max_flatness = f;
+    }
     write_ply(&out.join("target.ply"), &target)?;
     write_ply(&out.join("source.ply"), &source)?;
     let case = serde_json::json!({

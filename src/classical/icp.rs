@@ -4,7 +4,7 @@
 //! How it works. The target LiDAR (fixed, usually the root) gives a cloud in the world frame:
 //! every point moved with the trajectory at its own firing time (deskewed), voxel-downsampled
 //! to [`IcpConfig::target_voxel_m`] (voxel centroids), each point with the normal of the least-squares plane of
-//! its neighbours within 0.4 m (flat neighbourhoods only: [`crate::eval::registration`]; one pass
+//! its neighbours within 0.4 m (flat or gently curved neighbourhoods: [`IcpConfig::max_flatness`]; one pass
 //! over the neighbourhood's moments, and only for target points a source point can reach). The
 //! source LiDAR keeps its points in its own frame `p_i`, each with the vehicle pose `W_i` at its
 //! firing time, so the unknown extrinsic `X = vehicle_from_source` enters every point as
@@ -187,6 +187,11 @@ pub struct IcpConfig {
     pub iterations_per_level: usize,
     pub target_voxel_m: f64,
     pub huber_m: f64,
+    /// A target point gets a normal when the variance across its neighbourhood's plane is at
+    /// most this fraction of the total (⅓: any neighbourhood). 0.15 keeps gently curved
+    /// surfaces (car bodies, poles) that pin the translation, and drops corners and clutter;
+    /// the evaluation metric is stricter ([`crate::eval::registration::MAX_FLATNESS`]).
+    pub max_flatness: f64,
 }
 
 impl Default for IcpConfig {
@@ -196,6 +201,7 @@ impl Default for IcpConfig {
             iterations_per_level: 15,
             target_voxel_m: 0.1,
             huber_m: 0.1,
+            max_flatness: 0.15,
         }
     }
 }
@@ -305,7 +311,10 @@ impl IcpProblem {
             .filter(|p| reachable.contains(&(**p / reach_m).floor().as_ivec3().to_array()))
             .filter_map(|p| {
                 let (n, sum, outer) = all.moments(*p, NORMAL_RADIUS_M);
-                Some((*p, plane_normal_from_moments(n, sum, outer)?))
+                Some((
+                    *p,
+                    plane_normal_from_moments(n, sum, outer, config.max_flatness)?,
+                ))
             })
             .collect();
         let target: Vec<DVec3> = with_normals.iter().map(|(p, _)| *p).collect();
@@ -570,8 +579,10 @@ mod tests {
                 rot.to_degrees(),
                 trans * 1000.0
             );
+            // At the exact answer the residual left is the planes' approximation of the 0.3 m
+            // poles (gently curved neighbourhoods take part: `max_flatness`).
             assert!(
-                stats.fitness > 0.5 && stats.inlier_rmse_m < 0.005,
+                stats.fitness > 0.5 && stats.inlier_rmse_m < 0.006,
                 "{stats:?}"
             );
         }

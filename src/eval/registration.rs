@@ -99,25 +99,31 @@ pub fn plane_normal(points: &[DVec3]) -> Option<DVec3> {
         let q = *p - mean;
         cov += DMat3::from_cols(q * q.x, q * q.y, q * q.z);
     }
-    normal_of_covariance(cov)
+    normal_of_covariance(cov, MAX_FLATNESS)
 }
 
 /// [`plane_normal`] from the moments of the points taken relative to any nearby origin `o`:
-/// their count, `Σ (p − o)` and `Σ (p − o)(p − o)ᵀ` (one pass, no list of neighbours).
-pub fn plane_normal_from_moments(n: usize, sum: DVec3, outer: DMat3) -> Option<DVec3> {
+/// their count, `Σ (p − o)` and `Σ (p − o)(p − o)ᵀ` (one pass, no list of neighbours), flat
+/// when the variance across the plane is at most `max_flatness` of the total.
+pub fn plane_normal_from_moments(
+    n: usize,
+    sum: DVec3,
+    outer: DMat3,
+    max_flatness: f64,
+) -> Option<DVec3> {
     if n < MIN_NEIGHBOURS {
         return None;
     }
     let mean = sum / n as f64;
     let cov = outer - DMat3::from_cols(mean * sum.x, mean * sum.y, mean * sum.z);
-    normal_of_covariance(cov)
+    normal_of_covariance(cov, max_flatness)
 }
 
-fn normal_of_covariance(cov: DMat3) -> Option<DVec3> {
+fn normal_of_covariance(cov: DMat3, max_flatness: f64) -> Option<DVec3> {
     let normal = smallest_eigenvector(cov)?;
     let trace = cov.x_axis.x + cov.y_axis.y + cov.z_axis.z;
     let across = normal.dot(cov * normal);
-    (trace > 0.0 && across <= MAX_FLATNESS * trace).then_some(normal)
+    (trace > 0.0 && across <= max_flatness * trace).then_some(normal)
 }
 
 /// Eigenvector of the smallest eigenvalue of a symmetric positive semi-definite matrix: inverse
