@@ -612,3 +612,31 @@ fn mutual_information_runs_from_the_optimiser_panel_and_moves_only_its_camera() 
     }
     assert!(h.state().status.iter().all(|s| !s.starts_with("error")));
 }
+
+#[test]
+fn the_checkerboard_method_runs_from_the_optimiser_panel_and_says_when_there_are_no_boards() {
+    use rigcal::app::optimiser::Method;
+    // PandaSet has no checkerboards: the run ends with a one-line reason naming the pair.
+    let mut h = harness(pandaset());
+    h.run_steps(2);
+    h.state_mut().optimiser.method = Method::Target;
+    h.state_mut().optimiser.frames = 1;
+    h.state_mut().optimiser.cameras = vec!["front_camera".into()];
+    h.run_steps(2);
+    let before = h.state().current.clone();
+    h.get_by_label("Start").click();
+    h.run_steps(1);
+    assert!(
+        run_until(&mut h, 300.0, |s| s.optimiser.run.is_none()),
+        "the checkerboard run did not end: {:?}",
+        s_status(&h)
+    );
+    let message = h.state().optimiser.message.clone().unwrap_or_default();
+    assert!(
+        message.starts_with("error")
+            && message.contains("front_camera")
+            && message.contains("checkerboard"),
+        "{message}"
+    );
+    assert_eq!(h.state().current, before);
+}
