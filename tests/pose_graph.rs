@@ -5,42 +5,21 @@
 //! the pairwise methods' accuracy after aligning the reference LiDAR, the graph agrees with its
 //! edges, and the CLI writes the native file.
 
+mod common;
+
 use std::path::PathBuf;
 use std::process::Command;
 
-use rigcal::calib::{CalibrationFile, Rig};
+use common::named;
+
+use rigcal::calib::CalibrationFile;
 use rigcal::classical::pose_graph_calibrator::{CameraPairs, PoseGraphCalibrator, PoseGraphConfig};
 use rigcal::geometry::rig_errors;
 use rigcal::log::Drive;
 use rigcal::optim::runner::Calibrator;
-use rigcal::sim::rigs::{RigPreset, SimRig};
-use rigcal::sim::synth::{SynthConfig, synthesize};
-use rigcal::sim::trajectories::TrajectoryKind;
-use rigcal::sim::world::SceneKind;
 
 fn drive(seed: u64) -> (PathBuf, PathBuf, PathBuf) {
-    let dir = std::env::temp_dir().join(format!("rigcal-posegraph-{}-{seed}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    let mut cfg = SynthConfig::new(
-        SceneKind::Checkerboard,
-        SimRig::preset(RigPreset::Pandaset),
-        TrajectoryKind::Stationary,
-        0.6,
-        seed,
-    );
-    cfg.perturb_deg = 2.0;
-    cfg.perturb_cm = 20.0;
-    cfg.camera_rate_hz = 2.0;
-    let (log, gt) = (dir.join("boards.mcap"), dir.join("gt.yaml"));
-    synthesize(&cfg, &log, &gt, &mut |_, _| {}).unwrap();
-    (dir, log, gt)
-}
-
-fn named(rig: &Rig) -> Vec<(String, rigcal::geometry::Rigid)> {
-    rig.sensors
-        .iter()
-        .map(|s| (s.name.clone(), s.vehicle_from_sensor))
-        .collect()
+    common::checkerboard_drive("posegraph", seed)
 }
 
 #[test]

@@ -43,19 +43,7 @@ impl MiCalibrator {
                 Ok((p, search))
             })
             .collect::<Vec<Result<_, String>>>();
-        if cameras.is_empty() {
-            return Err("no camera selected".into());
-        }
-        // Cameras that cannot be set up (no overlap with the LiDAR) are skipped and named;
-        // only when none can is it an error.
-        let mut skipped = Vec::new();
-        let problems: Vec<_> = problems
-            .into_iter()
-            .filter_map(|r| r.map_err(|e| skipped.push(e)).ok())
-            .collect();
-        if problems.is_empty() {
-            return Err(skipped.join("; "));
-        }
+        let (problems, skipped) = super::per_camera(problems)?;
         Ok(Self {
             rig: rig.clone(),
             problems,

@@ -18,3 +18,23 @@ pub mod pose_graph;
 pub mod pose_graph_calibrator;
 pub mod target;
 pub mod target_calibrator;
+
+/// The cameras' problems that could be set up, and a reason for each that could not (no
+/// overlap with the LiDAR, no boards); an error only when no camera was asked for or none
+/// could be set up.
+pub(crate) fn per_camera<T>(
+    results: Vec<Result<T, String>>,
+) -> Result<(Vec<T>, Vec<String>), String> {
+    if results.is_empty() {
+        return Err("no camera selected".into());
+    }
+    let mut skipped = Vec::new();
+    let problems: Vec<T> = results
+        .into_iter()
+        .filter_map(|r| r.map_err(|e| skipped.push(e)).ok())
+        .collect();
+    if problems.is_empty() {
+        return Err(skipped.join("; "));
+    }
+    Ok((problems, skipped))
+}

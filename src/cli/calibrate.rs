@@ -51,6 +51,27 @@ pub struct CalibrateArgs {
     pub out: PathBuf,
 }
 
+/// The reference LiDAR: `--root`, else the rig's first LiDAR.
+fn reference_lidar(args: &CalibrateArgs, rig: &Rig) -> Result<String, String> {
+    match &args.root {
+        Some(r) => Ok(r.clone()),
+        None => rig
+            .lidars()
+            .next()
+            .map(|l| l.name.clone())
+            .ok_or_else(|| "the log has no LiDAR".to_string()),
+    }
+}
+
+/// The cameras with intrinsics that `--sensors` selects (all when empty).
+fn selected_cameras(args: &CalibrateArgs, rig: &Rig) -> Vec<String> {
+    rig.cameras()
+        .filter(|c| c.camera.is_some())
+        .map(|c| c.name.clone())
+        .filter(|c| args.sensors.is_empty() || args.sensors.contains(c))
+        .collect()
+}
+
 /// Parse `START..END` (seconds from `t0`) into nanoseconds.
 pub fn parse_segment(text: &str, t0_nanos: i64) -> Result<(i64, i64), String> {
     let (a, b) = text
@@ -106,12 +127,7 @@ pub fn calibrate(
                     .find(|l| args.sensors.is_empty() || !args.sensors.contains(l))
                     .or_else(|| rig.lidars().next().map(|l| l.name.clone()))
                     .ok_or("the log has no LiDAR")?;
-                let cameras: Vec<String> = rig
-                    .cameras()
-                    .filter(|c| c.camera.is_some())
-                    .map(|c| c.name.clone())
-                    .filter(|c| args.sensors.is_empty() || args.sensors.contains(c))
-                    .collect();
+                let cameras = selected_cameras(args, &rig);
                 Box::new(
                     EdgeRefiner::new(&drive, &rig, &lidar, &cameras, 4, &segments)
                         .map_err(|e| e.to_string())?,
@@ -131,14 +147,7 @@ pub fn calibrate(
                 )
             }
             "icp" => {
-                let reference = match &args.root {
-                    Some(r) => r.clone(),
-                    None => rig
-                        .lidars()
-                        .next()
-                        .map(|l| l.name.clone())
-                        .ok_or("the log has no LiDAR")?,
-                };
+                let reference = reference_lidar(args, &rig)?;
                 Box::new(IcpCalibrator::from_drive(
                     &drive,
                     &rig,
@@ -149,20 +158,8 @@ pub fn calibrate(
                 )?)
             }
             "mi" => {
-                let reference = match &args.root {
-                    Some(r) => r.clone(),
-                    None => rig
-                        .lidars()
-                        .next()
-                        .map(|l| l.name.clone())
-                        .ok_or("the log has no LiDAR")?,
-                };
-                let cameras: Vec<String> = rig
-                    .cameras()
-                    .filter(|c| c.camera.is_some())
-                    .map(|c| c.name.clone())
-                    .filter(|c| args.sensors.is_empty() || args.sensors.contains(c))
-                    .collect();
+                let reference = reference_lidar(args, &rig)?;
+                let cameras = selected_cameras(args, &rig);
                 let config = MiConfig {
                     iterations: args.iterations.unwrap_or(MiConfig::default().iterations),
                     ..MiConfig::default()
@@ -172,20 +169,8 @@ pub fn calibrate(
                 )?)
             }
             "target" => {
-                let reference = match &args.root {
-                    Some(r) => r.clone(),
-                    None => rig
-                        .lidars()
-                        .next()
-                        .map(|l| l.name.clone())
-                        .ok_or("the log has no LiDAR")?,
-                };
-                let cameras: Vec<String> = rig
-                    .cameras()
-                    .filter(|c| c.camera.is_some())
-                    .map(|c| c.name.clone())
-                    .filter(|c| args.sensors.is_empty() || args.sensors.contains(c))
-                    .collect();
+                let reference = reference_lidar(args, &rig)?;
+                let cameras = selected_cameras(args, &rig);
                 let config = TargetConfig {
                     iterations: args
                         .iterations
@@ -197,14 +182,7 @@ pub fn calibrate(
                 )?)
             }
             "pose-graph" => {
-                let reference = match &args.root {
-                    Some(r) => r.clone(),
-                    None => rig
-                        .lidars()
-                        .next()
-                        .map(|l| l.name.clone())
-                        .ok_or("the log has no LiDAR")?,
-                };
+                let reference = reference_lidar(args, &rig)?;
                 let cal = PoseGraphCalibrator::from_drive(
                     &drive,
                     &rig,

@@ -102,6 +102,38 @@ impl CameraIntrinsics {
         }
     }
 
+    /// Intrinsics from a CameraInfo message's fields (ROS 2 or Foxglove): the distortion model's
+    /// name, its coefficients and the row-major `K`; validated ([`Self::validate`]).
+    pub fn from_camera_info(
+        width: u32,
+        height: u32,
+        model_name: &str,
+        distortion: Vec<f64>,
+        k: &[f64],
+    ) -> Result<Self, String> {
+        if k.len() < 9 {
+            return Err(format!(
+                "camera calibration K has {} values, expected 9",
+                k.len()
+            ));
+        }
+        let model = CameraModel::parse(model_name)
+            .ok_or_else(|| format!("unknown distortion_model '{model_name}'"))?;
+        let (model, distortion) = model.normalized(distortion);
+        let intrinsics = Self {
+            width,
+            height,
+            model,
+            fx: k[0],
+            fy: k[4],
+            cx: k[2],
+            cy: k[5],
+            distortion,
+        };
+        intrinsics.validate()?;
+        Ok(intrinsics)
+    }
+
     /// Why these intrinsics cannot be used, if they cannot: focal lengths must be finite and
     /// positive (an uncalibrated ROS driver publishes K = 0), the principal point and every
     /// distortion coefficient finite, the image non-empty, and no more coefficients than the

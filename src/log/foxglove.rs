@@ -11,7 +11,7 @@ use super::error::{DecodeError, DecodeResult};
 use super::protobuf::{self as pb, Value};
 use super::types::*;
 use crate::geometry::Rigid;
-use crate::geometry::camera::{CameraIntrinsics, CameraModel};
+use crate::geometry::camera::CameraIntrinsics;
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum FoxgloveType {
@@ -112,26 +112,8 @@ fn calibration(
     d: Vec<f64>,
     k: &[f64],
 ) -> DecodeResult<Decoded<'static>> {
-    if k.len() < 9 {
-        return Err(DecodeError::new(format!(
-            "camera calibration K has {} values, expected 9",
-            k.len()
-        )));
-    }
-    let model = CameraModel::parse(model)
-        .ok_or_else(|| DecodeError::new(format!("unknown distortion_model '{model}'")))?;
-    let (model, distortion) = model.normalized(d);
-    let intrinsics = CameraIntrinsics {
-        width,
-        height,
-        model,
-        fx: k[0],
-        fy: k[4],
-        cx: k[2],
-        cy: k[5],
-        distortion,
-    };
-    intrinsics.validate().map_err(DecodeError::new)?;
+    let intrinsics =
+        CameraIntrinsics::from_camera_info(width, height, model, d, k).map_err(DecodeError::new)?;
     Ok(Decoded::CameraInfo(CameraInfoMsg {
         stamp_nanos: stamp,
         frame_id,

@@ -10,7 +10,7 @@ use super::cdr::CdrReader;
 use super::error::{DecodeError, DecodeResult};
 use super::types::*;
 use crate::geometry::Rigid;
-use crate::geometry::camera::{CameraIntrinsics, CameraModel};
+use crate::geometry::camera::CameraIntrinsics;
 
 /// The message types this module decodes.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -120,21 +120,8 @@ pub fn decode(kind: Ros2Type, payload: &[u8]) -> DecodeResult<Decoded<'_>> {
             let model_name = r.string("distortion_model")?;
             let d = r.f64_seq("d")?;
             let k = r.f64_array::<9>("k")?;
-            let model = CameraModel::parse(&model_name).ok_or_else(|| {
-                DecodeError::new(format!("unknown distortion_model '{model_name}'"))
-            })?;
-            let (model, distortion) = model.normalized(d);
-            let intrinsics = CameraIntrinsics {
-                width,
-                height,
-                model,
-                fx: k[0],
-                fy: k[4],
-                cx: k[2],
-                cy: k[5],
-                distortion,
-            };
-            intrinsics.validate().map_err(DecodeError::new)?;
+            let intrinsics = CameraIntrinsics::from_camera_info(width, height, &model_name, d, &k)
+                .map_err(DecodeError::new)?;
             Decoded::CameraInfo(CameraInfoMsg {
                 stamp_nanos: h.stamp_nanos,
                 frame_id: h.frame_id,

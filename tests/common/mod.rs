@@ -1,4 +1,5 @@
-//! Helpers shared by the integration tests that read the real PandaSet drive.
+//! Helpers shared by the integration tests: the real PandaSet drive, and the simulator's
+//! checkerboard drive.
 #![allow(dead_code, clippy::unwrap_used)]
 
 use std::path::PathBuf;
@@ -22,4 +23,36 @@ pub fn reference_rig(drive: &Drive) -> Rig {
         }
     }
     rig
+}
+
+/// A stationary 0.6 s drive of the pandaset rig in the checkerboard scene (cameras at 2 Hz),
+/// every sensor perturbed by 2° / 20 cm with `seed`: (its folder, the log, the ground truth).
+pub fn checkerboard_drive(tag: &str, seed: u64) -> (PathBuf, PathBuf, PathBuf) {
+    use rigcal::sim::rigs::{RigPreset, SimRig};
+    use rigcal::sim::synth::{SynthConfig, synthesize};
+    use rigcal::sim::trajectories::TrajectoryKind;
+    use rigcal::sim::world::SceneKind;
+    let dir = std::env::temp_dir().join(format!("rigcal-{tag}-{}-{seed}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let mut cfg = SynthConfig::new(
+        SceneKind::Checkerboard,
+        SimRig::preset(RigPreset::Pandaset),
+        TrajectoryKind::Stationary,
+        0.6,
+        seed,
+    );
+    cfg.perturb_deg = 2.0;
+    cfg.perturb_cm = 20.0;
+    cfg.camera_rate_hz = 2.0;
+    let (log, gt) = (dir.join("boards.mcap"), dir.join("gt.yaml"));
+    synthesize(&cfg, &log, &gt, &mut |_, _| {}).unwrap();
+    (dir, log, gt)
+}
+
+/// `(name, vehicle_from_sensor)` of every sensor, for `rig_errors`.
+pub fn named(rig: &Rig) -> Vec<(String, rigcal::geometry::Rigid)> {
+    rig.sensors
+        .iter()
+        .map(|s| (s.name.clone(), s.vehicle_from_sensor))
+        .collect()
 }
