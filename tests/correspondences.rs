@@ -30,15 +30,35 @@ fn stage(drive: &Drive, rig: &Rig, config: DepthCalibConfig) -> UnicalLidarStage
 fn matches_agree_with_the_reference_calibration() {
     let drive = Drive::open(&pandaset().join("pandaset-002.mcap")).unwrap();
     let rig = reference_rig(&drive);
+    let cache = std::env::temp_dir().join(format!("rigcal-matches-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&cache);
     let config = DepthCalibConfig {
         iterations: 1,
         geometry_init_steps: 0,
         alignment: AlignmentLoss::SurfaceAlignment,
+        correspondence_cache: Some(cache.clone()),
         ..DepthCalibConfig::default()
     };
-    let s = stage(&drive, &rig, config);
+    let s = stage(&drive, &rig, config.clone());
     let calib = s.calibration();
     let c = &calib.correspondences;
+    // Matched once: the cache file is written, read back by the next run, and a damaged file
+    // is rebuilt to the same answer.
+    let files: Vec<_> = std::fs::read_dir(&cache).unwrap().flatten().collect();
+    assert_eq!(files.len(), 1, "one cache file");
+    let again = stage(&drive, &rig, config.clone());
+    assert_eq!(&again.calibration().correspondences, c);
+    // The next run reads the file: emptied of pairs, it gives no pairs.
+    let text = std::fs::read_to_string(files[0].path()).unwrap();
+    let mut doc: serde_json::Value = serde_json::from_str(&text).unwrap();
+    doc["pairs"] = serde_json::json!([]);
+    std::fs::write(files[0].path(), doc.to_string()).unwrap();
+    let emptied = stage(&drive, &rig, config.clone());
+    assert!(emptied.calibration().correspondences.pairs.is_empty());
+    std::fs::write(files[0].path(), b"{ not json").unwrap();
+    let rebuilt = stage(&drive, &rig, config.clone());
+    assert_eq!(&rebuilt.calibration().correspondences, c);
+    let _ = std::fs::remove_dir_all(&cache);
     assert!(c.candidates > 0, "no overlapping frames");
     assert!(
         !c.pairs.is_empty(),

@@ -183,6 +183,7 @@ pub fn start(studio: &mut Studio) {
         // The reference LiDAR is the root: its extrinsic stays fixed.
         let config = crate::unical::depth_calib::DepthCalibConfig {
             frozen_sensor: Some(lidar),
+            correspondence_cache: Some(crate::session::state_dir().join("matches")),
             ..Default::default()
         };
         studio.optimiser.run = Some(Run::spawn_with(move || {

@@ -139,6 +139,7 @@ pub fn calibrate(
                     seed: args.seed,
                     frozen_sensor: args.root.clone(),
                     alignment: args.alignment,
+                    correspondence_cache: Some(crate::session::state_dir().join("matches")),
                     ..DepthCalibConfig::default()
                 };
                 Box::new(

@@ -8,9 +8,19 @@
 //! up to 960 px wide and scaled to the training resolution) are matched by mutual nearest
 //! neighbours with a 0.8 ratio test and verified by RANSAC on the essential matrix (1.5 training
 //! pixels); pairs with fewer than 12 inliers are dropped. Pairs are processed in parallel.
+//!
+//! [`build_cached`] keeps the result on disk, named by a hash of everything it depends on
+//! (every frame's stamp, keypoints and intrinsics, the starting extrinsics, the vehicle poses
+//! at the frames' stamps, and a version of this code's settings), so a second run on the same
+//! data and start matches nothing again. The cache is best effort: a missing, unreadable or
+//! inconsistent file is rebuilt, and a failed write only costs the next run the matching.
+
+use std::hash::Hasher;
+use std::path::Path;
 
 use glam::{DVec2, DVec3};
 use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
 
 use super::depth_calib::CameraData;
 use crate::features::epipolar::verify;
@@ -73,6 +83,154 @@ impl Correspondences {
     pub fn matches(&self) -> usize {
         self.pairs.iter().map(|p| p.pixels.len()).sum()
     }
+}
+
+/// Changes whenever the matching's settings or the file layout change (old files are then
+/// simply not found).
+const CACHE_VERSION: &str = "rigcal-matches-1: 0.3 s, 2 s, 10 %, 12 inliers, 1.5 px, ratio 0.8";
+
+/// The on-disk form of [`Correspondences`].
+#[derive(Serialize, Deserialize)]
+struct CachedMatches {
+    version: String,
+    candidates: usize,
+    /// `[camera a, frame a, camera b, frame b]` and `[ua.x, ua.y, ub.x, ub.y]` per match.
+    pairs: Vec<([usize; 4], Vec<[f64; 4]>)>,
+}
+
+/// The cache file's name for this input: 128 bits of two hashes of everything [`build`] reads.
+pub fn cache_key(
+    cameras: &[CameraData],
+    vehicle_from_camera: &[Rigid],
+    trajectory: &Trajectory,
+) -> String {
+    let hash = |seed: u64| {
+        let mut h = crate::util::FastHasher::default();
+        h.write_u64(seed);
+        h.write(CACHE_VERSION.as_bytes());
+        for (c, extrinsic) in cameras.iter().zip(vehicle_from_camera) {
+            let k = &c.intrinsics;
+            h.write_u64(u64::from(k.width) << 32 | u64::from(k.height));
+            for v in [k.fx, k.fy, k.cx, k.cy].iter().chain(&k.distortion) {
+                h.write_u64(v.to_bits());
+            }
+            for v in extrinsic
+                .rotation
+                .to_array()
+                .iter()
+                .chain(&extrinsic.translation.to_array())
+            {
+                h.write_u64(v.to_bits());
+            }
+            for f in &c.frames {
+                h.write_u64(f.stamp_nanos as u64);
+                if let Ok(wv) = trajectory.world_from_vehicle(f.stamp_nanos) {
+                    for v in wv
+                        .rotation
+                        .to_array()
+                        .iter()
+                        .chain(&wv.translation.to_array())
+                    {
+                        h.write_u64(v.to_bits());
+                    }
+                }
+                h.write_u64(f.keypoints.len() as u64);
+                for kp in &f.keypoints {
+                    h.write_u64(u64::from(kp.x.to_bits()) << 32 | u64::from(kp.y.to_bits()));
+                    kp.descriptor.iter().for_each(|d| h.write_u64(*d));
+                }
+            }
+            h.write_u64(c.frames.len() as u64);
+        }
+        h.finish()
+    };
+    format!(
+        "{:016x}{:016x}",
+        hash(0x9e37_79b9_7f4a_7c15),
+        hash(0xc2b2_ae3d_27d4_eb4f)
+    )
+}
+
+/// [`build`], kept in `dir` (created if missing) under [`cache_key`]: read back when there, else
+/// built and written atomically. `None`: always built.
+pub fn build_cached(
+    cameras: &[CameraData],
+    vehicle_from_camera: &[Rigid],
+    trajectory: &Trajectory,
+    dir: Option<&Path>,
+) -> Correspondences {
+    let Some(dir) = dir else {
+        return build(cameras, vehicle_from_camera, trajectory);
+    };
+    let path = dir.join(format!(
+        "{}.json",
+        cache_key(cameras, vehicle_from_camera, trajectory)
+    ));
+    if let Some(c) = std::fs::read(&path)
+        .ok()
+        .and_then(|bytes| serde_json::from_slice::<CachedMatches>(&bytes).ok())
+        .and_then(|cached| from_cache(cached, cameras))
+    {
+        return c;
+    }
+    let built = build(cameras, vehicle_from_camera, trajectory);
+    let cached = CachedMatches {
+        version: CACHE_VERSION.into(),
+        candidates: built.candidates,
+        pairs: built
+            .pairs
+            .iter()
+            .map(|p| {
+                (
+                    [p.a.0, p.a.1, p.b.0, p.b.1],
+                    p.pixels
+                        .iter()
+                        .map(|(ua, ub)| [ua.x, ua.y, ub.x, ub.y])
+                        .collect(),
+                )
+            })
+            .collect(),
+    };
+    if let Ok(bytes) = serde_json::to_vec(&cached) {
+        let _ = std::fs::create_dir_all(dir);
+        let _ = crate::util::write_atomic(&path, &bytes);
+    }
+    built
+}
+
+/// A cached file as correspondences, if it fits these cameras (indices in range, finite pixels).
+fn from_cache(cached: CachedMatches, cameras: &[CameraData]) -> Option<Correspondences> {
+    if cached.version != CACHE_VERSION {
+        return None;
+    }
+    let frame_ok = |c: usize, f: usize| cameras.get(c).is_some_and(|cam| f < cam.frames.len());
+    let mut pairs = Vec::with_capacity(cached.pairs.len());
+    for ([ca, fa, cb, fb], pixels) in cached.pairs {
+        if !frame_ok(ca, fa) || !frame_ok(cb, fb) || pixels.iter().flatten().any(|v| !v.is_finite())
+        {
+            return None;
+        }
+        pairs.push(MatchedPair {
+            a: (ca, fa),
+            b: (cb, fb),
+            pixels: pixels
+                .into_iter()
+                .map(|[ax, ay, bx, by]| (DVec2::new(ax, ay), DVec2::new(bx, by)))
+                .collect(),
+        });
+    }
+    let mut by_camera = vec![Vec::new(); cameras.len()];
+    for (k, p) in pairs.iter().enumerate() {
+        by_camera[p.a.0].push(k);
+        if p.b.0 != p.a.0 {
+            by_camera[p.b.0].push(k);
+        }
+    }
+    Some(Correspondences {
+        pairs,
+        by_camera,
+        candidates: cached.candidates,
+    })
 }
 
 /// Match every overlapping pair of `cameras`' frames (their keypoints, in training pixels),

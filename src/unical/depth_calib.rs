@@ -92,6 +92,8 @@ pub struct DepthCalibConfig {
     /// Matches per camera and step.
     pub alignment_matches_per_camera: usize,
     pub alignment_settings: AlignSettings,
+    /// Where matched correspondences are kept between runs (`None`: matched every run).
+    pub correspondence_cache: Option<std::path::PathBuf>,
     /// Coarse-to-fine sampling (§10): from this fraction of the iterations on, camera pixels
     /// are drawn from keypoint heat maps (the paper: 2000 of 30 000); 1.0 keeps them uniform.
     pub heatmap_start_fraction: f32,
@@ -133,6 +135,7 @@ impl Default for DepthCalibConfig {
             alignment_weight: 0.001,
             alignment_matches_per_camera: 32,
             alignment_settings: AlignSettings::default(),
+            correspondence_cache: None,
             heatmap_start_fraction: 2000.0 / 30_000.0,
             heatmap_sigma_px: (40.0, 5.0),
             heatmap_uniform_share: 0.2,
@@ -547,8 +550,12 @@ impl DepthCalibration {
         });
         if self.config.alignment != AlignmentLoss::None {
             let extrinsics: Vec<Rigid> = cameras.iter().map(|c| c.initial).collect();
-            self.correspondences =
-                super::correspondences::build(&cameras, &extrinsics, &self.trajectory);
+            self.correspondences = super::correspondences::build_cached(
+                &cameras,
+                &extrinsics,
+                &self.trajectory,
+                self.config.correspondence_cache.as_deref(),
+            );
         }
         self.camera = Some(CameraStage {
             background,
