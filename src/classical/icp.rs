@@ -284,6 +284,15 @@ impl IcpProblem {
     ) -> Self {
         let thinned = voxel_centroids(target_world, config.target_voxel_m);
         let all = KdTree::new(&thinned);
+        // Every source point in the world under the starting extrinsic, once: it decides both
+        // where normals are needed and which points each level's thinning keeps.
+        let source_world: Vec<DVec3> = source
+            .par_iter()
+            .map(|s| {
+                s.world_from_vehicle
+                    .transform_point(start.transform_point(s.in_sensor))
+            })
+            .collect();
         // Normals only where the source can reach: target points farther from every source
         // point (under the start) than the widest correspondence distance plus a margin for
         // the extrinsic's change can never be a nearest neighbour. Cells of that size, each
@@ -320,14 +329,15 @@ impl IcpProblem {
         let target: Vec<DVec3> = with_normals.iter().map(|(p, _)| *p).collect();
         // Thin the source in the world under the starting extrinsic (close enough to decide
         // which points are redundant).
+        let indices: Vec<usize> = (0..source.len()).collect();
         let sources = config
             .levels
             .par_iter()
             .map(|(voxel, _)| {
-                voxel_thin(source, *voxel, |s| {
-                    s.world_from_vehicle
-                        .transform_point(start.transform_point(s.in_sensor))
-                })
+                voxel_thin(&indices, *voxel, |&i| source_world[i])
+                    .into_iter()
+                    .map(|i| source[i])
+                    .collect::<Vec<SourcePoint>>()
             })
             .collect::<Vec<_>>();
         let tree = KdTree::new(&target);

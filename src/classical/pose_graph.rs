@@ -280,9 +280,9 @@ impl PoseGraph {
                     continue;
                 };
                 let mut cols = [[0.0; 6]; 6];
+                let mut poses = self.poses.clone();
                 for (k, col) in cols.iter_mut().enumerate() {
                     let mut d = [0.0; 6];
-                    let mut poses = self.poses.clone();
                     d[k] = eps;
                     poses[node] = moved(self.poses[node], &d);
                     let up = Self::residual(f, &poses);

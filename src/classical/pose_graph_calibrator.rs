@@ -269,11 +269,11 @@ impl PoseGraphCalibrator {
             .map_or(Rigid::IDENTITY, |s| s.vehicle_from_sensor)
     }
 
-    /// The finished pairwise problem's results as edges.
-    fn harvest(&mut self, index: usize) -> Vec<Edge> {
+    /// The finished pairwise problem's results as edges, and what it measured nothing for.
+    fn harvest(&self, index: usize) -> (Vec<Edge>, Vec<String>) {
         let mut edges = Vec::new();
-        let pairwise = std::mem::take(&mut self.pairwise);
-        match &pairwise[index] {
+        let mut notes = Vec::new();
+        match &self.pairwise[index] {
             Pairwise::Icp { reference, run } => {
                 let vehicle_from_parent = self.vehicle_from(reference);
                 for (child, problem) in run.problems() {
@@ -299,7 +299,7 @@ impl PoseGraphCalibrator {
                     // A search that never left its start measured nothing: the start is the
                     // guess the graph already has, and an edge would only pull towards it.
                     if search.best == search.start {
-                        self.skipped.push(format!(
+                        notes.push(format!(
                             "mutual information {} × {lidar}: no pose better than the start",
                             problem.camera
                         ));
@@ -340,8 +340,7 @@ impl PoseGraphCalibrator {
                 }
             }
         }
-        self.pairwise = pairwise;
-        edges
+        (edges, notes)
     }
 
     fn graph_losses(&self) -> Vec<(String, f64)> {
@@ -392,7 +391,9 @@ impl Calibrator for PoseGraphCalibrator {
             };
             self.stage_steps += 1;
             if report.done || self.stage_steps >= limit {
-                for edge in self.harvest(index) {
+                let (edges, notes) = self.harvest(index);
+                self.skipped.extend(notes);
+                for edge in edges {
                     if let Err(e) = self.graph.add_edge(edge) {
                         self.skipped.push(e);
                     }

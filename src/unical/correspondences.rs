@@ -80,6 +80,22 @@ pub struct Correspondences {
 }
 
 impl Correspondences {
+    /// `pairs` of `cameras` cameras, indexed by camera.
+    fn new(pairs: Vec<MatchedPair>, cameras: usize, candidates: usize) -> Self {
+        let mut by_camera = vec![Vec::new(); cameras];
+        for (k, p) in pairs.iter().enumerate() {
+            by_camera[p.a.0].push(k);
+            if p.b.0 != p.a.0 {
+                by_camera[p.b.0].push(k);
+            }
+        }
+        Self {
+            pairs,
+            by_camera,
+            candidates,
+        }
+    }
+
     pub fn matches(&self) -> usize {
         self.pairs.iter().map(|p| p.pixels.len()).sum()
     }
@@ -219,18 +235,11 @@ fn from_cache(cached: CachedMatches, cameras: &[CameraData]) -> Option<Correspon
                 .collect(),
         });
     }
-    let mut by_camera = vec![Vec::new(); cameras.len()];
-    for (k, p) in pairs.iter().enumerate() {
-        by_camera[p.a.0].push(k);
-        if p.b.0 != p.a.0 {
-            by_camera[p.b.0].push(k);
-        }
-    }
-    Some(Correspondences {
+    Some(Correspondences::new(
         pairs,
-        by_camera,
-        candidates: cached.candidates,
-    })
+        cameras.len(),
+        cached.candidates,
+    ))
 }
 
 /// Match every overlapping pair of `cameras`' frames (their keypoints, in training pixels),
@@ -273,18 +282,7 @@ pub fn build(
             match_pair(cameras, (a, ka), (b, kb))
         })
         .collect();
-    let mut by_camera = vec![Vec::new(); cameras.len()];
-    for (k, p) in pairs.iter().enumerate() {
-        by_camera[p.a.0].push(k);
-        if p.b.0 != p.a.0 {
-            by_camera[p.b.0].push(k);
-        }
-    }
-    Correspondences {
-        pairs,
-        by_camera,
-        candidates: overlapping.len(),
-    }
+    Correspondences::new(pairs, cameras.len(), overlapping.len())
 }
 
 /// Fraction of a grid of frame a's pixels, at 8 and 20 m, that frame b sees.
