@@ -1,6 +1,9 @@
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 //! Render one simulated camera image to PNG, for looking at the simulator's pictures.
 //! `cargo run --release --example render_frame -- SCENE CAMERA OUT.png [TIME_S] [SCALE]`
+//! With `RENDER_REPEAT=N` it first renders every camera of the rig at N times from TIME_S on
+//! (0.5 s apart) and prints the mean time per image (a steadier figure for profiling); the
+//! drive is then at least 8 s long, like the default drive.
 
 use rigcal::geometry::Trajectory;
 use rigcal::sim::camera_sim::{self, Exposure, RayTable};
@@ -21,6 +24,10 @@ fn main() -> anyhow::Result<()> {
         .unwrap_or_else(|| "front_camera".into());
     let out = args.get(3).cloned().unwrap_or_else(|| "frame.png".into());
     let time_s: f64 = args.get(4).and_then(|s| s.parse().ok()).unwrap_or(1.0);
+    let repeat: usize = std::env::var("RENDER_REPEAT")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(0);
     let scale: f64 = args.get(5).and_then(|s| s.parse().ok()).unwrap_or(1.0);
     let kind = if scene == SceneKind::Checkerboard {
         TrajectoryKind::Stationary
@@ -29,7 +36,11 @@ fn main() -> anyhow::Result<()> {
     };
     let tcfg = TrajectoryConfig {
         kind,
-        duration_secs: time_s + 1.0,
+        duration_secs: if repeat > 0 {
+            (time_s + 1.0 + 0.5 * repeat as f64).max(8.0)
+        } else {
+            time_s + 1.0
+        },
         rate_hz: 100.0,
         speed_mps: 8.0,
         seed: 7,
@@ -44,6 +55,33 @@ fn main() -> anyhow::Result<()> {
         .iter()
         .find(|c| c.name == camera)
         .ok_or_else(|| anyhow::anyhow!("no camera {camera}"))?;
+    if repeat > 0 {
+        let tables: Vec<RayTable> = rig
+            .cameras
+            .iter()
+            .map(|c| RayTable::new(&c.intrinsics))
+            .collect();
+        let started = std::time::Instant::now();
+        let mut images = 0;
+        for i in 0..repeat {
+            let t = time_s + 0.5 * i as f64;
+            for (c, table) in rig.cameras.iter().zip(&tables) {
+                let pose = traj.world_from_vehicle((t * 1e9) as i64)? * c.vehicle_from_camera;
+                let exposure = Exposure {
+                    gain: 1.0,
+                    tint: [1.0; 3],
+                    noise_sigma: 2.0,
+                    seed: 1,
+                };
+                camera_sim::render(&world, table, &c.intrinsics, pose, exposure);
+                images += 1;
+            }
+        }
+        eprintln!(
+            "{images} images, {:.3} s per image",
+            started.elapsed().as_secs_f64() / images as f64
+        );
+    }
     let started = std::time::Instant::now();
     let pose = traj.world_from_vehicle((time_s * 1e9) as i64)? * cam.vehicle_from_camera;
     let table = RayTable::new(&cam.intrinsics);
