@@ -10,7 +10,7 @@ mod common;
 use rigcal::calib::Rig;
 use rigcal::log::Drive;
 use rigcal::optim::runner::Calibrator;
-use rigcal::unical::calibrator::UnicalLidarStage;
+use rigcal::unical::calibrator::{LOADING_IMAGES, MATCHING, UnicalLidarStage};
 use rigcal::unical::depth_calib::DepthCalibConfig;
 use rigcal::unical::pose::PoseParams;
 use rigcal::unical::surface_align::{
@@ -20,10 +20,35 @@ use rigcal::unical::surface_align::{
 use common::{pandaset_dir as pandaset, reference_rig};
 
 fn stage(drive: &Drive, rig: &Rig, config: DepthCalibConfig) -> UnicalLidarStage {
-    UnicalLidarStage::from_drive(drive, rig, 1, &[], config)
+    stage_reporting(drive, rig, config).0
+}
+
+/// The stage and every progress report of its preparation, in order.
+fn stage_reporting(
+    drive: &Drive,
+    rig: &Rig,
+    config: DepthCalibConfig,
+) -> (UnicalLidarStage, Vec<(String, usize, usize)>) {
+    let reports = std::sync::Mutex::new(Vec::new());
+    let stage = UnicalLidarStage::from_drive(drive, rig, 1, &[], config)
         .unwrap()
-        .with_cameras(drive, 2, &[], 0.25)
-        .unwrap()
+        .with_cameras_reporting(drive, 2, &[], 0.25, &|phase, done, total| {
+            reports
+                .lock()
+                .unwrap()
+                .push((phase.to_owned(), done, total))
+        })
+        .unwrap();
+    (stage, reports.into_inner().unwrap())
+}
+
+/// The reports of one phase.
+fn phase(reports: &[(String, usize, usize)], name: &str) -> Vec<(usize, usize)> {
+    reports
+        .iter()
+        .filter(|r| r.0 == name)
+        .map(|r| (r.1, r.2))
+        .collect()
 }
 
 #[test]
@@ -39,15 +64,38 @@ fn matches_agree_with_the_reference_calibration() {
         correspondence_cache: Some(cache.clone()),
         ..DepthCalibConfig::default()
     };
-    let s = stage(&drive, &rig, config.clone());
+    let (s, reports) = stage_reporting(&drive, &rig, config.clone());
     let calib = s.calibration();
     let c = &calib.correspondences;
+    // Progress: every image loaded is counted, then every candidate pair matched, each phase
+    // from 0 to its total.
+    let images = phase(&reports, LOADING_IMAGES);
+    let n_images = 2 * drive.rig.cameras().count();
+    assert_eq!(images.first(), Some(&(0, n_images)), "{reports:?}");
+    assert_eq!(images.last(), Some(&(n_images, n_images)));
+    assert_eq!(images.len(), n_images + 1);
+    let matching = phase(&reports, MATCHING);
+    assert_eq!(matching.first(), Some(&(0, c.candidates)));
+    assert_eq!(matching.len(), c.candidates + 1);
+    let mut counted: Vec<usize> = matching.iter().map(|m| m.0).collect();
+    counted.sort_unstable();
+    assert_eq!(counted, (0..=c.candidates).collect::<Vec<_>>());
+    let last = reports.iter().rposition(|r| r.0 == LOADING_IMAGES).unwrap();
+    assert!(
+        reports.iter().position(|r| r.0 == MATCHING).unwrap() > last,
+        "matching reported before the images were loaded"
+    );
     // Matched once: the cache file is written, read back by the next run, and a damaged file
     // is rebuilt to the same answer.
     let files: Vec<_> = std::fs::read_dir(&cache).unwrap().flatten().collect();
     assert_eq!(files.len(), 1, "one cache file");
-    let again = stage(&drive, &rig, config.clone());
+    let (again, reports) = stage_reporting(&drive, &rig, config.clone());
     assert_eq!(&again.calibration().correspondences, c);
+    // Read back from the cache: the matching is reported done at once.
+    assert_eq!(
+        phase(&reports, MATCHING),
+        vec![(c.candidates, c.candidates)]
+    );
     // The next run reads the file: emptied of pairs, it gives no pairs.
     let text = std::fs::read_to_string(files[0].path()).unwrap();
     let mut doc: serde_json::Value = serde_json::from_str(&text).unwrap();

@@ -186,7 +186,7 @@ pub fn start(studio: &mut Studio) {
             correspondence_cache: Some(crate::session::state_dir().join("matches")),
             ..Default::default()
         };
-        studio.optimiser.run = Some(Run::spawn_with(move || {
+        studio.optimiser.run = Some(Run::spawn_preparing(move |preparing| {
             let stage = crate::unical::calibrator::UnicalLidarStage::from_drive(
                 &drive,
                 &prepare_rig,
@@ -195,7 +195,13 @@ pub fn start(studio: &mut Studio) {
                 config,
             )?;
             let stage = if method == Method::Unical {
-                stage.with_cameras(&drive, frames, &segments, 0.125)?
+                stage.with_cameras_reporting(
+                    &drive,
+                    frames,
+                    &segments,
+                    0.125,
+                    &|phase, done, total| preparing.report(phase, done, total),
+                )?
             } else {
                 stage
             };
@@ -385,6 +391,17 @@ pub fn optimiser_ui(studio: &mut Studio, ui: &mut egui::Ui) {
         } else if running && step == 0 {
             ui.label(m);
         }
+    }
+    let preparing = studio
+        .optimiser
+        .run
+        .as_ref()
+        .and_then(|run| run.preparing.get());
+    if let Some((phase, done, total)) = preparing.filter(|_| running && step == 0) {
+        ui.add(
+            egui::ProgressBar::new(done as f32 / total.max(1) as f32)
+                .text(format!("{phase} {done}/{total}")),
+        );
     }
     ui.separator();
     losses_ui(studio, ui);

@@ -118,90 +118,96 @@ pub fn calibrate(
         Some(s) => vec![parse_segment(s, t0)?],
         None => Vec::new(),
     };
-    let mut calibrator: Box<dyn Calibrator> =
-        match args.method.as_str() {
-            "edge" => {
-                let lidar = rig
-                    .lidars()
-                    .map(|l| l.name.clone())
-                    .find(|l| args.sensors.is_empty() || !args.sensors.contains(l))
-                    .or_else(|| rig.lidars().next().map(|l| l.name.clone()))
-                    .ok_or("the log has no LiDAR")?;
-                let cameras = selected_cameras(args, &rig);
-                Box::new(
-                    EdgeRefiner::new(&drive, &rig, &lidar, &cameras, 4, &segments)
-                        .map_err(|e| e.to_string())?,
-                )
-            }
-            "unical" => {
-                let config = DepthCalibConfig {
-                    iterations: args.iterations.unwrap_or(300),
-                    seed: args.seed,
-                    frozen_sensor: args.root.clone(),
-                    alignment: args.alignment,
-                    correspondence_cache: Some(crate::session::state_dir().join("matches")),
-                    ..DepthCalibConfig::default()
-                };
-                Box::new(
-                    UnicalLidarStage::from_drive(&drive, &rig, 4, &segments, config)?
-                        .with_cameras(&drive, args.camera_frames, &segments, 0.125)?,
-                )
-            }
-            "icp" => {
-                let reference = reference_lidar(args, &rig)?;
-                Box::new(IcpCalibrator::from_drive(
+    let mut calibrator: Box<dyn Calibrator> = match args.method.as_str() {
+        "edge" => {
+            let lidar = rig
+                .lidars()
+                .map(|l| l.name.clone())
+                .find(|l| args.sensors.is_empty() || !args.sensors.contains(l))
+                .or_else(|| rig.lidars().next().map(|l| l.name.clone()))
+                .ok_or("the log has no LiDAR")?;
+            let cameras = selected_cameras(args, &rig);
+            Box::new(
+                EdgeRefiner::new(&drive, &rig, &lidar, &cameras, 4, &segments)
+                    .map_err(|e| e.to_string())?,
+            )
+        }
+        "unical" => {
+            let config = DepthCalibConfig {
+                iterations: args.iterations.unwrap_or(300),
+                seed: args.seed,
+                frozen_sensor: args.root.clone(),
+                alignment: args.alignment,
+                correspondence_cache: Some(crate::session::state_dir().join("matches")),
+                ..DepthCalibConfig::default()
+            };
+            let bars = super::progress::PhasedProgress::default();
+            let stage = UnicalLidarStage::from_drive(&drive, &rig, 4, &segments, config)?
+                .with_cameras_reporting(
                     &drive,
-                    &rig,
-                    &reference,
-                    3,
+                    args.camera_frames,
                     &segments,
-                    IcpConfig::default(),
-                )?)
-            }
-            "mi" => {
-                let reference = reference_lidar(args, &rig)?;
-                let cameras = selected_cameras(args, &rig);
-                let config = MiConfig {
-                    iterations: args.iterations.unwrap_or(MiConfig::default().iterations),
-                    ..MiConfig::default()
-                };
-                Box::new(MiCalibrator::from_drive(
-                    &drive, &rig, &reference, &cameras, 3, &segments, config,
-                )?)
-            }
-            "target" => {
-                let reference = reference_lidar(args, &rig)?;
-                let cameras = selected_cameras(args, &rig);
-                let config = TargetConfig {
-                    iterations: args
-                        .iterations
-                        .unwrap_or(TargetConfig::default().iterations),
-                    ..TargetConfig::default()
-                };
-                Box::new(TargetCalibrator::from_drive(
-                    &drive, &rig, &reference, &cameras, &segments, config,
-                )?)
-            }
-            "pose-graph" => {
-                let reference = reference_lidar(args, &rig)?;
-                let cal = PoseGraphCalibrator::from_drive(
-                    &drive,
-                    &rig,
-                    &reference,
-                    &segments,
-                    PoseGraphConfig::default(),
+                    0.125,
+                    &|phase, done, total| bars.report(phase, done, total),
                 )?;
-                for s in cal.skipped() {
-                    eprintln!("pose-graph: skipped {s}");
-                }
-                Box::new(cal)
+            bars.finish();
+            Box::new(stage)
+        }
+        "icp" => {
+            let reference = reference_lidar(args, &rig)?;
+            Box::new(IcpCalibrator::from_drive(
+                &drive,
+                &rig,
+                &reference,
+                3,
+                &segments,
+                IcpConfig::default(),
+            )?)
+        }
+        "mi" => {
+            let reference = reference_lidar(args, &rig)?;
+            let cameras = selected_cameras(args, &rig);
+            let config = MiConfig {
+                iterations: args.iterations.unwrap_or(MiConfig::default().iterations),
+                ..MiConfig::default()
+            };
+            Box::new(MiCalibrator::from_drive(
+                &drive, &rig, &reference, &cameras, 3, &segments, config,
+            )?)
+        }
+        "target" => {
+            let reference = reference_lidar(args, &rig)?;
+            let cameras = selected_cameras(args, &rig);
+            let config = TargetConfig {
+                iterations: args
+                    .iterations
+                    .unwrap_or(TargetConfig::default().iterations),
+                ..TargetConfig::default()
+            };
+            Box::new(TargetCalibrator::from_drive(
+                &drive, &rig, &reference, &cameras, &segments, config,
+            )?)
+        }
+        "pose-graph" => {
+            let reference = reference_lidar(args, &rig)?;
+            let cal = PoseGraphCalibrator::from_drive(
+                &drive,
+                &rig,
+                &reference,
+                &segments,
+                PoseGraphConfig::default(),
+            )?;
+            for s in cal.skipped() {
+                eprintln!("pose-graph: skipped {s}");
             }
-            m => {
-                return Err(format!(
-                    "unknown --method '{m}' (expected unical, icp, mi, target, pose-graph or edge)"
-                ));
-            }
-        };
+            Box::new(cal)
+        }
+        m => {
+            return Err(format!(
+                "unknown --method '{m}' (expected unical, icp, mi, target, pose-graph or edge)"
+            ));
+        }
+    };
     let max_steps = match (args.method.as_str(), args.iterations) {
         ("edge", Some(n)) => n.min(calibrator.max_steps()),
         _ => calibrator.max_steps(),

@@ -71,3 +71,36 @@ impl Progress {
         }
     }
 }
+
+/// Bars for work in named phases, reported from any thread as `(phase, done, total)`: a new
+/// bar when the phase changes (the previous one finished), never moving backwards within one.
+#[derive(Default)]
+pub struct PhasedProgress {
+    bar: std::sync::Mutex<Option<(String, Progress)>>,
+}
+
+impl PhasedProgress {
+    pub fn report(&self, phase: &str, done: usize, total: usize) {
+        let Ok(mut bar) = self.bar.lock() else {
+            return;
+        };
+        if bar.as_ref().is_none_or(|(p, _)| p != phase) {
+            if let Some((_, previous)) = bar.as_mut() {
+                previous.finish();
+            }
+            *bar = Some((phase.to_owned(), Progress::new(phase, total as u64)));
+        }
+        if let Some((_, progress)) = bar.as_mut() {
+            progress.set_total(total as u64);
+            progress.set((done as u64).max(progress.done));
+        }
+    }
+
+    pub fn finish(&self) {
+        if let Ok(mut bar) = self.bar.lock()
+            && let Some((_, mut progress)) = bar.take()
+        {
+            progress.finish();
+        }
+    }
+}

@@ -5,9 +5,9 @@
 //! running (so ≥ 2 Hz whenever steps are faster than 0.5 s) and always for the last step. A
 //! stopped run ends with a final packet carrying the best rig found so far.
 
-use std::sync::Arc;
 use std::sync::atomic::{AtomicU8, Ordering};
 use std::sync::mpsc::{Receiver, Sender, channel};
+use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
@@ -52,10 +52,35 @@ const RUN: u8 = 0;
 const PAUSE: u8 = 1;
 const STOP: u8 = 2;
 
+/// How far a run's preparation has got, `(phase, done, total)`: written by the worker while it
+/// prepares, read by the caller (the studio's progress bar).
+#[derive(Clone, Debug, Default)]
+pub struct Preparing(Arc<Mutex<Option<(String, usize, usize)>>>);
+
+impl Preparing {
+    /// Record progress; within one phase `done` never moves backwards (reports may come from
+    /// several threads out of order).
+    pub fn report(&self, phase: &str, done: usize, total: usize) {
+        if let Ok(mut now) = self.0.lock() {
+            let done = match now.as_ref() {
+                Some((p, d, _)) if p == phase => done.max(*d),
+                _ => done,
+            };
+            *now = Some((phase.to_owned(), done, total));
+        }
+    }
+
+    pub fn get(&self) -> Option<(String, usize, usize)> {
+        self.0.lock().ok().and_then(|now| now.clone())
+    }
+}
+
 /// Handle of a running optimisation.
 pub struct Run {
     control: Arc<AtomicU8>,
     pub packets: Receiver<Packet>,
+    /// The preparation's progress (stays at its last report once stepping starts).
+    pub preparing: Preparing,
     thread: Option<JoinHandle<()>>,
 }
 
@@ -72,12 +97,22 @@ impl Run {
     where
         F: FnOnce() -> Result<Box<dyn Calibrator>, String> + Send + 'static,
     {
+        Self::spawn_preparing(move |_| prepare())
+    }
+
+    /// [`Run::spawn_with`] for a preparation that reports its progress ([`Run::preparing`]).
+    pub fn spawn_preparing<F>(prepare: F) -> Self
+    where
+        F: FnOnce(&Preparing) -> Result<Box<dyn Calibrator>, String> + Send + 'static,
+    {
         let control = Arc::new(AtomicU8::new(RUN));
         let (tx, rx) = channel();
         let ctl = control.clone();
+        let preparing = Preparing::default();
+        let status = preparing.clone();
         let thread = std::thread::Builder::new()
             .name("rigcal-optimiser".into())
-            .spawn(move || match prepare() {
+            .spawn(move || match prepare(&status) {
                 Ok(mut c) => worker(c.as_mut(), &ctl, &tx),
                 Err(e) => {
                     let _ = tx.send(Packet {
@@ -96,6 +131,7 @@ impl Run {
         Self {
             control,
             packets: rx,
+            preparing,
             thread,
         }
     }
@@ -193,4 +229,31 @@ fn worker(c: &mut dyn Calibrator, control: &AtomicU8, tx: &Sender<Packet>) {
         finished: true,
         error: None,
     });
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn preparation_progress_reaches_the_caller_and_never_moves_back_within_a_phase() {
+        let p = Preparing::default();
+        assert_eq!(p.get(), None);
+        p.report("loading", 3, 10);
+        p.report("loading", 2, 10); // a late report from another thread
+        assert_eq!(p.get(), Some(("loading".into(), 3, 10)));
+        p.report("matching", 0, 40);
+        assert_eq!(p.get(), Some(("matching".into(), 0, 40)));
+        // Through a run: the worker's reports are what the caller sees, and a failed
+        // preparation still ends with its error packet.
+        let run = Run::spawn_preparing(|preparing| {
+            preparing.report("matching", 7, 9);
+            Err("no cameras".into())
+        });
+        let status = run.preparing.clone();
+        let packets = run.join();
+        assert_eq!(status.get(), Some(("matching".into(), 7, 9)));
+        assert_eq!(packets.len(), 1);
+        assert_eq!(packets[0].error.as_deref(), Some("no cameras"));
+    }
 }

@@ -334,13 +334,13 @@ pub fn render(
                 // The rasterised candidate names the face without an exact intersection: when it
                 // is the anchors' face, the pixel sees it too.
                 let cand = candidate(d);
-                if anchors_agree && smooth {
-                    if let Candidate::Triangle(id) = cand {
-                        if world.bvh.triangles[id as usize].face == face {
-                            (row[x], prow[x]) = (sum / n, face);
-                            continue;
-                        }
-                    }
+                if anchors_agree
+                    && smooth
+                    && let Candidate::Triangle(id) = cand
+                    && world.bvh.triangles[id as usize].face == face
+                {
+                    (row[x], prow[x]) = (sum / n, face);
+                    continue;
                 }
                 let dir = rot * d;
                 let hit = world.trace_with(origin, dir, SKY_DISTANCE_M, cand);

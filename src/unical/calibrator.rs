@@ -14,6 +14,11 @@ use crate::calib::Rig;
 use crate::log::{Drive, spread_evenly};
 use crate::optim::runner::{Calibrator, StepReport};
 
+/// What [`UnicalLidarStage::with_cameras_reporting`] reports while it loads images.
+pub const LOADING_IMAGES: &str = "images and keypoints";
+/// What it reports while it matches keypoints between frames.
+pub const MATCHING: &str = "matching keypoints";
+
 pub struct UnicalLidarStage {
     calib: DepthCalibration,
     rig: Rig,
@@ -57,11 +62,31 @@ impl UnicalLidarStage {
     /// Add `frames_per_camera` images of every camera (spread over the segments), downscaled by
     /// `scale` (e.g. 0.125: 1920×1080 → 240×135), to the optimisation.
     pub fn with_cameras(
+        self,
+        drive: &Drive,
+        frames_per_camera: usize,
+        segments_nanos: &[(i64, i64)],
+        scale: f64,
+    ) -> Result<Self, String> {
+        self.with_cameras_reporting(
+            drive,
+            frames_per_camera,
+            segments_nanos,
+            scale,
+            &|_, _, _| {},
+        )
+    }
+
+    /// [`UnicalLidarStage::with_cameras`], reporting its two slow parts as `(what, done, total)`:
+    /// [`LOADING_IMAGES`] (images decoded and searched for keypoints) and [`MATCHING`]
+    /// (candidate frame pairs matched; read back at once from the cache when there).
+    pub fn with_cameras_reporting(
         mut self,
         drive: &Drive,
         frames_per_camera: usize,
         segments_nanos: &[(i64, i64)],
         scale: f64,
+        report: &(dyn Fn(&str, usize, usize) + Sync),
     ) -> Result<Self, String> {
         if frames_per_camera == 0 {
             return Ok(self);
@@ -70,18 +95,29 @@ impl UnicalLidarStage {
             return Err(format!("camera image scale {scale} is not in (0, 1]"));
         }
         let with_keypoints = self.calib.config.alignment != AlignmentLoss::None;
+        let chosen: Vec<(&crate::calib::Sensor, Vec<usize>)> = self
+            .rig
+            .cameras()
+            .filter(|cam| cam.camera.is_some() && drive.stream(&cam.name).is_some())
+            .map(|cam| {
+                let usable = drive.frames_within(&cam.name, segments_nanos);
+                (cam, spread_evenly(&usable, frames_per_camera))
+            })
+            .collect();
+        let total: usize = chosen.iter().map(|(_, frames)| frames.len()).sum();
+        let mut loaded = 0;
+        report(LOADING_IMAGES, 0, total);
         let mut cameras = Vec::new();
-        for cam in self.rig.cameras() {
+        for (cam, picked) in chosen {
             let Some(intrinsics) = &cam.camera else {
                 continue;
             };
             let Some(stream) = drive.stream(&cam.name) else {
                 continue;
             };
-            let usable = drive.frames_within(&cam.name, segments_nanos);
             let small = intrinsics.scaled(scale);
             let mut frames = Vec::new();
-            for i in spread_evenly(&usable, frames_per_camera) {
+            for i in picked {
                 let img = drive.load_image(&cam.name, i).map_err(|e| e.to_string())?;
                 let resized = image::imageops::resize(
                     img.as_ref(),
@@ -99,6 +135,8 @@ impl UnicalLidarStage {
                     rgb: resized.into_raw(),
                     keypoints,
                 });
+                loaded += 1;
+                report(LOADING_IMAGES, loaded, total);
             }
             if !frames.is_empty() {
                 cameras.push(CameraData {
@@ -109,7 +147,9 @@ impl UnicalLidarStage {
                 });
             }
         }
-        self.calib = self.calib.with_cameras(cameras);
+        self.calib = self
+            .calib
+            .with_cameras_reporting(cameras, &|done, total| report(MATCHING, done, total));
         Ok(self)
     }
 

@@ -167,16 +167,21 @@ pub fn cache_key(
     )
 }
 
+/// Called as candidate pairs are matched: `(pairs done, pairs to match)`, from any thread.
+pub type MatchProgress<'a> = &'a (dyn Fn(usize, usize) + Sync);
+
 /// [`build`], kept in `dir` (created if missing) under [`cache_key`]: read back when there, else
-/// built and written atomically. `None`: always built.
+/// built and written atomically. `None`: always built. A cached result reports one
+/// `(total, total)`.
 pub fn build_cached(
     cameras: &[CameraData],
     vehicle_from_camera: &[Rigid],
     trajectory: &Trajectory,
     dir: Option<&Path>,
+    progress: MatchProgress,
 ) -> Correspondences {
     let Some(dir) = dir else {
-        return build(cameras, vehicle_from_camera, trajectory);
+        return build(cameras, vehicle_from_camera, trajectory, progress);
     };
     let path = dir.join(format!(
         "{}.json",
@@ -187,9 +192,10 @@ pub fn build_cached(
         .and_then(|bytes| serde_json::from_slice::<CachedMatches>(&bytes).ok())
         .and_then(|cached| from_cache(cached, cameras))
     {
+        progress(c.candidates, c.candidates);
         return c;
     }
-    let built = build(cameras, vehicle_from_camera, trajectory);
+    let built = build(cameras, vehicle_from_camera, trajectory, progress);
     let cached = CachedMatches {
         version: CACHE_VERSION.into(),
         candidates: built.candidates,
@@ -248,6 +254,7 @@ pub fn build(
     cameras: &[CameraData],
     vehicle_from_camera: &[Rigid],
     trajectory: &Trajectory,
+    progress: MatchProgress,
 ) -> Correspondences {
     let mut candidates = Vec::new();
     for (i, ci) in cameras.iter().enumerate() {
@@ -274,12 +281,22 @@ pub fn build(
                 .is_some_and(|o| o >= MIN_OVERLAP)
         })
         .collect();
+    let total = overlapping.len();
+    progress(0, total);
+    let done = std::sync::atomic::AtomicUsize::new(0);
     let pairs: Vec<MatchedPair> = overlapping
         .par_iter()
         .filter_map(|&(a, b)| {
-            let ka = &cameras.get(a.0)?.frames.get(a.1)?.keypoints;
-            let kb = &cameras.get(b.0)?.frames.get(b.1)?.keypoints;
-            match_pair(cameras, (a, ka), (b, kb))
+            let matched = (|| {
+                let ka = &cameras.get(a.0)?.frames.get(a.1)?.keypoints;
+                let kb = &cameras.get(b.0)?.frames.get(b.1)?.keypoints;
+                match_pair(cameras, (a, ka), (b, kb))
+            })();
+            progress(
+                done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1,
+                total,
+            );
+            matched
         })
         .collect();
     Correspondences::new(pairs, cameras.len(), overlapping.len())

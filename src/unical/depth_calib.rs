@@ -520,7 +520,17 @@ impl DepthCalibration {
     }
 
     /// Add cameras: their extrinsics, exposure maps and the colour term join the optimisation.
-    pub fn with_cameras(mut self, cameras: Vec<CameraData>) -> Self {
+    pub fn with_cameras(self, cameras: Vec<CameraData>) -> Self {
+        self.with_cameras_reporting(cameras, &|_, _| {})
+    }
+
+    /// [`DepthCalibration::with_cameras`], reporting the keypoint matching of the alignment
+    /// term as `(pairs done, pairs)`.
+    pub fn with_cameras_reporting(
+        mut self,
+        cameras: Vec<CameraData>,
+        matching: super::correspondences::MatchProgress,
+    ) -> Self {
         if cameras.is_empty() {
             self.camera = None;
             return self;
@@ -555,6 +565,7 @@ impl DepthCalibration {
                 &extrinsics,
                 &self.trajectory,
                 self.config.correspondence_cache.as_deref(),
+                matching,
             );
         }
         self.camera = Some(CameraStage {
