@@ -12,7 +12,7 @@ use std::process::Command;
 use common::named;
 
 use rigcal::calib::{CalibrationFile, Rig};
-use rigcal::classical::target::TargetConfig;
+use rigcal::classical::target::{BoardCache, TargetConfig, TargetProblem, camera_boards};
 use rigcal::classical::target_calibrator::TargetCalibrator;
 use rigcal::geometry::rig_errors;
 use rigcal::log::Drive;
@@ -149,4 +149,39 @@ fn the_cli_calibrates_with_target_and_names_what_is_missing() {
     );
     assert_eq!(err.trim().lines().count(), 1, "{err}");
     let _ = std::fs::remove_dir_all(dir);
+}
+
+#[test]
+fn a_board_cache_searches_each_image_once_and_changes_nothing() {
+    let (_dir, log, _gt) = drive(3);
+    let drive = Drive::open(&log).unwrap();
+    let rig = drive.rig.clone();
+    let config = TargetConfig::default();
+    let cam = "front_camera";
+    let intrinsics = rig.sensor(cam).unwrap().camera.clone().unwrap();
+    let cache = BoardCache::default();
+    let first = cache
+        .boards(&drive, cam, 0, &intrinsics, &config.spec)
+        .unwrap();
+    let again = cache
+        .boards(&drive, cam, 0, &intrinsics, &config.spec)
+        .unwrap();
+    assert!(std::sync::Arc::ptr_eq(&first, &again), "searched twice");
+    let direct = camera_boards(
+        &drive.load_image(cam, 0).unwrap(),
+        &intrinsics,
+        &config.spec,
+    );
+    assert!(!direct.is_empty());
+    assert_eq!(*first, direct);
+    // The same camera against both LiDARs through one cache: the problems built without it.
+    let shared = BoardCache::default();
+    for lidar in ["pandar64", "pandar_gt"] {
+        let cached =
+            TargetProblem::from_drive_cached(&drive, &rig, cam, lidar, &[], &config, &shared)
+                .unwrap();
+        let fresh = TargetProblem::from_drive(&drive, &rig, cam, lidar, &[], &config).unwrap();
+        assert!(!fresh.views.is_empty(), "{lidar}");
+        assert_eq!(cached.views, fresh.views, "{lidar}");
+    }
 }

@@ -16,12 +16,14 @@
 //! fixed, and its rig is the result. Losses report each stage's own terms, then the graph's
 //! cost and every edge's disagreement with the solved rig.
 
+use rayon::prelude::*;
+
 use super::icp::IcpConfig;
 use super::icp_calibrator::IcpCalibrator;
 use super::mi_calibrator::MiCalibrator;
 use super::mutual_info::MiConfig;
 use super::pose_graph::{Edge, EdgeAgreement, PoseGraph, diagonal, reparametrise, tangent};
-use super::target::TargetConfig;
+use super::target::{BoardCache, TargetConfig};
 use super::target_calibrator::TargetCalibrator;
 use crate::calib::Rig;
 use crate::geometry::Rigid;
@@ -165,16 +167,26 @@ impl PoseGraphCalibrator {
         // falls back to mutual information (Auto, MutualInformation).
         let mut by_boards: Vec<String> = Vec::new();
         if config.camera_pairs != CameraPairs::MutualInformation {
+            // Each camera's images are searched for boards once (the cache), the cameras of
+            // one LiDAR in parallel.
+            let boards = BoardCache::default();
             for l in &lidars {
-                for cam in &cameras {
-                    match TargetCalibrator::from_drive(
-                        drive,
-                        rig,
-                        l,
-                        std::slice::from_ref(cam),
-                        segments_nanos,
-                        TargetConfig::default(),
-                    ) {
+                let made: Vec<_> = cameras
+                    .par_iter()
+                    .map(|cam| {
+                        TargetCalibrator::from_drive_cached(
+                            drive,
+                            rig,
+                            l,
+                            std::slice::from_ref(cam),
+                            segments_nanos,
+                            TargetConfig::default(),
+                            &boards,
+                        )
+                    })
+                    .collect();
+                for (cam, made) in cameras.iter().zip(made) {
+                    match made {
                         Ok(run) => {
                             by_boards.push(cam.clone());
                             pairwise.push(Pairwise::Target {

@@ -25,6 +25,9 @@
 //!   of returns; a Huber kernel (`huber_m`) keeps stray returns from dominating. `JᵀJ` at the
 //!   solution is the result's information matrix (for pose graphs).
 
+use std::collections::HashMap;
+use std::sync::{Arc, Mutex};
+
 use glam::{DVec2, DVec3};
 
 use crate::calib::Rig;
@@ -115,6 +118,37 @@ fn board_corners(spec: &BoardSpec) -> Vec<DVec2> {
         }
     }
     out
+}
+
+/// Boards found in a drive's images, kept by (camera, image index) so that calibrating one
+/// camera against several LiDARs (the pose graph) reads and searches each image once. One
+/// cache serves one drive and one board pattern.
+#[derive(Debug, Default)]
+pub struct BoardCache {
+    found: Mutex<HashMap<(String, usize), Arc<Vec<(Rigid, f64)>>>>,
+}
+
+impl BoardCache {
+    /// The boards of `camera`'s image `index`: found now or remembered.
+    pub fn boards(
+        &self,
+        drive: &Drive,
+        camera: &str,
+        index: usize,
+        intrinsics: &CameraIntrinsics,
+        spec: &BoardSpec,
+    ) -> Result<Arc<Vec<(Rigid, f64)>>, AlignError> {
+        let key = (camera.to_owned(), index);
+        if let Some(found) = self.found.lock().ok().and_then(|m| m.get(&key).cloned()) {
+            return Ok(found);
+        }
+        let image = drive.load_image(camera, index)?;
+        let found = Arc::new(camera_boards(&image, intrinsics, spec));
+        if let Ok(mut m) = self.found.lock() {
+            m.insert(key, found.clone());
+        }
+        Ok(found)
+    }
 }
 
 /// Boards found in one image, as `camera_from_board` with their PnP RMS.
@@ -213,6 +247,27 @@ impl TargetProblem {
         segments_nanos: &[(i64, i64)],
         config: &TargetConfig,
     ) -> Result<Self, AlignError> {
+        Self::from_drive_cached(
+            drive,
+            rig,
+            camera,
+            lidar,
+            segments_nanos,
+            config,
+            &BoardCache::default(),
+        )
+    }
+
+    /// [`TargetProblem::from_drive`] with the camera's boards taken from (and added to) `boards`.
+    pub fn from_drive_cached(
+        drive: &Drive,
+        rig: &Rig,
+        camera: &str,
+        lidar: &str,
+        segments_nanos: &[(i64, i64)],
+        config: &TargetConfig,
+        boards: &BoardCache,
+    ) -> Result<Self, AlignError> {
         let setup = |what: String| AlignError::Setup(what);
         let cam = rig
             .sensor(camera)
@@ -228,8 +283,7 @@ impl TargetProblem {
             .vehicle_from_sensor;
         let mut views = Vec::new();
         for pair in sweep_image_pairs(drive, camera, lidar, config.frames, segments_nanos)? {
-            let image = drive.load_image(camera, pair.image_index)?;
-            let seen = camera_boards(&image, &intrinsics, &config.spec);
+            let seen = boards.boards(drive, camera, pair.image_index, &intrinsics, &config.spec)?;
             if seen.is_empty() {
                 continue;
             }

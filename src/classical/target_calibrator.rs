@@ -5,7 +5,7 @@
 
 use rayon::prelude::*;
 
-use super::target::{TargetConfig, TargetProblem, TargetSearch, TargetSolution};
+use super::target::{BoardCache, TargetConfig, TargetProblem, TargetSearch, TargetSolution};
 use crate::calib::Rig;
 use crate::log::Drive;
 use crate::optim::runner::{Calibrator, StepReport};
@@ -28,11 +28,34 @@ impl TargetCalibrator {
         segments_nanos: &[(i64, i64)],
         config: TargetConfig,
     ) -> Result<Self, String> {
+        let boards = BoardCache::default();
+        Self::from_drive_cached(drive, rig, lidar, cameras, segments_nanos, config, &boards)
+    }
+
+    /// [`TargetCalibrator::from_drive`] with the cameras' boards taken from (and added to)
+    /// `boards`.
+    pub fn from_drive_cached(
+        drive: &Drive,
+        rig: &Rig,
+        lidar: &str,
+        cameras: &[String],
+        segments_nanos: &[(i64, i64)],
+        config: TargetConfig,
+        boards: &BoardCache,
+    ) -> Result<Self, String> {
         let problems = cameras
             .par_iter()
             .map(|cam| {
-                let p = TargetProblem::from_drive(drive, rig, cam, lidar, segments_nanos, &config)
-                    .map_err(|e| format!("{cam} × {lidar}: {e}"))?;
+                let p = TargetProblem::from_drive_cached(
+                    drive,
+                    rig,
+                    cam,
+                    lidar,
+                    segments_nanos,
+                    &config,
+                    boards,
+                )
+                .map_err(|e| format!("{cam} × {lidar}: {e}"))?;
                 let start = rig
                     .sensor(cam)
                     .map(|s| s.vehicle_from_sensor)
