@@ -9,9 +9,10 @@ use std::path::PathBuf;
 use std::time::Duration;
 
 use egui_kittest::Harness;
-use egui_kittest::kittest::Queryable;
+use egui_kittest::kittest::{NodeT, Queryable};
 use glam::DVec3;
 use rigcal::app::{Studio, new_studio};
+use rigcal::unical::calibrator::{LOADING_IMAGES, MATCHING};
 
 fn pandaset() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/data/pandaset-002/pandaset-002.mcap")
@@ -417,6 +418,22 @@ fn unical_with_cameras_runs_from_the_optimiser_panel() {
         s_status(&h),
         h.state().optimiser.message
     );
+    // While it prepares, the panel shows a progress bar of the images loaded (and of the
+    // keypoint matching when the matches are not cached yet).
+    let t0 = std::time::Instant::now();
+    let mut bar = None;
+    while bar.is_none() && t0.elapsed().as_secs() < 120 && h.state().optimiser.progress.0 == 0 {
+        h.step();
+        bar = [LOADING_IMAGES, MATCHING].into_iter().find_map(|phase| {
+            h.query_all_by_label_contains(phase)
+                .next()
+                .and_then(|node| node.accesskit_node().label())
+        });
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    let bar = bar.expect("no preparation progress bar");
+    eprintln!("preparation: {bar}");
+    assert!(bar.contains('/'), "{bar}");
     assert!(
         run_until(&mut h, 300.0, |s| s.optimiser.progress.0 > 0),
         "no packet from UniCal: {:?}",
