@@ -3,7 +3,9 @@
 //! both LiDARs at the ground truth, then the PandarGT is perturbed and only its pose (and, with
 //! `joint`, the scene) is optimised while the Pandar64 stays frozen. A scene that is frozen
 //! separates "the pose gradient points the wrong way" from "the scene co-adapts to the error".
-//! `cargo run --release --example unical_probe -- [SCENE_STEPS] [POSE_STEPS] [frozen|joint] [SECONDS] [LR_POSE]`
+//! `cargo run --release --example unical_probe -- [SCENE_STEPS] [POSE_STEPS] [frozen|joint|rounds] [SECONDS] [LR_POSE]`
+//! (`rounds`: `PROBE_ROUNDS` alternations of a scene learned from scratch at the current pose
+//! and preconditioned pose steps against it, from a 1° / 9 cm PandarGT start.)
 
 use glam::DVec3;
 use rigcal::geometry::Trajectory;
@@ -79,6 +81,66 @@ fn main() {
         },
         ..DepthCalibConfig::default()
     };
+    if args.get(3).is_some_and(|s| s == "rounds") {
+        // Alternation with scene restarts: learn a scene from scratch with the current
+        // PandarGT pose (poses fixed), register the PandarGT to that frozen scene by
+        // preconditioned steps, start the next round's scene from the result. Tests whether a
+        // scene learned with the error still pulls the pose towards the truth, and how fast.
+        let rounds: usize = std::env::var("PROBE_ROUNDS")
+            .ok()
+            .and_then(|v| v.parse().ok())
+            .unwrap_or(4);
+        let mut current = truth[1].perturbed_right(
+            DVec3::new(0.6, -0.5, 0.6) * 1f64.to_radians(),
+            DVec3::new(0.06, -0.05, 0.05),
+        );
+        let newton = NewtonConfig {
+            step: 1.0,
+            interval: 1,
+            robust_scale: 3.0,
+            robust_floor_m: 0.02,
+            ..NewtonConfig::default()
+        };
+        let t0 = std::time::Instant::now();
+        for round in 0..rounds {
+            let (er, et) = truth[1].difference(current);
+            eprintln!(
+                "round {round}: start {:.3}° {:.2} cm · {:.0} s",
+                er.to_degrees(),
+                et * 100.0,
+                t0.elapsed().as_secs_f64()
+            );
+            let mut lidars = lidars.clone();
+            lidars[1].initial = current;
+            let round_config = DepthCalibConfig {
+                iterations: scene_steps + 1,
+                pose_warmup: scene_steps + 1,
+                lidar_pose_update: PoseUpdate::Newton(newton),
+                ..config.clone()
+            };
+            let mut calib = DepthCalibration::new(round_config, traj.clone(), lidars);
+            for _ in 0..scene_steps {
+                calib.step();
+            }
+            let state = rigcal::unical::pose_newton::NewtonState::new(newton);
+            let mut pose = PoseParams::from_rigid(current);
+            for _ in 0..pose_steps {
+                calib.poses[1] = pose;
+                let rays = calib.lidar_batch(1, 2048);
+                let (_, _, system) = calib.lidar_objective(1, &pose, &rays);
+                state.solve_and_apply(&mut pose, &system, 1.0);
+            }
+            current = pose.to_rigid();
+        }
+        let (er, et) = truth[1].difference(current);
+        eprintln!(
+            "end: {:.3}° {:.2} cm · {:.0} s",
+            er.to_degrees(),
+            et * 100.0,
+            t0.elapsed().as_secs_f64()
+        );
+        return;
+    }
     let mut calib = DepthCalibration::new(config, traj, lidars);
     let t0 = std::time::Instant::now();
     let report = |calib: &DepthCalibration, it: usize, loss: f64, mae: f64, beta: f32| {
