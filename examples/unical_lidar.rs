@@ -78,7 +78,6 @@ fn main() {
             .is_ok()
             .then(|| rig.lidars[0].name.clone()),
         iterations,
-        shared_rows_only: std::env::var("RIGCAL_SHARED").is_ok(),
         registration_steps: std::env::var("RIGCAL_REGISTRATION")
             .ok()
             .and_then(|v| v.parse().ok())

@@ -77,11 +77,6 @@ pub struct DepthCalibConfig {
     /// gradient scaled by the rendered depth's curvature, [`super::pose_newton`]). Cameras
     /// always use Adam.
     pub lidar_pose_update: PoseUpdate,
-    /// With preconditioned steps: a LiDAR other than the anchor (the frozen root, else the
-    /// first) keeps only the rows whose rendered surface lies where the anchor has returns
-    /// (0.5 m voxels, dilated by one): surfaces only it sees are shaped by it alone and carry
-    /// no information on where it sits relative to the anchor.
-    pub shared_rows_only: bool,
     /// Camera rays are sampled up to this distance (the scene box clips them further).
     pub camera_far_m: f64,
     /// The background model beyond the scene box for camera rays (`None`: the sky feature
@@ -131,7 +126,6 @@ impl Default for DepthCalibConfig {
             intensity_weight: 0.1,
             regulariser_weight: 0.01,
             lidar_pose_update: PoseUpdate::Adam,
-            shared_rows_only: false,
             registration_steps: 0,
             coarse_to_fine: None,
             camera_far_m: 120.0,
@@ -275,8 +269,6 @@ pub struct DepthCalibration {
     intensity_maps: Vec<IntensityMap>,
     /// The LiDAR that alone shapes the scene during the registration phase.
     anchor: usize,
-    /// The anchor's returns as 0.5 m voxels, dilated by one (`shared_rows_only`).
-    anchor_cover: Option<crate::util::FastSet<[i32; 3]>>,
     /// Per LiDAR: the state of its preconditioned pose steps (unused with Adam).
     newton: Vec<NewtonState>,
     intensity_map_opt: Vec<DenseAdam>,
@@ -425,12 +417,6 @@ fn pose_grad_flat(g: &super::pose::PoseGrad, w: f64) -> [f32; 9] {
     out
 }
 
-/// The 0.5 m voxel of a world point (`shared_rows_only`).
-fn cover_voxel(p: DVec3) -> [i32; 3] {
-    let v = (p / 0.5).floor();
-    [v.x as i32, v.y as i32, v.z as i32]
-}
-
 impl DepthCalibration {
     /// Build the scene box and occupancy from the sweeps under the initial extrinsics.
     pub fn new(config: DepthCalibConfig, trajectory: Trajectory, lidars: Vec<LidarData>) -> Self {
@@ -479,20 +465,6 @@ impl DepthCalibration {
         let decoder_params = mlp_flat(&decoder.mlp);
         let registering =
             config.registration_steps > 0 && config.lidar_pose_update != PoseUpdate::Adam;
-        let anchor_cover = config.shared_rows_only.then(|| {
-            let mut cover = crate::util::FastSet::default();
-            for p in &anchor_points {
-                let v = cover_voxel(*p);
-                for dx in -1..=1 {
-                    for dy in -1..=1 {
-                        for dz in -1..=1 {
-                            cover.insert([v[0] + dx, v[1] + dy, v[2] + dz]);
-                        }
-                    }
-                }
-            }
-            cover
-        });
         let aggregated = match (config.geometry_init_steps, registering) {
             (0, _) => Vec::new(),
             (_, false) => points,
@@ -500,7 +472,6 @@ impl DepthCalibration {
         };
         Self {
             anchor,
-            anchor_cover,
             aggregated,
             point_index: None,
             intensity_maps: vec![IntensityMap::default(); lidars.len()],
@@ -1269,11 +1240,6 @@ impl DepthCalibration {
                     // Full steps after the warm-up: each solves the gathered rows, which
                     // already average the batches' noise (no learning-rate decay).
                     PoseUpdate::Newton(_) if lr_pose > 0.0 => {
-                        if s != self.anchor
-                            && let Some(cover) = &self.anchor_cover
-                        {
-                            rows.retain(|r| cover.contains(&cover_voxel(r.surface_world)));
-                        }
                         if self.newton[s].gather(&mut rows) {
                             self.newton[s].step(&mut self.poses[s], 1.0);
                         }

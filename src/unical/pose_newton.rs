@@ -83,8 +83,6 @@ impl Default for NewtonConfig {
 pub struct PoseRow {
     pub jacobian: [f64; 6],
     pub residual_m: f64,
-    /// Where the rendered surface of the row's ray is (world frame).
-    pub surface_world: DVec3,
 }
 
 /// The row of a ray of `pose` (vehicle at `world_from_vehicle`, sensor direction `u`, world
@@ -107,7 +105,6 @@ pub fn plane_row(
         return None;
     }
     let d_origin = -n * cos.signum();
-    let origin = pose.ray(world_from_vehicle, u).0;
     Some(PoseRow {
         jacobian: to_tangent(
             world_from_vehicle,
@@ -117,7 +114,6 @@ pub fn plane_row(
             d_origin * surface_depth_m,
         ),
         residual_m: (surface_depth_m - range_m) * cos.abs(),
-        surface_world: origin + d * surface_depth_m,
     })
 }
 
@@ -409,9 +405,7 @@ mod tests {
             let row = row.unwrap_or(PoseRow {
                 jacobian: [9.0; 6],
                 residual_m: 9.0,
-                surface_world: DVec3::ZERO,
             });
-            assert_eq!(row.surface_world, DVec3::X * 5.0);
             assert!((row.residual_m - 0.2).abs() < 1e-12, "{row:?}");
             assert!((row.jacobian[3] + 1.0).abs() < 1e-12 && row.jacobian[4].abs() < 1e-12);
         }
