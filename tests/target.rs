@@ -153,7 +153,8 @@ fn the_cli_calibrates_with_target_and_names_what_is_missing() {
 
 #[test]
 fn a_board_cache_searches_each_image_once_and_changes_nothing() {
-    let (_dir, log, _gt) = drive(3);
+    // Its own folder: the other tests remove theirs when they finish.
+    let (dir, log, _gt) = common::checkerboard_drive("target-cache", 3);
     let drive = Drive::open(&log).unwrap();
     let rig = drive.rig.clone();
     let config = TargetConfig::default();
@@ -184,4 +185,5 @@ fn a_board_cache_searches_each_image_once_and_changes_nothing() {
         assert!(!fresh.views.is_empty(), "{lidar}");
         assert_eq!(cached.views, fresh.views, "{lidar}");
     }
+    let _ = std::fs::remove_dir_all(dir);
 }
