@@ -21,25 +21,22 @@ pub fn camera_info_topic(s: &crate::calib::Sensor) -> String {
         .unwrap_or_else(|| format!("/{}/camera_info", s.name))
 }
 
-/// The MCAP's bytes (written through a private temporary directory, read back, removed).
+/// The MCAP's bytes (written in memory).
 pub fn export(rig: &Rig) -> Result<Vec<u8>, String> {
-    static CALLS: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
-    let dir = std::env::temp_dir().join(format!(
-        "rigcal-export-{}-{}",
-        std::process::id(),
-        CALLS.fetch_add(1, std::sync::atomic::Ordering::Relaxed)
-    ));
-    std::fs::create_dir_all(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
-    let path = dir.join("tf.mcap");
-    let result = write(rig, &path)
-        .and_then(|()| std::fs::read(&path).map_err(|e| format!("{}: {e}", path.display())));
-    let _ = std::fs::remove_dir_all(&dir);
-    result
+    let mut w = Ros2McapWriter::in_memory().map_err(|e| e.to_string())?;
+    fill(rig, &mut w)?;
+    w.finish_bytes().map_err(|e| e.to_string())
 }
 
 /// Write the MCAP to `path` (atomically).
 pub fn write(rig: &Rig, path: &Path) -> Result<(), String> {
     let mut w = Ros2McapWriter::create(path).map_err(|e| e.to_string())?;
+    fill(rig, &mut w)?;
+    w.finish().map_err(|e| e.to_string())
+}
+
+/// The rig's /tf_static and every camera's CameraInfo, stamped 0.
+fn fill(rig: &Rig, w: &mut Ros2McapWriter) -> Result<(), String> {
     let transforms: Vec<_> = rig
         .sensors
         .iter()
@@ -61,7 +58,7 @@ pub fn write(rig: &Rig, path: &Path) -> Result<(), String> {
                 .map_err(|e| e.to_string())?;
         }
     }
-    w.finish().map_err(|e| e.to_string())
+    Ok(())
 }
 
 /// `base`'s sensors with the extrinsics (and camera intrinsics) the MCAP at `path` gives their
@@ -104,7 +101,12 @@ mod tests {
         let dir = std::env::temp_dir().join(format!("rigcal-mcap-tf-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         let path = dir.join("rig.mcap");
-        std::fs::write(&path, bytes).unwrap();
+        std::fs::write(&path, &bytes).unwrap();
+        // Written to a file: the same bytes as in memory, and no temporary file left beside.
+        let written = dir.join("written.mcap");
+        write(&rig, &written).unwrap();
+        assert_eq!(std::fs::read(&written).unwrap(), bytes);
+        assert_eq!(std::fs::read_dir(&dir).unwrap().count(), 2);
         let mut blank = rig.clone();
         for s in &mut blank.sensors {
             s.vehicle_from_sensor = crate::geometry::Rigid::IDENTITY;

@@ -1,7 +1,7 @@
 //! Export to, and import from, the formats calibration consumers use (docs/users.md §4).
 //!
 //! How it works: [`export`] turns a native calibration document into the files of one
-//! [`ExportFormat`] in memory (text, or an MCAP written through a temporary file), each file
+//! [`ExportFormat`] in memory (text, or an MCAP written to memory), each file
 //! naming the direction of every transform it holds in a key or a comment (`p_parent =
 //! parent_from_child · p_child`). [`write`] puts them on disk atomically: one file, or one file
 //! per camera in a directory for the per-camera formats. [`import::load_initial_guess`] reads

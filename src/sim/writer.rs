@@ -26,7 +26,7 @@
 
 use std::collections::{BTreeMap, BTreeSet, HashMap};
 use std::fs::File;
-use std::io::{BufWriter, Write};
+use std::io::{BufWriter, Cursor, Seek, SeekFrom, Write};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};
 
@@ -341,11 +341,43 @@ struct ChannelState {
     sequence: u32,
 }
 
+/// Where the MCAP's bytes go: a temporary file renamed into place, or memory.
+enum Sink {
+    File(BufWriter<File>),
+    Memory(Cursor<Vec<u8>>),
+}
+
+impl Write for Sink {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        match self {
+            Sink::File(f) => f.write(buf),
+            Sink::Memory(m) => m.write(buf),
+        }
+    }
+    fn flush(&mut self) -> std::io::Result<()> {
+        match self {
+            Sink::File(f) => f.flush(),
+            Sink::Memory(m) => m.flush(),
+        }
+    }
+}
+
+impl Seek for Sink {
+    fn seek(&mut self, pos: SeekFrom) -> std::io::Result<u64> {
+        match self {
+            Sink::File(f) => f.seek(pos),
+            Sink::Memory(m) => m.seek(pos),
+        }
+    }
+}
+
 /// Writes a ROS 2 MCAP (see the module documentation).
 pub struct Ros2McapWriter {
+    /// The target file (a placeholder in error messages when writing to memory).
     path: PathBuf,
-    tmp_path: PathBuf,
-    mcap: Option<mcap::Writer<BufWriter<File>>>,
+    /// The temporary file beside it (`None`: in memory).
+    tmp_path: Option<PathBuf>,
+    mcap: Option<mcap::Writer<Sink>>,
     schemas: HashMap<MsgType, u16>,
     channels: HashMap<String, ChannelState>,
     scratch: Vec<u8>,
@@ -391,23 +423,35 @@ impl Ros2McapWriter {
             what: format!("cannot create the temporary file {}", tmp_path.display()),
             source,
         })?;
+        let sink = Sink::File(BufWriter::with_capacity(1 << 20, file));
+        let made = Self::over(sink, path.to_path_buf(), Some(tmp_path.clone()));
+        if made.is_err() {
+            let _ = std::fs::remove_file(&tmp_path);
+        }
+        made
+    }
+
+    /// Writes to memory; [`Ros2McapWriter::finish_bytes`] returns the file's bytes.
+    pub fn in_memory() -> Result<Self, WriterError> {
+        Self::over(
+            Sink::Memory(Cursor::new(Vec::new())),
+            PathBuf::from("<in memory>"),
+            None,
+        )
+    }
+
+    fn over(sink: Sink, path: PathBuf, tmp_path: Option<PathBuf>) -> Result<Self, WriterError> {
         let options = mcap::WriteOptions::new().profile("ros2").library(format!(
             "rigcal {} simulator ({})",
             env!("CARGO_PKG_VERSION"),
             mcap::LIBRARY_IDENTIFIER
         ));
-        let mcap = match options.create(BufWriter::with_capacity(1 << 20, file)) {
-            Ok(w) => w,
-            Err(source) => {
-                let _ = std::fs::remove_file(&tmp_path);
-                return Err(WriterError::Mcap {
-                    path: path.to_path_buf(),
-                    source,
-                });
-            }
-        };
+        let mcap = options.create(sink).map_err(|source| WriterError::Mcap {
+            path: path.clone(),
+            source,
+        })?;
         Ok(Self {
-            path: path.to_path_buf(),
+            path,
             tmp_path,
             mcap: Some(mcap),
             schemas: HashMap::new(),
@@ -692,27 +736,37 @@ impl Ros2McapWriter {
         })
     }
 
-    /// Finish the MCAP (summary, indexes) and atomically move it into place.
-    pub fn finish(mut self) -> Result<(), WriterError> {
+    /// Finish the MCAP (summary, indexes): its sink.
+    fn finish_sink(&mut self) -> Result<Sink, WriterError> {
         let Some(mut mcap) = self.mcap.take() else {
             return Err(self.invalid("the writer is already finished"));
         };
+        mcap.finish().map_err(|e| self.mcap_error(e))?;
+        Ok(mcap.into_inner())
+    }
+
+    /// Finish the MCAP (summary, indexes) and atomically move it into place.
+    pub fn finish(mut self) -> Result<(), WriterError> {
+        let Some(tmp_path) = self.tmp_path.clone() else {
+            return Err(self.invalid("an in-memory writer ends with finish_bytes"));
+        };
         let result = (|| {
-            mcap.finish().map_err(|e| self.mcap_error(e))?;
+            let Sink::File(file) = self.finish_sink()? else {
+                return Err(self.invalid("a file writer without its file"));
+            };
             let io = |what: &str, source| WriterError::Io {
                 path: self.path.clone(),
                 what: what.to_string(),
                 source,
             };
-            let file = mcap
-                .into_inner()
+            let file = file
                 .into_inner()
                 .map_err(|e| io("cannot flush", e.into_error()))?;
             file.sync_all().map_err(|e| io("cannot sync", e))?;
             drop(file);
-            std::fs::rename(&self.tmp_path, &self.path).map_err(|e| {
+            std::fs::rename(&tmp_path, &self.path).map_err(|e| {
                 io(
-                    &format!("cannot rename {} into place", self.tmp_path.display()),
+                    &format!("cannot rename {} into place", tmp_path.display()),
                     e,
                 )
             })?;
@@ -725,9 +779,18 @@ impl Ros2McapWriter {
             Ok(())
         })();
         if result.is_err() {
-            let _ = std::fs::remove_file(&self.tmp_path);
+            let _ = std::fs::remove_file(&tmp_path);
         }
+        self.tmp_path = None;
         result
+    }
+
+    /// Finish an in-memory MCAP and return its bytes.
+    pub fn finish_bytes(mut self) -> Result<Vec<u8>, WriterError> {
+        match self.finish_sink()? {
+            Sink::Memory(bytes) => Ok(bytes.into_inner()),
+            Sink::File(_) => Err(self.invalid("a file writer ends with finish")),
+        }
     }
 }
 
@@ -737,10 +800,12 @@ impl Drop for Ros2McapWriter {
     fn drop(&mut self) {
         if let Some(mcap) = self.mcap.take() {
             // `into_inner` skips writing the summary that dropping an mcap::Writer would.
-            let mut file = mcap.into_inner();
-            let _ = file.flush();
-            drop(file);
-            let _ = std::fs::remove_file(&self.tmp_path);
+            let mut sink = mcap.into_inner();
+            let _ = sink.flush();
+            drop(sink);
+        }
+        if let Some(tmp) = &self.tmp_path {
+            let _ = std::fs::remove_file(tmp);
         }
     }
 }
@@ -751,6 +816,31 @@ mod tests {
 
     use super::*;
     use crate::log::cdr::CdrReader;
+
+    #[test]
+    fn in_memory_and_file_writers_end_their_own_way_and_leave_nothing_behind() {
+        let mut w = Ros2McapWriter::in_memory().unwrap();
+        w.write_tf_static(0, &[("base_link".into(), "lidar".into(), Rigid::IDENTITY)])
+            .unwrap();
+        let bytes = w.finish_bytes().unwrap();
+        assert!(bytes.starts_with(b"\x89MCAP0\r\n") && bytes.ends_with(b"\x89MCAP0\r\n"));
+        let err = Ros2McapWriter::in_memory().unwrap().finish().unwrap_err();
+        assert!(err.to_string().contains("finish_bytes"), "{err}");
+        let dir = std::env::temp_dir().join(format!("rigcal-writer-ends-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("x.mcap");
+        let err = Ros2McapWriter::create(&path)
+            .unwrap()
+            .finish_bytes()
+            .unwrap_err();
+        assert!(err.to_string().contains("ends with finish"), "{err}");
+        assert_eq!(
+            std::fs::read_dir(&dir).unwrap().count(),
+            0,
+            "temporary file left"
+        );
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
 
     #[test]
     fn every_definition_resolves_with_dependencies_once_in_rosbag2_order() {
