@@ -65,17 +65,21 @@ pub fn export(rig: &Rig) -> String {
         comment(&rig.vehicle_frame),
         comment(&rig.vehicle_frame)
     );
-    for s in &rig.sensors {
-        match s.kind {
-            SensorKind::Lidar => entry(&mut out, &lidar_key(&s.frame_id), s.vehicle_from_sensor),
-            SensorKind::Camera => entry(
-                &mut out,
-                &camera_key(&s.frame_id),
-                frames::vehicle_from_body(s),
-            ),
-        }
+    for (key, t) in entries(rig) {
+        entry(&mut out, &key, t);
     }
     out
+}
+
+/// Every sensor's key under the root and its pose there, in the rig's order.
+pub fn entries(rig: &Rig) -> Vec<(String, Rigid)> {
+    rig.sensors
+        .iter()
+        .map(|s| match s.kind {
+            SensorKind::Lidar => (lidar_key(&s.frame_id), s.vehicle_from_sensor),
+            SensorKind::Camera => (camera_key(&s.frame_id), frames::vehicle_from_body(s)),
+        })
+        .collect()
 }
 
 #[cfg(test)]

@@ -305,37 +305,38 @@ pub fn export(
         }
         ExportFormat::Nuscenes => one(nuscenes::export(&rig)),
     };
-    distinct_names(format, &files).map_err(unsupported)?;
+    distinct_names(format, &rig, &files).map_err(unsupported)?;
     Ok(Export { format, files })
 }
 
 /// Names derived from sensor names must not collide: two cameras written to one file, a URDF
 /// link that is the child of two joints, an Autoware key given twice.
-fn distinct_names(format: ExportFormat, files: &[ExportedFile]) -> Result<(), String> {
-    for (i, f) in files.iter().enumerate() {
-        if files[..i].iter().any(|o| o.name == f.name) {
-            return Err(format!(
-                "two cameras would both be written to '{}' (their names differ only in characters a file name cannot hold): rename one or export them separately with --sensors",
-                f.name
-            ));
-        }
+fn distinct_names(format: ExportFormat, rig: &Rig, files: &[ExportedFile]) -> Result<(), String> {
+    let first_repeat = |names: Vec<String>| {
+        let mut seen = std::collections::HashSet::new();
+        names.into_iter().find(|n| !seen.insert(n.clone()))
+    };
+    if let Some(name) = first_repeat(files.iter().map(|f| f.name.clone()).collect()) {
+        return Err(format!(
+            "two cameras would both be written to '{name}' (their names differ only in characters a file name cannot hold): rename one or export them separately with --sensors"
+        ));
     }
-    let text = || String::from_utf8_lossy(&files[0].bytes).into_owned();
-    match format {
-        ExportFormat::Urdf if !files.is_empty() => {
-            urdf::parse_joints(&text(), Path::new("the URDF"))
-                .map(|_| ())
-                .map_err(|e| format!("{e} (two sensors map to one link: rename one)"))
+    let repeated = match format {
+        ExportFormat::Urdf => {
+            let children = urdf::links_and_joints(rig).1.into_iter().map(|j| j.child);
+            first_repeat(children.collect()).map(|link| {
+                format!("link '{link}' would be the child of two joints in the URDF (two sensors map to one link): rename one")
+            })
         }
-        ExportFormat::Autoware if !files.is_empty() => {
-            serde_yaml::from_str::<serde_yaml::Value>(&text())
-                .map(|_| ())
-                .map_err(|e| {
-                    format!("two sensors map to one Autoware frame name ({e}): rename one")
-                })
+        ExportFormat::Autoware => {
+            let keys = autoware::entries(rig).into_iter().map(|(k, _)| k);
+            first_repeat(keys.collect()).map(|key| {
+                format!("two sensors map to one Autoware frame name '{key}': rename one")
+            })
         }
-        _ => Ok(()),
-    }
+        _ => None,
+    };
+    repeated.map_or(Ok(()), Err)
 }
 
 fn one_binary(format: ExportFormat, bytes: Vec<u8>) -> Vec<ExportedFile> {

@@ -47,10 +47,29 @@ fn joint(out: &mut String, name: &str, parent: &str, child: &str, parent_from_ch
     ));
 }
 
-pub fn export(rig: &Rig) -> String {
+/// A fixed joint of the exported URDF.
+pub struct Joint {
+    pub name: String,
+    pub parent: String,
+    pub child: String,
+    pub parent_from_child: Rigid,
+}
+
+/// The links (vehicle frame first) and joints the URDF holds for `rig`: a LiDAR's frame under
+/// the vehicle frame; a camera's body link under the vehicle frame and its optical frame
+/// under the body link.
+pub fn links_and_joints(rig: &Rig) -> (Vec<String>, Vec<Joint>) {
     let v = &rig.vehicle_frame;
     let mut links = vec![v.clone()];
-    let mut joints = String::new();
+    let mut joints = Vec::new();
+    let mut add = |name: String, parent: &str, child: &str, parent_from_child: Rigid| {
+        joints.push(Joint {
+            name,
+            parent: parent.to_owned(),
+            child: child.to_owned(),
+            parent_from_child,
+        })
+    };
     for s in &rig.sensors {
         if s.frame_id == *v {
             // The sensor defines the vehicle frame (PandaSet's pandar64): no joint to itself.
@@ -58,9 +77,8 @@ pub fn export(rig: &Rig) -> String {
         }
         match s.kind {
             SensorKind::Lidar => {
-                joint(
-                    &mut joints,
-                    &format!("{}_joint", s.name),
+                add(
+                    format!("{}_joint", s.name),
                     v,
                     &s.frame_id,
                     s.vehicle_from_sensor,
@@ -69,16 +87,14 @@ pub fn export(rig: &Rig) -> String {
             }
             SensorKind::Camera => {
                 let body = frames::body_link(&s.frame_id);
-                joint(
-                    &mut joints,
-                    &format!("{}_joint", s.name),
+                add(
+                    format!("{}_joint", s.name),
                     v,
                     &body,
                     frames::vehicle_from_body(s),
                 );
-                joint(
-                    &mut joints,
-                    &format!("{}_optical_joint", s.name),
+                add(
+                    format!("{}_optical_joint", s.name),
                     &body,
                     &s.frame_id,
                     frames::body_from_optical(),
@@ -87,6 +103,21 @@ pub fn export(rig: &Rig) -> String {
                 links.push(s.frame_id.clone());
             }
         }
+    }
+    (links, joints)
+}
+
+pub fn export(rig: &Rig) -> String {
+    let (links, joint_list) = links_and_joints(rig);
+    let mut joints = String::new();
+    for j in &joint_list {
+        joint(
+            &mut joints,
+            &j.name,
+            &j.parent,
+            &j.child,
+            j.parent_from_child,
+        );
     }
     let mut out = format!(
         "<?xml version=\"1.0\"?>\n\
