@@ -3,12 +3,9 @@
 //! extrinsics from depth, print the error against the ground truth as it goes.
 //! `cargo run --release --example unical_lidar -- [ITERATIONS] [SECONDS] [PERTURBATION_SCALE] [BETA_INIT] [REGULARISER_WEIGHT]`
 
+mod common;
+
 use glam::DVec3;
-use rigcal::geometry::Trajectory;
-use rigcal::sim::lidar_sim;
-use rigcal::sim::rigs::{RigPreset, SimRig};
-use rigcal::sim::trajectories::{self, TrajectoryConfig, TrajectoryKind};
-use rigcal::sim::world::{SceneKind, World};
 use rigcal::unical::depth_calib::{DepthCalibConfig, DepthCalibration, LidarData};
 
 fn main() {
@@ -27,29 +24,13 @@ fn main() {
         .get(5)
         .and_then(|s| s.parse().ok())
         .unwrap_or(defaults.regulariser_weight);
-    let rig = SimRig::preset(RigPreset::Pandaset);
-    let tcfg = TrajectoryConfig {
-        kind: TrajectoryKind::Figure8,
-        duration_secs: seconds + 0.5,
-        rate_hz: 100.0,
-        speed_mps: 8.0,
-        seed: 3,
-    };
-    let traj = Trajectory::new(trajectories::generate(&tcfg));
-    let world = World::build(
-        SceneKind::Urban,
-        &trajectories::path_polyline(&tcfg, 1.0),
-        3,
-    );
+    let (rig, traj, world) = common::drive(seconds);
     let t0 = std::time::Instant::now();
     let lidars: Vec<LidarData> = rig
         .lidars
         .iter()
         .enumerate()
         .map(|(k, l)| {
-            let sweeps = (1..(seconds * 10.0) as i64)
-                .map(|i| lidar_sim::simulate_sweep(&world, l, &traj, i * 100_000_000, 5).unwrap())
-                .collect();
             let sign = if k == 0 { perturbation } else { -perturbation };
             // With RIGCAL_ROOT set the first LiDAR is the frozen root, left at the truth.
             let sign = if k == 0 && std::env::var("RIGCAL_ROOT").is_ok() {
@@ -57,14 +38,11 @@ fn main() {
             } else {
                 sign
             };
-            LidarData {
-                name: l.name.clone(),
-                initial: l.vehicle_from_lidar.perturbed_right(
-                    DVec3::new(0.6, -0.5, 0.6) * sign * 1f64.to_radians(),
-                    DVec3::new(0.06, -0.05, 0.05) * sign,
-                ),
-                sweeps,
-            }
+            let initial = l.vehicle_from_lidar.perturbed_right(
+                DVec3::new(0.6, -0.5, 0.6) * sign * 1f64.to_radians(),
+                DVec3::new(0.06, -0.05, 0.05) * sign,
+            );
+            common::lidar_data(&world, l, &traj, seconds, initial)
         })
         .collect();
     eprintln!(

@@ -7,12 +7,9 @@
 //! (`rounds`: `PROBE_ROUNDS` alternations of a scene learned from scratch at the current pose
 //! and preconditioned pose steps against it, from a 1° / 9 cm PandarGT start.)
 
+mod common;
+
 use glam::DVec3;
-use rigcal::geometry::Trajectory;
-use rigcal::sim::lidar_sim;
-use rigcal::sim::rigs::{RigPreset, SimRig};
-use rigcal::sim::trajectories::{self, TrajectoryConfig, TrajectoryKind};
-use rigcal::sim::world::{SceneKind, World};
 use rigcal::unical::depth_calib::{DepthCalibConfig, DepthCalibration, LidarData};
 use rigcal::unical::pose::PoseParams;
 use rigcal::unical::pose_newton::{NewtonConfig, PoseUpdate};
@@ -24,30 +21,11 @@ fn main() {
     let joint = args.get(3).is_some_and(|s| s == "joint");
     let seconds: f64 = args.get(4).and_then(|s| s.parse().ok()).unwrap_or(3.0);
     let lr_pose: f32 = args.get(5).and_then(|s| s.parse().ok()).unwrap_or(1e-3);
-    let rig = SimRig::preset(RigPreset::Pandaset);
-    let tcfg = TrajectoryConfig {
-        kind: TrajectoryKind::Figure8,
-        duration_secs: seconds + 0.5,
-        rate_hz: 100.0,
-        speed_mps: 8.0,
-        seed: 3,
-    };
-    let traj = Trajectory::new(trajectories::generate(&tcfg));
-    let world = World::build(
-        SceneKind::Urban,
-        &trajectories::path_polyline(&tcfg, 1.0),
-        3,
-    );
+    let (rig, traj, world) = common::drive(seconds);
     let lidars: Vec<LidarData> = rig
         .lidars
         .iter()
-        .map(|l| LidarData {
-            name: l.name.clone(),
-            initial: l.vehicle_from_lidar,
-            sweeps: (1..(seconds * 10.0) as i64)
-                .map(|i| lidar_sim::simulate_sweep(&world, l, &traj, i * 100_000_000, 5).unwrap())
-                .collect(),
-        })
+        .map(|l| common::lidar_data(&world, l, &traj, seconds, l.vehicle_from_lidar))
         .collect();
     let truth: Vec<_> = rig.lidars.iter().map(|l| l.vehicle_from_lidar).collect();
     let root = rig.lidars[0].name.clone();

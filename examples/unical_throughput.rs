@@ -13,11 +13,8 @@
 //! and weight gradients), plus the hash grid's trilinear interpolation of every level forward
 //! and its scatter backward; activations, compositing and the optimiser are not counted.
 
-use rigcal::geometry::Trajectory;
-use rigcal::sim::lidar_sim;
-use rigcal::sim::rigs::{RigPreset, SimRig};
-use rigcal::sim::trajectories::{self, TrajectoryConfig, TrajectoryKind};
-use rigcal::sim::world::{SceneKind, World};
+mod common;
+
 use rigcal::unical::depth_calib::{DepthCalibConfig, DepthCalibration, LidarData};
 
 fn peak_rss_mb() -> f64 {
@@ -37,30 +34,11 @@ fn main() {
         .and_then(|s| s.parse().ok())
         .unwrap_or(60);
     let seconds = 3.0;
-    let rig = SimRig::preset(RigPreset::Pandaset);
-    let tcfg = TrajectoryConfig {
-        kind: TrajectoryKind::Figure8,
-        duration_secs: seconds + 0.5,
-        rate_hz: 100.0,
-        speed_mps: 8.0,
-        seed: 3,
-    };
-    let traj = Trajectory::new(trajectories::generate(&tcfg));
-    let world = World::build(
-        SceneKind::Urban,
-        &trajectories::path_polyline(&tcfg, 1.0),
-        3,
-    );
+    let (rig, traj, world) = common::drive(seconds);
     let lidars: Vec<LidarData> = rig
         .lidars
         .iter()
-        .map(|l| LidarData {
-            name: l.name.clone(),
-            initial: l.vehicle_from_lidar,
-            sweeps: (1..(seconds * 10.0) as i64)
-                .map(|i| lidar_sim::simulate_sweep(&world, l, &traj, i * 100_000_000, 5).unwrap())
-                .collect(),
-        })
+        .map(|l| common::lidar_data(&world, l, &traj, seconds, l.vehicle_from_lidar))
         .collect();
     let config = DepthCalibConfig::default();
     let (init_steps, rays_per_sensor) = (config.geometry_init_steps, config.rays_per_sensor);

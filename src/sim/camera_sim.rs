@@ -121,11 +121,12 @@ const SKY_DISTANCE_M: f32 = 600.0;
 const SMOOTH_RELATIVE: f32 = 0.04;
 const SMOOTH_ABSOLUTE: f32 = 0.004;
 
-/// Whether the sun reached a shaded sample: its neighbours' answer lets an in-between pixel on
-/// the same face skip its shadow ray.
 /// Coarse anchors answer the sun question for the anchors between them only when they are at
 /// most this far apart on the surface (m): a pole's shadow is wider.
 const COARSE_SUN_SPACING_M: f32 = 0.25;
+
+/// Whether the sun reached a shaded sample: its neighbours' answer lets an in-between pixel on
+/// the same face skip its shadow ray.
 const SHADOW: u8 = 0;
 const LIT: u8 = 1;
 const NO_SUN: u8 = 2;
@@ -134,6 +135,30 @@ const NO_SUN: u8 = 2;
 fn footprint(hit: &crate::sim::world::SurfaceHit, dir: Vec3, pixel_angle: f32) -> f32 {
     let cos_view = (-dir.dot(hit.normal)).abs().max(0.15);
     hit.t * pixel_angle / cos_view
+}
+
+/// The sun's answer for the anchor at (x, y) from the coarse anchors around it (a 4-pixel grid,
+/// `cw` of them a row): whether it is lit, when they all see `face` and agree; `None` otherwise
+/// or at the image's edge.
+fn coarse_sun(
+    coarse: &[(Vec3, u32, u8)],
+    cw: usize,
+    (w, h): (usize, usize),
+    (x, y): (usize, usize),
+    face: u32,
+) -> Option<bool> {
+    let xs: &[usize] = if x % 4 == 0 { &[x] } else { &[x - 2, x + 2] };
+    let ys: &[usize] = if y % 4 == 0 { &[y] } else { &[y - 2, y + 2] };
+    if xs.iter().any(|&ax| ax >= w) || ys.iter().any(|&ay| ay >= h) {
+        return None;
+    }
+    let at = |ax: usize, ay: usize| coarse[(ay / 4) * cw + ax / 4];
+    let first = at(xs[0], ys[0]).2;
+    let agree = ys.iter().all(|&ay| {
+        xs.iter()
+            .all(|&ax| at(ax, ay).1 == face && at(ax, ay).2 == first)
+    });
+    (agree && first != NO_SUN).then_some(first == LIT)
 }
 
 /// Linear radiance of what a ray hit (the sky when nothing), its primitive and whether the sun
@@ -267,22 +292,10 @@ pub fn render(
                         let dir = rot * d;
                         let hit = world.trace_with(origin, dir, SKY_DISTANCE_M, candidate(d));
                         let hint = hit.and_then(|hit| {
-                            let xs: &[usize] = if x % 4 == 0 { &[x] } else { &[x - 2, x + 2] };
-                            let ys: &[usize] = if y % 4 == 0 { &[y] } else { &[y - 2, y + 2] };
-                            if xs.iter().any(|&ax| ax >= w) || ys.iter().any(|&ay| ay >= h) {
-                                return None;
-                            }
                             let spacing = 4.0 * footprint(&hit, dir, rays.pixel_angle);
-                            let at = |ax: usize, ay: usize| coarse[(ay / 4) * cw + ax / 4];
-                            let first = at(xs[0], ys[0]).2;
-                            let agree = ys.iter().all(|&ay| {
-                                xs.iter().all(|&ax| {
-                                    let (_, p, sun) = at(ax, ay);
-                                    p == hit.primitive && sun == first
-                                })
-                            });
-                            (agree && first != NO_SUN && spacing <= COARSE_SUN_SPACING_M)
-                                .then_some(first == LIT)
+                            (spacing <= COARSE_SUN_SPACING_M)
+                                .then(|| coarse_sun(&coarse, cw, (w, h), (x, y), hit.primitive))
+                                .flatten()
                         });
                         shade_hit(world, dir, hit, rays.pixel_angle, hint)
                     }

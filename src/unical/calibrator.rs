@@ -95,26 +95,27 @@ impl UnicalLidarStage {
             return Err(format!("camera image scale {scale} is not in (0, 1]"));
         }
         let with_keypoints = self.calib.config.alignment != AlignmentLoss::None;
-        let chosen: Vec<(&crate::calib::Sensor, Vec<usize>)> = self
+        // Every camera with intrinsics and a stream, and the frames it contributes (counted
+        // first, for the progress).
+        let chosen: Vec<_> = self
             .rig
             .cameras()
-            .filter(|cam| cam.camera.is_some() && drive.stream(&cam.name).is_some())
-            .map(|cam| {
+            .filter_map(|cam| {
+                let (intrinsics, stream) = (cam.camera.as_ref()?, drive.stream(&cam.name)?);
                 let usable = drive.frames_within(&cam.name, segments_nanos);
-                (cam, spread_evenly(&usable, frames_per_camera))
+                Some((
+                    cam,
+                    intrinsics,
+                    stream,
+                    spread_evenly(&usable, frames_per_camera),
+                ))
             })
             .collect();
-        let total: usize = chosen.iter().map(|(_, frames)| frames.len()).sum();
+        let total: usize = chosen.iter().map(|c| c.3.len()).sum();
         let mut loaded = 0;
         report(LOADING_IMAGES, 0, total);
         let mut cameras = Vec::new();
-        for (cam, picked) in chosen {
-            let Some(intrinsics) = &cam.camera else {
-                continue;
-            };
-            let Some(stream) = drive.stream(&cam.name) else {
-                continue;
-            };
+        for (cam, intrinsics, stream, picked) in chosen {
             let small = intrinsics.scaled(scale);
             let mut frames = Vec::new();
             for i in picked {

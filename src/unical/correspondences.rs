@@ -114,6 +114,12 @@ struct CachedMatches {
     pairs: Vec<([usize; 4], Vec<[f64; 4]>)>,
 }
 
+/// A transform's exact bits into a hash.
+fn write_rigid(h: &mut impl Hasher, t: &Rigid) {
+    let (q, v) = (t.rotation.to_array(), t.translation.to_array());
+    q.iter().chain(&v).for_each(|x| h.write_u64(x.to_bits()));
+}
+
 /// The cache file's name for this input: 128 bits of two hashes of everything [`build`] reads.
 pub fn cache_key(
     cameras: &[CameraData],
@@ -130,25 +136,11 @@ pub fn cache_key(
             for v in [k.fx, k.fy, k.cx, k.cy].iter().chain(&k.distortion) {
                 h.write_u64(v.to_bits());
             }
-            for v in extrinsic
-                .rotation
-                .to_array()
-                .iter()
-                .chain(&extrinsic.translation.to_array())
-            {
-                h.write_u64(v.to_bits());
-            }
+            write_rigid(&mut h, extrinsic);
             for f in &c.frames {
                 h.write_u64(f.stamp_nanos as u64);
                 if let Ok(wv) = trajectory.world_from_vehicle(f.stamp_nanos) {
-                    for v in wv
-                        .rotation
-                        .to_array()
-                        .iter()
-                        .chain(&wv.translation.to_array())
-                    {
-                        h.write_u64(v.to_bits());
-                    }
+                    write_rigid(&mut h, &wv);
                 }
                 h.write_u64(f.keypoints.len() as u64);
                 for kp in &f.keypoints {
