@@ -235,6 +235,37 @@ impl Gamma {
     }
 }
 
+/// Per-image working buffers (anchors, radiance and primitive per pixel: ≈ 40 MB at 1920×1080),
+/// kept for the next image: fresh allocations of that size cost more in page faults than the
+/// tone pass.
+#[derive(Default)]
+struct Scratch {
+    anchors: Vec<(Vec3, u32, u8)>,
+    radiance: Vec<Vec3>,
+    prim: Vec<u32>,
+}
+
+/// Buffers of finished images; at most as many as images rendered at once.
+static SCRATCH_POOL: std::sync::Mutex<Vec<Scratch>> = std::sync::Mutex::new(Vec::new());
+
+impl Scratch {
+    fn take() -> Self {
+        SCRATCH_POOL
+            .lock()
+            .ok()
+            .and_then(|mut pool| pool.pop())
+            .unwrap_or_default()
+    }
+
+    fn give_back(self) {
+        if let Ok(mut pool) = SCRATCH_POOL.lock()
+            && pool.len() < 4
+        {
+            pool.push(self);
+        }
+    }
+}
+
 /// Render one image of `world` seen by a camera at `world_from_camera`.
 pub fn render(
     world: &World,
@@ -271,42 +302,46 @@ pub fn render(
         .into_par_iter()
         .map(|i| shade((i / cw) * 4 * w + (i % cw) * 4))
         .collect();
-    let mut anchor_rad = vec![Vec3::ZERO; w * h];
-    let mut anchor_prim = vec![INVALID; w * h];
-    let mut anchor_sun = vec![NO_SUN; w * h];
-    anchor_rad
-        .par_chunks_mut(w)
-        .zip(anchor_prim.par_chunks_mut(w))
-        .zip(anchor_sun.par_chunks_mut(w))
-        .enumerate()
-        .filter(|(y, _)| y % 2 == 0)
-        .for_each(|(y, ((row, prow), srow))| {
-            for x in (0..w).step_by(2) {
-                (row[x], prow[x], srow[x]) = if x % 4 == 0 && y % 4 == 0 {
-                    coarse[(y / 4) * cw + x / 4]
+    // Anchors are the even pixels of even rows: `aw` of them a row.
+    let aw = w.div_ceil(2);
+    let mut scratch = Scratch::take();
+    let Scratch {
+        anchors,
+        radiance: radiance_buf,
+        prim,
+    } = &mut scratch;
+    // Every slot of the three buffers is written below before it is read.
+    anchors.resize(aw * h.div_ceil(2), (Vec3::ZERO, INVALID, NO_SUN));
+    radiance_buf.resize(w * h, Vec3::ZERO);
+    prim.resize(w * h, INVALID);
+    anchors.par_chunks_mut(aw).enumerate().for_each(|(ay, row)| {
+        let y = 2 * ay;
+        for (ax, slot) in row.iter_mut().enumerate() {
+            let x = 2 * ax;
+            *slot = if x % 4 == 0 && y % 4 == 0 {
+                coarse[(y / 4) * cw + x / 4]
+            } else {
+                let d = rays.dirs[y * w + x];
+                if d == Vec3::ZERO {
+                    (Vec3::ZERO, INVALID, NO_SUN)
                 } else {
-                    let d = rays.dirs[y * w + x];
-                    if d == Vec3::ZERO {
-                        (Vec3::ZERO, INVALID, NO_SUN)
-                    } else {
-                        let dir = rot * d;
-                        let hit = world.trace_with(origin, dir, SKY_DISTANCE_M, candidate(d));
-                        let hint = hit.and_then(|hit| {
-                            let spacing = 4.0 * footprint(&hit, dir, rays.pixel_angle);
-                            (spacing <= COARSE_SUN_SPACING_M)
-                                .then(|| coarse_sun(&coarse, cw, (w, h), (x, y), hit.primitive))
-                                .flatten()
-                        });
-                        shade_hit(world, dir, hit, rays.pixel_angle, hint)
-                    }
-                };
-            }
-        });
+                    let dir = rot * d;
+                    let hit = world.trace_with(origin, dir, SKY_DISTANCE_M, candidate(d));
+                    let hint = hit.and_then(|hit| {
+                        let spacing = 4.0 * footprint(&hit, dir, rays.pixel_angle);
+                        (spacing <= COARSE_SUN_SPACING_M)
+                            .then(|| coarse_sun(&coarse, cw, (w, h), (x, y), hit.primitive))
+                            .flatten()
+                    });
+                    shade_hit(world, dir, hit, rays.pixel_angle, hint)
+                }
+            };
+        }
+    });
+    let anchor = |x: usize, y: usize| anchors[(y / 2) * aw + x / 2];
     // Pass 2: every other pixel is interpolated from its two or four anchors when they see the
     // same primitive as the pixel's own ray and agree in colour; otherwise it is shaded, without
     // a shadow ray when those anchors agree on the sun.
-    let mut radiance_buf = vec![Vec3::ZERO; w * h];
-    let mut prim = vec![INVALID; w * h];
     radiance_buf
         .par_chunks_mut(w)
         .zip(prim.par_chunks_mut(w))
@@ -315,7 +350,7 @@ pub fn render(
             for x in 0..w {
                 let k = y * w + x;
                 if x % 2 == 0 && y % 2 == 0 {
-                    (row[x], prow[x]) = (anchor_rad[k], anchor_prim[k]);
+                    (row[x], prow[x], _) = anchor(x, y);
                     continue;
                 }
                 let d = rays.dirs[k];
@@ -329,15 +364,13 @@ pub fn render(
                     continue;
                 }
                 let (mut lo, mut hi, mut sum) = (Vec3::MAX, Vec3::MIN, Vec3::ZERO);
-                let first = ys[0] * w + xs[0];
-                let (face, first_sun) = (anchor_prim[first], anchor_sun[first]);
+                let (_, face, first_sun) = anchor(xs[0], ys[0]);
                 let (mut anchors_agree, mut same_sun) = (true, true);
                 for &ay in ys {
                     for &ax in xs {
-                        let a = ay * w + ax;
-                        anchors_agree &= anchor_prim[a] == face;
-                        same_sun &= anchor_sun[a] == first_sun;
-                        let c = anchor_rad[a];
+                        let (c, a_face, a_sun) = anchor(ax, ay);
+                        anchors_agree &= a_face == face;
+                        same_sun &= a_sun == first_sun;
                         (lo, hi, sum) = (lo.min(c), hi.max(c), sum + c);
                     }
                 }
@@ -372,36 +405,29 @@ pub fn render(
     // Pass 3: 4 sub-samples where a neighbour hit another primitive, each shaded at half the
     // pixel's footprint (reusing the pixel's own colour for sub-samples on its face moves the
     // LiDAR-silhouette-to-edge measure of tests/sim_acceptance.rs from 0.97 to 1.01 px).
-    let refined: Vec<(usize, Vec3)> = (0..w * h)
-        .into_par_iter()
-        .with_min_len(4096)
-        .filter_map(|k| {
-            let (x, y) = (k % w, k / w);
-            let p = prim[k];
-            let edge = (x + 1 < w && prim[k + 1] != p)
-                || (y + 1 < h && prim[k + w] != p)
-                || (x > 0 && prim[k - 1] != p)
-                || (y > 0 && prim[k - w] != p);
-            if !edge || p == INVALID {
-                return None;
+    // Then exposure, tone, vignetting, noise and gamma, row by row.
+    let edge_sample = |x: usize, y: usize| -> Option<Vec3> {
+        let k = y * w + x;
+        let p = prim[k];
+        let edge = (x + 1 < w && prim[k + 1] != p)
+            || (y + 1 < h && prim[k + w] != p)
+            || (x > 0 && prim[k - 1] != p)
+            || (y > 0 && prim[k - w] != p);
+        if !edge || p == INVALID {
+            return None;
+        }
+        let mut sum = Vec3::ZERO;
+        for (dx, dy) in [(-0.25, -0.25), (0.25, -0.25), (-0.25, 0.25), (0.25, 0.25)] {
+            let d = rays.dir(intr, x as f32 + dx, y as f32 + dy);
+            if d == Vec3::ZERO {
+                continue;
             }
-            let mut sum = Vec3::ZERO;
-            for (dx, dy) in [(-0.25, -0.25), (0.25, -0.25), (-0.25, 0.25), (0.25, 0.25)] {
-                let d = rays.dir(intr, x as f32 + dx, y as f32 + dy);
-                if d == Vec3::ZERO {
-                    continue;
-                }
-                let dir = rot * d;
-                let hit = world.trace_with(origin, dir, SKY_DISTANCE_M, candidate(d));
-                sum += shade_hit(world, dir, hit, rays.pixel_angle * 0.5, None).0;
-            }
-            Some((k, sum * 0.25))
-        })
-        .collect();
-    for (k, c) in refined {
-        radiance_buf[k] = c;
-    }
-    // Exposure, tone, vignetting, noise, gamma.
+            let dir = rot * d;
+            let hit = world.trace_with(origin, dir, SKY_DISTANCE_M, candidate(d));
+            sum += shade_hit(world, dir, hit, rays.pixel_angle * 0.5, None).0;
+        }
+        Some(sum * 0.25)
+    };
     let (cx, cy) = (intr.cx as f32, intr.cy as f32);
     // (2 r / diagonal)², so the vignette needs no square root.
     let inv_diag2 = 4.0 / (w * w + h * h) as f32;
@@ -412,7 +438,8 @@ pub fn render(
         for x in 0..w {
             let r2 = (((x as f32 - cx).powi(2) + (y as f32 - cy).powi(2)) * inv_diag2).min(2.25);
             let vignette = 1.0 - 0.25 * r2;
-            let c = radiance_buf[y * w + x] * exposure.gain * tint * vignette * 0.8;
+            let radiance = edge_sample(x, y).unwrap_or(radiance_buf[y * w + x]);
+            let c = radiance * exposure.gain * tint * vignette * 0.8;
             let noise = gaussian3(x as u32, y as u32, exposure.seed);
             for ch in 0..3 {
                 // Filmic-ish shoulder, then gamma.
@@ -422,6 +449,7 @@ pub fn render(
             }
         }
     });
+    scratch.give_back();
     img
 }
 
