@@ -314,30 +314,33 @@ pub fn render(
     anchors.resize(aw * h.div_ceil(2), (Vec3::ZERO, INVALID, NO_SUN));
     radiance_buf.resize(w * h, Vec3::ZERO);
     prim.resize(w * h, INVALID);
-    anchors.par_chunks_mut(aw).enumerate().for_each(|(ay, row)| {
-        let y = 2 * ay;
-        for (ax, slot) in row.iter_mut().enumerate() {
-            let x = 2 * ax;
-            *slot = if x % 4 == 0 && y % 4 == 0 {
-                coarse[(y / 4) * cw + x / 4]
-            } else {
-                let d = rays.dirs[y * w + x];
-                if d == Vec3::ZERO {
-                    (Vec3::ZERO, INVALID, NO_SUN)
+    anchors
+        .par_chunks_mut(aw)
+        .enumerate()
+        .for_each(|(ay, row)| {
+            let y = 2 * ay;
+            for (ax, slot) in row.iter_mut().enumerate() {
+                let x = 2 * ax;
+                *slot = if x % 4 == 0 && y % 4 == 0 {
+                    coarse[(y / 4) * cw + x / 4]
                 } else {
-                    let dir = rot * d;
-                    let hit = world.trace_with(origin, dir, SKY_DISTANCE_M, candidate(d));
-                    let hint = hit.and_then(|hit| {
-                        let spacing = 4.0 * footprint(&hit, dir, rays.pixel_angle);
-                        (spacing <= COARSE_SUN_SPACING_M)
-                            .then(|| coarse_sun(&coarse, cw, (w, h), (x, y), hit.primitive))
-                            .flatten()
-                    });
-                    shade_hit(world, dir, hit, rays.pixel_angle, hint)
-                }
-            };
-        }
-    });
+                    let d = rays.dirs[y * w + x];
+                    if d == Vec3::ZERO {
+                        (Vec3::ZERO, INVALID, NO_SUN)
+                    } else {
+                        let dir = rot * d;
+                        let hit = world.trace_with(origin, dir, SKY_DISTANCE_M, candidate(d));
+                        let hint = hit.and_then(|hit| {
+                            let spacing = 4.0 * footprint(&hit, dir, rays.pixel_angle);
+                            (spacing <= COARSE_SUN_SPACING_M)
+                                .then(|| coarse_sun(&coarse, cw, (w, h), (x, y), hit.primitive))
+                                .flatten()
+                        });
+                        shade_hit(world, dir, hit, rays.pixel_angle, hint)
+                    }
+                };
+            }
+        });
     let anchor = |x: usize, y: usize| anchors[(y / 2) * aw + x / 2];
     // Pass 2: every other pixel is interpolated from its two or four anchors when they see the
     // same primitive as the pixel's own ray and agree in colour; otherwise it is shaded, without

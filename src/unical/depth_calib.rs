@@ -1050,8 +1050,8 @@ impl DepthCalibration {
             self.iteration,
             self.config.iterations,
         );
-        let grid = GradAccumulator::drain_all(&mut self.grid_accs);
-        self.grid_opt.step(&mut self.field.grid.params, &grid, lr);
+        self.grid_opt
+            .step_accumulated(&mut self.field.grid.params, &mut self.grid_accs, lr);
         self.mlp_opt
             .step(&mut self.mlp_params, &grad_flat(&geo), lr);
         mlp_set(&mut self.field.geo, &self.mlp_params);
@@ -1355,8 +1355,11 @@ impl DepthCalibration {
                     .step(&mut stage.colour_params, &grad_flat(&colour), lr_field);
                 mlp_set(&mut stage.appearance.colour, &stage.colour_params);
                 if let Some(b) = stage.background.as_mut() {
-                    let grid = GradAccumulator::drain_all(&mut b.grid_accs);
-                    b.grid_opt.step(&mut b.field.grid.params, &grid, lr_field);
+                    b.grid_opt.step_accumulated(
+                        &mut b.field.grid.params,
+                        &mut b.grid_accs,
+                        lr_field,
+                    );
                     b.mlp_opt
                         .step(&mut b.mlp_params, &grad_flat(&background_mlp), lr_field);
                     mlp_set(&mut b.field.geo, &b.mlp_params);
@@ -1367,9 +1370,8 @@ impl DepthCalibration {
                 mlp_set(&mut stage.appearance.sky, &stage.sky_params);
             }
         }
-        let grid = GradAccumulator::drain_all(&mut self.grid_accs);
         self.grid_opt
-            .step(&mut self.field.grid.params, &grid, lr_field);
+            .step_accumulated(&mut self.field.grid.params, &mut self.grid_accs, lr_field);
         self.mlp_opt
             .step(&mut self.mlp_params, &grad_flat(&geo), lr_field);
         mlp_set(&mut self.field.geo, &self.mlp_params);

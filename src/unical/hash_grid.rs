@@ -13,6 +13,8 @@
 //! touched entries (a step touches a tiny fraction of the table; method.md §18). Spatial gradient:
 //! the derivative of the trilinear weights times `scale_l`, used for pose gradients and Eikonal.
 
+use rayon::prelude::*;
+
 /// Features per entry.
 pub const F: usize = 2;
 
@@ -129,21 +131,24 @@ impl GradSink for Scaled<'_> {
 }
 
 /// Sums sparse gradients by scattering into a dense buffer (O(n), where sorting the millions of
-/// (entry, gradient) pairs of a step was the step's largest cost), remembering which entries
-/// were touched so only they are read back and cleared. Allocated once per optimisation.
+/// (entry, gradient) pairs of a step was the step's largest cost), marking which blocks of
+/// [`ACC_BLOCK`] entries were touched so only they are read back and cleared. Allocated once
+/// per optimisation; [`super::adam::SparseAdam::step_accumulated`] reads and clears several in
+/// one parallel pass in index order.
 #[derive(Clone, Debug)]
 pub struct GradAccumulator {
     grad: Vec<f32>,
-    touched: Vec<u32>,
-    is_touched: Vec<bool>,
+    dirty: Vec<bool>,
 }
+
+/// Entries per dirty flag of a [`GradAccumulator`].
+pub const ACC_BLOCK: usize = 64;
 
 impl GradAccumulator {
     pub fn new(entries: usize) -> Self {
         Self {
             grad: vec![0.0; entries * F],
-            touched: Vec::new(),
-            is_touched: vec![false; entries],
+            dirty: vec![false; entries.div_ceil(ACC_BLOCK)],
         }
     }
 
@@ -158,46 +163,79 @@ impl GradAccumulator {
     #[inline]
     pub fn add_one(&mut self, entry: u32, v: [f32; F]) {
         let e = entry as usize;
-        if e >= self.is_touched.len() {
+        let Some(slot) = self.grad.get_mut(e * F..e * F + F) else {
             return;
-        }
-        if !self.is_touched[e] {
-            self.is_touched[e] = true;
-            self.touched.push(entry);
-        }
+        };
         for f in 0..F {
-            self.grad[e * F + f] += v[f];
+            slot[f] += v[f];
         }
+        self.dirty[e / ACC_BLOCK] = true;
+    }
+
+    /// Add every other accumulator into the first (in order, so the sums are deterministic) and
+    /// empty them; block-parallel.
+    pub fn reduce_into_first(accs: &mut [GradAccumulator]) {
+        let Some((first, rest)) = accs.split_first_mut() else {
+            return;
+        };
+        for acc in rest {
+            first
+                .grad
+                .par_chunks_mut(ACC_BLOCK * F)
+                .zip(first.dirty.par_iter_mut())
+                .zip(acc.grad.par_chunks_mut(ACC_BLOCK * F))
+                .zip(acc.dirty.par_iter_mut())
+                .with_min_len(256)
+                .for_each(|(((into, into_dirty), from), from_dirty)| {
+                    if std::mem::take(from_dirty) {
+                        for (a, b) in into.iter_mut().zip(from.iter_mut()) {
+                            *a += std::mem::take(b);
+                        }
+                        *into_dirty = true;
+                    }
+                });
+        }
+    }
+
+    /// Blocks of [`ACC_BLOCK`] entries: their gradients (`ACC_BLOCK · F` values) and whether
+    /// any was touched, for a consumer that clears them ([`Self::reduce_into_first`] first).
+    pub(crate) fn blocks_mut(
+        &mut self,
+    ) -> impl IndexedParallelIterator<Item = (&mut [f32], &mut bool)> {
+        self.grad
+            .par_chunks_mut(ACC_BLOCK * F)
+            .zip(self.dirty.par_iter_mut())
     }
 
     /// Sum several accumulators (in order, so the result is deterministic) and empty them.
     pub fn drain_all(accs: &mut [GradAccumulator]) -> SparseGrad {
-        let Some((first, rest)) = accs.split_first_mut() else {
-            return SparseGrad::default();
-        };
-        for acc in rest {
-            let g = acc.drain();
-            first.add(&g, 1.0);
-        }
-        first.drain()
+        Self::reduce_into_first(accs);
+        accs.first_mut().map(Self::drain).unwrap_or_default()
     }
 
-    /// The summed gradient (one item per touched entry, in first-touch order); the
+    /// The summed gradient, in entry order: every entry of a touched block whose gradient is
+    /// not zero (an entry whose contributions cancel exactly moves no optimiser either). The
     /// accumulator is empty afterwards.
     pub fn drain(&mut self) -> SparseGrad {
-        let mut out = SparseGrad {
-            entries: Vec::with_capacity(self.touched.len()),
-        };
-        for &entry in &self.touched {
-            let e = entry as usize;
-            let mut v = [0f32; F];
-            for f in 0..F {
-                v[f] = std::mem::take(&mut self.grad[e * F + f]);
+        let mut out = SparseGrad::default();
+        for (block, (grads, dirty)) in self
+            .grad
+            .chunks_mut(ACC_BLOCK * F)
+            .zip(self.dirty.iter_mut())
+            .enumerate()
+        {
+            if !std::mem::take(dirty) {
+                continue;
             }
-            self.is_touched[e] = false;
-            out.entries.push((entry, v));
+            for (k, g) in grads.chunks_exact_mut(F).enumerate() {
+                if g.iter().any(|v| *v != 0.0) {
+                    let mut v = [0f32; F];
+                    v.copy_from_slice(g);
+                    g.fill(0.0);
+                    out.entries.push(((block * ACC_BLOCK + k) as u32, v));
+                }
+            }
         }
-        self.touched.clear();
         out
     }
 }
