@@ -141,6 +141,9 @@ pub struct GradAccumulator {
     dirty: Vec<bool>,
 }
 
+/// Levels whose corners are found together before the table is read.
+const LEVEL_CHUNK: usize = 16;
+
 /// Entries per dirty flag of a [`GradAccumulator`].
 pub const ACC_BLOCK: usize = 64;
 
@@ -242,6 +245,7 @@ impl GradAccumulator {
 
 /// The 8 corners of one level: entry indices and trilinear weights, plus what the spatial
 /// gradient needs.
+#[derive(Clone, Copy, Default)]
 struct Corners {
     entry: [u32; 8],
     weight: [f32; 8],
@@ -377,24 +381,35 @@ impl HashGrid {
         }
     }
 
-    /// Encode `x` ∈ [0,1]³ into `out` (length `L·F`).
+    /// Encode `x` ∈ [0,1]³ into `out` (length `L·F`). Every level's corners are found before
+    /// any is read, so the table reads (random, into tens of megabytes) are independent loads
+    /// the processor overlaps instead of each waiting behind the next level's arithmetic.
     pub fn encode(&self, x: [f32; 3], out: &mut [f32]) {
-        for (l, level) in self.levels.iter().enumerate() {
-            let w = self.level_weights[l];
-            if w == 0.0 {
-                out[l * F..(l + 1) * F].fill(0.0);
-                continue;
-            }
-            let c = self.corners(level, x);
-            let mut acc = [0f32; F];
-            for k in 0..8 {
-                let base = c.entry[k] as usize * F;
-                for f in 0..F {
-                    acc[f] += c.weight[k] * self.params[base + f];
+        for (chunk, levels) in self.levels.chunks(LEVEL_CHUNK).enumerate() {
+            let first = chunk * LEVEL_CHUNK;
+            let mut corners = [Corners::default(); LEVEL_CHUNK];
+            for (j, level) in levels.iter().enumerate() {
+                if self.level_weights[first + j] != 0.0 {
+                    corners[j] = self.corners(level, x);
                 }
             }
-            for f in 0..F {
-                out[l * F + f] = w * acc[f];
+            for (j, c) in corners[..levels.len()].iter().enumerate() {
+                let l = first + j;
+                let w = self.level_weights[l];
+                if w == 0.0 {
+                    out[l * F..(l + 1) * F].fill(0.0);
+                    continue;
+                }
+                let mut acc = [0f32; F];
+                for k in 0..8 {
+                    let base = c.entry[k] as usize * F;
+                    for f in 0..F {
+                        acc[f] += c.weight[k] * self.params[base + f];
+                    }
+                }
+                for f in 0..F {
+                    out[l * F + f] = w * acc[f];
+                }
             }
         }
     }
@@ -423,7 +438,7 @@ impl HashGrid {
     }
 
     /// [`HashGrid::backward`] and [`HashGrid::grad_x`] in one pass over the corners (the hot
-    /// path of every ray sample's backward pass).
+    /// path of every ray sample's backward pass); corners first, as in [`HashGrid::encode`].
     pub fn backward_and_grad_x(
         &self,
         x: [f32; 3],
@@ -431,38 +446,45 @@ impl HashGrid {
         mut grad: Option<&mut impl GradSink>,
     ) -> [f32; 3] {
         let mut gx = [0f32; 3];
-        for (l, level) in self.levels.iter().enumerate() {
-            let Some(g) = self.level_grad(l, d_out) else {
-                continue;
-            };
-            let c = self.corners(level, x);
-            if let Some(grad) = grad.as_deref_mut() {
-                for k in 0..8 {
-                    let mut e = [0f32; F];
-                    for f in 0..F {
-                        e[f] = c.weight[k] * g[f];
-                    }
-                    grad.add(c.entry[k], e);
+        for (chunk, levels) in self.levels.chunks(LEVEL_CHUNK).enumerate() {
+            let first = chunk * LEVEL_CHUNK;
+            let mut work = [(Corners::default(), [0f32; F], 0f32); LEVEL_CHUNK];
+            let mut n = 0;
+            for (j, level) in levels.iter().enumerate() {
+                if let Some(g) = self.level_grad(first + j, d_out) {
+                    work[n] = (self.corners(level, x), g, level.scale);
+                    n += 1;
                 }
             }
-            for k in 0..8 {
-                let base = c.entry[k] as usize * F;
-                let mut dot = 0.0;
-                for f in 0..F {
-                    dot += g[f] * self.params[base + f];
-                }
-                for d in 0..3 {
-                    // ∂w/∂x_d = ±(product of the other two factors)·scale
-                    let mut dw = level.scale;
-                    for e in 0..3 {
-                        let bit = (k >> e) & 1;
-                        if e == d {
-                            dw *= if bit == 1 { 1.0 } else { -1.0 };
-                        } else {
-                            dw *= if bit == 1 { c.frac[e] } else { 1.0 - c.frac[e] };
+            for (c, g, scale) in &work[..n] {
+                if let Some(grad) = grad.as_deref_mut() {
+                    for k in 0..8 {
+                        let mut e = [0f32; F];
+                        for f in 0..F {
+                            e[f] = c.weight[k] * g[f];
                         }
+                        grad.add(c.entry[k], e);
                     }
-                    gx[d] += dw * dot;
+                }
+                for k in 0..8 {
+                    let base = c.entry[k] as usize * F;
+                    let mut dot = 0.0;
+                    for f in 0..F {
+                        dot += g[f] * self.params[base + f];
+                    }
+                    for d in 0..3 {
+                        // ∂w/∂x_d = ±(product of the other two factors)·scale
+                        let mut dw = *scale;
+                        for e in 0..3 {
+                            let bit = (k >> e) & 1;
+                            if e == d {
+                                dw *= if bit == 1 { 1.0 } else { -1.0 };
+                            } else {
+                                dw *= if bit == 1 { c.frac[e] } else { 1.0 - c.frac[e] };
+                            }
+                        }
+                        gx[d] += dw * dot;
+                    }
                 }
             }
         }
