@@ -83,11 +83,11 @@ impl SceneField {
     /// Evaluate the field at a world point.
     pub fn query(&self, world: DVec3) -> FieldSample {
         let unit = self.unit(world);
-        let mut h = vec![0.0; self.grid.output_dim()];
-        self.grid.encode(unit, &mut h);
         FieldSample {
             unit,
-            trace: self.geo.forward(&h),
+            trace: self
+                .geo
+                .forward_from(self.grid.output_dim(), |h| self.grid.encode(unit, h)),
         }
     }
 

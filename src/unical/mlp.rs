@@ -25,16 +25,26 @@ pub struct MlpGrad {
     pub bias: Vec<Vec<f32>>,
 }
 
-/// Activations of one forward pass: `acts[0]` is the input, `acts[k]` the output of layer k-1
-/// (after ReLU for hidden layers).
+/// Activations of one forward pass, all in one buffer (one allocation per sample on the hot
+/// path): activation `k` is `data[ends[k-1]..ends[k]]` (`ends[-1] = 0`); activation 0 is the
+/// input, activation k the output of layer k-1 (after ReLU for hidden layers).
 #[derive(Clone, Debug, Default)]
 pub struct Trace {
-    pub acts: Vec<Vec<f32>>,
+    data: Vec<f32>,
+    ends: Vec<usize>,
 }
 
 impl Trace {
+    fn act(&self, k: usize) -> &[f32] {
+        let start = if k == 0 { 0 } else { self.ends[k - 1] };
+        &self.data[start..self.ends[k]]
+    }
+
     pub fn output(&self) -> &[f32] {
-        self.acts.last().map_or(&[], |a| a.as_slice())
+        match self.ends.len() {
+            0 => &[],
+            n => self.act(n - 1),
+        }
     }
 }
 
@@ -90,39 +100,57 @@ impl Mlp {
 
     /// Forward pass keeping the activations.
     pub fn forward(&self, input: &[f32]) -> Trace {
-        let mut acts = Vec::with_capacity(self.layers.len() + 1);
-        acts.push(input.to_vec());
+        self.forward_from(input.len(), |x| x.copy_from_slice(input))
+    }
+
+    /// Forward pass on an input of `input_len` values that `write_input` writes in place (an
+    /// encoding straight into the trace, without a buffer of its own).
+    pub fn forward_from(&self, input_len: usize, write_input: impl FnOnce(&mut [f32])) -> Trace {
+        let mut ends = Vec::with_capacity(self.layers.len() + 1);
+        ends.push(input_len);
+        for layer in &self.layers {
+            ends.push(ends[ends.len() - 1] + layer.outputs);
+        }
+        let mut data = vec![0.0; ends[ends.len() - 1]];
+        write_input(&mut data[..input_len]);
         let last = self.layers.len().saturating_sub(1);
+        let mut start = 0;
         for (k, layer) in self.layers.iter().enumerate() {
-            let x = &acts[k];
-            let mut y = layer.bias.clone();
+            let (done, rest) = data.split_at_mut(ends[k]);
+            let x = &done[start..];
+            let y = &mut rest[..layer.outputs];
+            y.copy_from_slice(&layer.bias);
             for (yo, row) in y.iter_mut().zip(layer.weights.chunks_exact(layer.inputs)) {
                 *yo += dot(row, x);
                 if k < last {
                     *yo = yo.max(0.0);
                 }
             }
-            acts.push(y);
+            start = ends[k];
         }
-        Trace { acts }
+        Trace { data, ends }
     }
 
     /// Backward pass: accumulate parameter gradients into `grad`, return d(loss)/d(input).
     pub fn backward(&self, trace: &Trace, d_output: &[f32], grad: &mut MlpGrad) -> Vec<f32> {
-        let mut delta = d_output.to_vec();
+        let widest = self.layers.iter().map(|l| l.inputs).max().unwrap_or(0);
+        let mut delta = Vec::with_capacity(widest.max(d_output.len()));
+        delta.extend_from_slice(d_output);
+        let mut d_in = Vec::with_capacity(widest);
         let last = self.layers.len().saturating_sub(1);
         for k in (0..self.layers.len()).rev() {
             let layer = &self.layers[k];
             if k < last {
                 // ReLU: no gradient where the unit was off.
-                for (d, a) in delta.iter_mut().zip(&trace.acts[k + 1]) {
+                for (d, a) in delta.iter_mut().zip(trace.act(k + 1)) {
                     if *a <= 0.0 {
                         *d = 0.0;
                     }
                 }
             }
-            let x = &trace.acts[k][..layer.inputs];
-            let mut d_in = vec![0.0; layer.inputs];
+            let x = &trace.act(k)[..layer.inputs];
+            d_in.clear();
+            d_in.resize(layer.inputs, 0.0);
             let rows = layer.weights.chunks_exact(layer.inputs);
             let grad_rows = grad.weights[k].chunks_exact_mut(layer.inputs);
             for (((&d, w), g), b) in delta.iter().zip(rows).zip(grad_rows).zip(&mut grad.bias[k]) {
@@ -138,7 +166,7 @@ impl Mlp {
                     *di += d * wi;
                 }
             }
-            delta = d_in;
+            std::mem::swap(&mut delta, &mut d_in);
         }
         delta
     }
