@@ -108,32 +108,49 @@ impl SparseAdam {
 }
 
 impl SparseAdam {
-    /// [`Self::step`] on the sum of `accs` (see [`GradAccumulator::reduce_into_first`]), read
-    /// and cleared block by block in parallel in index order instead of through a list of
-    /// entries in touch order: the same sums and the same updates, without the random walk
-    /// over three table-sized arrays.
+    /// [`Self::step`] on the sum of `accs` (added in order, so the sums are deterministic),
+    /// read and cleared block by block in parallel in index order instead of through a list of
+    /// entries in touch order: the same sums and the same updates, in one pass over the table,
+    /// its moments and the accumulators.
     pub fn step_accumulated(&mut self, params: &mut [f32], accs: &mut [GradAccumulator], lr: f32) {
-        GradAccumulator::reduce_into_first(accs);
-        let Some(acc) = accs.first_mut() else {
-            return;
-        };
         self.step += 1;
         let c = self.config;
         let bc1 = 1.0 - c.beta1.powi(self.step);
         let bc2 = 1.0 - c.beta2.powi(self.step);
         let block = ACC_BLOCK * F;
+        // Block-major: block b of every accumulator at `parts[b·n..(b+1)·n]` (disjoint borrows).
+        let n = accs.len().max(1);
+        let mut blocks: Vec<_> = accs.iter_mut().map(|a| a.blocks_mut()).collect();
+        let mut parts: Vec<(&mut [f32], &mut bool)> = Vec::new();
+        'blocks: loop {
+            for it in blocks.iter_mut() {
+                match it.next() {
+                    Some(part) => parts.push(part),
+                    None => break 'blocks,
+                }
+            }
+        }
         params
             .par_chunks_mut(block)
             .zip(self.m.par_chunks_mut(block))
             .zip(self.v.par_chunks_mut(block))
-            .zip(acc.blocks_mut())
+            .zip(parts.par_chunks_mut(n))
             .with_min_len(256)
-            .for_each(|(((p, m), v), (g, dirty))| {
-                if !std::mem::take(dirty) {
+            .for_each(|(((p, m), v), parts)| {
+                let mut any = false;
+                for (_, dirty) in parts.iter_mut() {
+                    any |= std::mem::take(*dirty);
+                }
+                if !any {
                     return;
                 }
-                for (i, gi) in g.iter_mut().enumerate() {
-                    let gf = std::mem::take(gi);
+                for i in 0..p.len() {
+                    let mut gf = 0.0f32;
+                    for (g, _) in parts.iter_mut() {
+                        if let Some(gi) = g.get_mut(i) {
+                            gf += std::mem::take(gi);
+                        }
+                    }
                     if gf == 0.0 {
                         continue;
                     }

@@ -323,9 +323,10 @@ struct AlignmentGrads {
     kept: usize,
 }
 
-/// One gradient accumulator per parallel chunk of rays: two chunks per thread.
+/// One gradient accumulator per parallel chunk of rays: one chunk per thread (each is a
+/// table-sized buffer every step reads back).
 fn accumulators(entries: usize) -> Vec<GradAccumulator> {
-    let chunks = rayon::current_num_threads().max(1) * 2;
+    let chunks = rayon::current_num_threads().max(1);
     (0..chunks).map(|_| GradAccumulator::new(entries)).collect()
 }
 

@@ -201,13 +201,11 @@ impl GradAccumulator {
     }
 
     /// Blocks of [`ACC_BLOCK`] entries: their gradients (`ACC_BLOCK · F` values) and whether
-    /// any was touched, for a consumer that clears them ([`Self::reduce_into_first`] first).
-    pub(crate) fn blocks_mut(
-        &mut self,
-    ) -> impl IndexedParallelIterator<Item = (&mut [f32], &mut bool)> {
+    /// any was touched, for a consumer that clears both.
+    pub(crate) fn blocks_mut(&mut self) -> impl Iterator<Item = (&mut [f32], &mut bool)> {
         self.grad
-            .par_chunks_mut(ACC_BLOCK * F)
-            .zip(self.dirty.par_iter_mut())
+            .chunks_mut(ACC_BLOCK * F)
+            .zip(self.dirty.iter_mut())
     }
 
     /// Sum several accumulators (in order, so the result is deterministic) and empty them.
@@ -337,10 +335,10 @@ impl HashGrid {
         let mut cell = [0u32; 3];
         let mut frac = [0f32; 3];
         for d in 0..3 {
+            // pos ≥ 0.5, so truncation is the floor (without a libm call on baseline x86-64).
             let pos = x[d].clamp(0.0, 1.0) * level.scale + 0.5;
-            let c = pos.floor();
-            cell[d] = c as u32;
-            frac[d] = pos - c;
+            cell[d] = pos as u32;
+            frac[d] = pos - cell[d] as f32;
         }
         let mut entry = [0u32; 8];
         let mut weight = [0f32; 8];
