@@ -5,7 +5,8 @@
 //! separates "the pose gradient points the wrong way" from "the scene co-adapts to the error".
 //! `cargo run --release --example unical_probe -- [SCENE_STEPS] [POSE_STEPS] [frozen|joint|rounds] [SECONDS] [LR_POSE]`
 //! (`rounds`: `PROBE_ROUNDS` alternations of a scene learned from scratch at the current pose
-//! and preconditioned pose steps against it, from a 1° / 9 cm PandarGT start.)
+//! and preconditioned pose steps against it, from a 1° / 9 cm PandarGT start; with
+//! `PROBE_ROOT_SCENE` only the Pandar64 shapes each round's scene.)
 
 mod common;
 
@@ -94,6 +95,13 @@ fn main() {
                 iterations: scene_steps + 1,
                 pose_warmup: scene_steps + 1,
                 lidar_pose_update: PoseUpdate::Newton(newton),
+                // PROBE_ROOT_SCENE: only the Pandar64 shapes the scene (the PandarGT only clears
+                // free space), so the scene carries no PandarGT error.
+                registration_steps: if std::env::var("PROBE_ROOT_SCENE").is_ok() {
+                    usize::MAX / 2
+                } else {
+                    0
+                },
                 ..config.clone()
             };
             let mut calib = DepthCalibration::new(round_config, traj.clone(), lidars);
