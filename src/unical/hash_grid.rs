@@ -454,8 +454,10 @@ impl HashGrid {
                     n += 1;
                 }
             }
-            for (c, g, scale) in &work[..n] {
-                if let Some(grad) = grad.as_deref_mut() {
+            // The table-gradient scatter of every level, then the spatial gradient's reads:
+            // two runs of independent memory accesses.
+            if let Some(grad) = grad.as_deref_mut() {
+                for (c, g, _) in &work[..n] {
                     for k in 0..8 {
                         let mut e = [0f32; F];
                         for f in 0..F {
@@ -464,6 +466,8 @@ impl HashGrid {
                         grad.add(c.entry[k], e);
                     }
                 }
+            }
+            for (c, g, scale) in &work[..n] {
                 for k in 0..8 {
                     let base = c.entry[k] as usize * F;
                     let mut dot = 0.0;
