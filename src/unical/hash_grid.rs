@@ -340,24 +340,33 @@ impl HashGrid {
             cell[d] = pos as u32;
             frac[d] = pos - cell[d] as f32;
         }
+        // Per axis, the lattice coordinate's contribution to the index and the trilinear
+        // factor for the low (bit 0) and high (bit 1) corner.
+        let r = level.resolution;
+        let stride = if level.dense {
+            [1, r, r.wrapping_mul(r)]
+        } else {
+            PRIMES
+        };
+        let mut term = [[0u32; 2]; 3];
+        let mut factor = [[0f32; 2]; 3];
+        for d in 0..3 {
+            for bit in 0..2 {
+                term[d][bit] = (cell[d] + bit as u32).wrapping_mul(stride[d]);
+            }
+            factor[d] = [1.0 - frac[d], frac[d]];
+        }
         let mut entry = [0u32; 8];
         let mut weight = [0f32; 8];
         for k in 0..8 {
-            let mut w = 1.0;
-            let mut c = [0u32; 3];
-            for d in 0..3 {
-                let bit = (k >> d) & 1;
-                c[d] = cell[d] + bit as u32;
-                w *= if bit == 1 { frac[d] } else { 1.0 - frac[d] };
-            }
+            let (b0, b1, b2) = (k & 1, (k >> 1) & 1, (k >> 2) & 1);
+            weight[k] = factor[0][b0] * factor[1][b1] * factor[2][b2];
             let index = if level.dense {
-                let r = level.resolution;
-                c[0].wrapping_add(c[1].wrapping_mul(r))
-                    .wrapping_add(c[2].wrapping_mul(r).wrapping_mul(r))
+                term[0][b0]
+                    .wrapping_add(term[1][b1])
+                    .wrapping_add(term[2][b2])
             } else {
-                c[0].wrapping_mul(PRIMES[0])
-                    ^ c[1].wrapping_mul(PRIMES[1])
-                    ^ c[2].wrapping_mul(PRIMES[2])
+                term[0][b0] ^ term[1][b1] ^ term[2][b2]
             };
             // Same as `index % size`, without a division on the hot path: dense indices are
             // in range except the clamped far corner, hashed levels have power-of-two sizes.
@@ -370,7 +379,6 @@ impl HashGrid {
                 index % level.size
             };
             entry[k] = (level.offset + slot) as u32;
-            weight[k] = w;
         }
         Corners {
             entry,
