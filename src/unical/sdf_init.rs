@@ -114,13 +114,9 @@ impl PointIndex {
 const NEIGHBOURS: [(i32, i32, i32); 27] = {
     let mut out = [(0, 0, 0); 27];
     let mut k = 1;
-    let mut i = 0;
+    let mut i: i32 = 0;
     while i < 27 {
-        let (dx, dy, dz) = (
-            (i % 3) as i32 - 1,
-            ((i / 3) % 3) as i32 - 1,
-            (i / 9) as i32 - 1,
-        );
+        let (dx, dy, dz) = (i % 3 - 1, (i / 3) % 3 - 1, i / 9 - 1);
         if !(dx == 0 && dy == 0 && dz == 0) {
             out[k] = (dx, dy, dz);
             k += 1;
