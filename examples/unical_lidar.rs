@@ -104,6 +104,14 @@ fn main() {
                     format!("{n} {:.3}° {:.1} cm", r.to_degrees(), d * 100.0)
                 })
                 .collect();
+            // After root alignment: the second LiDAR in the first one's frame.
+            let ext = calib.extrinsics();
+            let relative = (ext.len() >= 2).then(|| {
+                let est = ext[0].1.inverse() * ext[1].1;
+                let (r, d) = (truth[0].inverse() * truth[1]).difference(est);
+                format!(" · relative {:.3}° {:.1} cm", r.to_degrees(), d * 100.0)
+            });
+            let errs = vec![errs.join(" · ") + &relative.unwrap_or_default()];
             eprintln!(
                 "it {it:4} depth loss {:.4} |err| {:.3} m int {:.4} reg {:.3} β {:.1} · {} · {:.2} s/it",
                 r.loss,
