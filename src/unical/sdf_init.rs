@@ -18,8 +18,6 @@
 //! 5 cm; every supervision point costs one field query and one backward pass, about a hundredth
 //! of rendering the ray.
 
-use std::collections::HashMap;
-
 use glam::DVec3;
 
 use super::field::SceneField;
@@ -30,27 +28,7 @@ use super::regulariser::eikonal;
 /// The distance field is truncated here (the scene field starts at +0.5 m everywhere).
 pub const TRUNCATION_M: f64 = 0.5;
 
-/// Hashes lattice keys with one multiply per word (FxHash's scheme): SipHash's resistance to
-/// chosen keys buys nothing for the index's own cells, and its cost showed in profiles.
-#[derive(Default)]
-struct CellHasher(u64);
-
-impl std::hash::Hasher for CellHasher {
-    fn write(&mut self, bytes: &[u8]) {
-        for chunk in bytes.chunks(8) {
-            let mut word = [0u8; 8];
-            word[..chunk.len()].copy_from_slice(chunk);
-            self.0 = (self.0.rotate_left(5) ^ u64::from_le_bytes(word))
-                .wrapping_mul(0x517c_c1b7_2722_0a95);
-        }
-    }
-
-    fn finish(&self) -> u64 {
-        self.0
-    }
-}
-
-type CellMap<V> = HashMap<[i32; 3], V, std::hash::BuildHasherDefault<CellHasher>>;
+type CellMap<V> = crate::util::FastMap<[i32; 3], V>;
 
 /// Nearest-return distances up to [`TRUNCATION_M`].
 pub struct PointIndex {
@@ -67,10 +45,10 @@ impl PointIndex {
 
     /// Index `points`, keeping one per 5 cm cell.
     pub fn new(points: &[DVec3]) -> Self {
-        let mut seen: CellMap<()> = CellMap::default();
+        let mut seen = crate::util::FastSet::default();
         let mut cells: CellMap<Vec<DVec3>> = CellMap::default();
         for p in points {
-            if p.is_finite() && seen.insert(Self::key(*p, Self::THIN_M), ()).is_none() {
+            if p.is_finite() && seen.insert(Self::key(*p, Self::THIN_M)) {
                 cells
                     .entry(Self::key(*p, Self::CELL_M))
                     .or_default()
