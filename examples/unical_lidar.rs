@@ -111,7 +111,7 @@ fn main() {
                 let (r, d) = (truth[0].inverse() * truth[1]).difference(est);
                 format!(" · relative {:.3}° {:.1} cm", r.to_degrees(), d * 100.0)
             });
-            let errs = vec![errs.join(" · ") + &relative.unwrap_or_default()];
+            let errs = errs.join(" · ") + &relative.unwrap_or_default();
             eprintln!(
                 "it {it:4} depth loss {:.4} |err| {:.3} m int {:.4} reg {:.3} β {:.1} · {} · {:.2} s/it",
                 r.loss,
@@ -119,7 +119,7 @@ fn main() {
                 r.intensity_loss,
                 r.regulariser_loss,
                 r.beta,
-                errs.join(" · "),
+                errs,
                 t0.elapsed().as_secs_f64() / (it + 1) as f64
             );
         }
