@@ -6,7 +6,8 @@
 //! `cargo run --release --example unical_probe -- [SCENE_STEPS] [POSE_STEPS] [frozen|joint|rounds] [SECONDS] [LR_POSE]`
 //! (`rounds`: `PROBE_ROUNDS` alternations of a scene learned from scratch at the current pose
 //! and preconditioned pose steps against it, from a 1° / 9 cm PandarGT start; with
-//! `PROBE_ROOT_SCENE` only the Pandar64 shapes each round's scene.)
+//! `PROBE_ROOT_SCENE` only the Pandar64 shapes each round's scene; with `PROBE_SHARED` the
+//! PandarGT's rows are kept only on surfaces the Pandar64 returns from.)
 
 mod common;
 
@@ -80,6 +81,37 @@ fn main() {
             robust_floor_m: 0.02,
             ..NewtonConfig::default()
         };
+        // PROBE_SHARED: the PandarGT's rows only where the Pandar64 has returns (0.5 m voxels
+        // of its points under its true pose, dilated by one).
+        let voxel = |p: DVec3| {
+            let v = (p / 0.5).floor();
+            [v.x as i32, v.y as i32, v.z as i32]
+        };
+        let cover: Option<rigcal::util::FastSet<[i32; 3]>> =
+            std::env::var("PROBE_SHARED").is_ok().then(|| {
+                let mut cover = rigcal::util::FastSet::default();
+                for sweep in &lidars[0].sweeps {
+                    let Ok(world_from_vehicle) = traj.world_from_vehicle(sweep.stamp_nanos) else {
+                        continue;
+                    };
+                    let world_from_lidar = world_from_vehicle * truth[0];
+                    for p in &sweep.points_in_sensor {
+                        let v = voxel(world_from_lidar.transform_point(DVec3::new(
+                            p[0] as f64,
+                            p[1] as f64,
+                            p[2] as f64,
+                        )));
+                        for dx in -1..=1 {
+                            for dy in -1..=1 {
+                                for dz in -1..=1 {
+                                    cover.insert([v[0] + dx, v[1] + dy, v[2] + dz]);
+                                }
+                            }
+                        }
+                    }
+                }
+                cover
+            });
         let t0 = std::time::Instant::now();
         for round in 0..rounds {
             let (er, et) = truth[1].difference(current);
@@ -113,7 +145,11 @@ fn main() {
             for _ in 0..pose_steps {
                 calib.poses[1] = pose;
                 let rays = calib.lidar_batch(1, 2048);
-                let (_, _, system) = calib.lidar_objective(1, &pose, &rays);
+                let (_, _, system) = calib.lidar_objective_where(1, &pose, &rays, |r| {
+                    cover
+                        .as_ref()
+                        .is_none_or(|c| c.contains(&voxel(r.surface_world)))
+                });
                 state.solve_and_apply(&mut pose, &system, 1.0);
             }
             current = pose.to_rigid();

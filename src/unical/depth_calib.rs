@@ -1104,6 +1104,18 @@ impl DepthCalibration {
         pose: &PoseParams,
         rays: &[DepthRay],
     ) -> (f64, super::pose::PoseGrad, TangentSystem) {
+        self.lidar_objective_where(sensor, pose, rays, |_| true)
+    }
+
+    /// [`Self::lidar_objective`] with the preconditioned steps' system built from the rows
+    /// `keep` accepts (e.g. only surfaces another sensor sees too).
+    pub fn lidar_objective_where(
+        &self,
+        sensor: usize,
+        pose: &PoseParams,
+        rays: &[DepthRay],
+        keep: impl Fn(&super::pose_newton::PoseRow) -> bool,
+    ) -> (f64, super::pose::PoseGrad, TangentSystem) {
         let model = LidarModel {
             field: &self.field,
             beta: self.beta(),
@@ -1124,7 +1136,8 @@ impl DepthCalibration {
             + weights.regulariser as f64 * part.regulariser_loss;
         let system = match self.config.lidar_pose_update {
             PoseUpdate::Newton(n) => {
-                robust_system(&part.pose_rows, n.robust_scale, n.robust_floor_m)
+                let rows: Vec<_> = part.pose_rows.into_iter().filter(|r| keep(r)).collect();
+                robust_system(&rows, n.robust_scale, n.robust_floor_m)
             }
             PoseUpdate::Adam => TangentSystem::default(),
         };

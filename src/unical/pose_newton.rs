@@ -83,6 +83,8 @@ impl Default for NewtonConfig {
 pub struct PoseRow {
     pub jacobian: [f64; 6],
     pub residual_m: f64,
+    /// Where the rendered surface of the row's ray is (world frame).
+    pub surface_world: DVec3,
 }
 
 /// The row of a ray of `pose` (vehicle at `world_from_vehicle`, sensor direction `u`, world
@@ -105,6 +107,7 @@ pub fn plane_row(
         return None;
     }
     let d_origin = -n * cos.signum();
+    let origin = pose.ray(world_from_vehicle, u).0;
     Some(PoseRow {
         jacobian: to_tangent(
             world_from_vehicle,
@@ -114,6 +117,7 @@ pub fn plane_row(
             d_origin * surface_depth_m,
         ),
         residual_m: (surface_depth_m - range_m) * cos.abs(),
+        surface_world: origin + d * surface_depth_m,
     })
 }
 
@@ -405,6 +409,7 @@ mod tests {
             let row = row.unwrap_or(PoseRow {
                 jacobian: [9.0; 6],
                 residual_m: 9.0,
+                surface_world: DVec3::ZERO,
             });
             assert!((row.residual_m - 0.2).abs() < 1e-12, "{row:?}");
             assert!((row.jacobian[3] + 1.0).abs() < 1e-12 && row.jacobian[4].abs() < 1e-12);
