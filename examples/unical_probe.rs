@@ -70,9 +70,14 @@ fn main() {
             .ok()
             .and_then(|v| v.parse().ok())
             .unwrap_or(4);
+        // PROBE_START_SCALE scales the start's perturbation (0: from the truth).
+        let start_scale: f64 = std::env::var("PROBE_START_SCALE")
+            .ok()
+            .and_then(|v| v.parse().ok())
+            .unwrap_or(1.0);
         let mut current = truth[1].perturbed_right(
-            DVec3::new(0.6, -0.5, 0.6) * 1f64.to_radians(),
-            DVec3::new(0.06, -0.05, 0.05),
+            DVec3::new(0.6, -0.5, 0.6) * start_scale.to_radians(),
+            DVec3::new(0.06, -0.05, 0.05) * start_scale,
         );
         let newton = NewtonConfig {
             step: 1.0,
@@ -115,10 +120,14 @@ fn main() {
         let t0 = std::time::Instant::now();
         for round in 0..rounds {
             let (er, et) = truth[1].difference(current);
+            let dt = (current.translation - truth[1].translation) * 100.0;
             eprintln!(
-                "round {round}: start {:.3}° {:.2} cm · {:.0} s",
+                "round {round}: start {:.3}° {:.2} cm (vehicle x {:.2} y {:.2} z {:.2} cm) · {:.0} s",
                 er.to_degrees(),
                 et * 100.0,
+                dt.x,
+                dt.y,
+                dt.z,
                 t0.elapsed().as_secs_f64()
             );
             let mut lidars = lidars.clone();
@@ -155,10 +164,14 @@ fn main() {
             current = pose.to_rigid();
         }
         let (er, et) = truth[1].difference(current);
+        let dt = (current.translation - truth[1].translation) * 100.0;
         eprintln!(
-            "end: {:.3}° {:.2} cm · {:.0} s",
+            "end: {:.3}° {:.2} cm (vehicle x {:.2} y {:.2} z {:.2} cm) · {:.0} s",
             er.to_degrees(),
             et * 100.0,
+            dt.x,
+            dt.y,
+            dt.z,
             t0.elapsed().as_secs_f64()
         );
         return;
