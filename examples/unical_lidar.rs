@@ -73,9 +73,6 @@ fn main() {
             rigcal::unical::pose_newton::PoseUpdate::Adam
         },
         beta_init,
-        beta_floor_end: std::env::var("RIGCAL_BETA_FLOOR")
-            .ok()
-            .and_then(|v| v.parse().ok()),
         regulariser_weight,
         ..defaults
     };

@@ -44,11 +44,6 @@ pub struct DepthCalibConfig {
     pub step_m: f64,
     pub max_samples_per_ray: usize,
     pub beta_init: f32,
-    /// A floor under the learnable β that rises exponentially from `beta_init` at the end of
-    /// the pose warm-up to this value at the last iteration (`None`: β is free). Per-sample
-    /// opacity `sigmoid(−β s)` at 10 cm steps renders depth a view-dependent fraction of 1/β
-    /// off the SDF's zero (BENCHMARKS.md), which a sharper surface shrinks.
-    pub beta_floor_end: Option<f32>,
     pub lr_field: f32,
     pub lr_pose: f32,
     /// The first iterations fit the SDF directly to the LiDAR returns ([`super::sdf_init`])
@@ -118,7 +113,6 @@ impl Default for DepthCalibConfig {
             step_m: 0.1,
             max_samples_per_ray: 256,
             beta_init: 20.0,
-            beta_floor_end: None,
             lr_field: 1e-2,
             lr_pose: 1e-3,
             geometry_init_steps: 150,
@@ -520,18 +514,6 @@ impl DepthCalibration {
             occupancy,
             poses,
         }
-    }
-
-    /// ln of [`DepthCalibConfig::beta_floor_end`]'s floor at this iteration (0 without one).
-    fn ln_beta_floor(&self) -> f32 {
-        let Some(end) = self.config.beta_floor_end else {
-            return 0.0;
-        };
-        let start = self.config.pose_warmup.min(self.config.iterations);
-        let span = self.config.iterations.saturating_sub(start).max(1);
-        let s = (self.iteration.saturating_sub(start) as f32 / span as f32).min(1.0);
-        let (a, b) = (self.config.beta_init.max(1e-3).ln(), end.max(1e-3).ln());
-        (a + (b - a) * s).max(0.0)
     }
 
     pub fn beta(&self) -> f32 {
@@ -1413,7 +1395,7 @@ impl DepthCalibration {
             &[(beta_grad * self.beta() as f64) as f32],
             lr_field,
         );
-        self.ln_beta = lb[0].clamp(self.ln_beta_floor(), 8.0);
+        self.ln_beta = lb[0].clamp(0.0, 8.0);
         self.iteration += 1;
         DepthReport {
             loss,
