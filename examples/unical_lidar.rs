@@ -128,7 +128,30 @@ fn main() {
     // ray's elevation (grazing returns from the ground have small negative elevations).
     let mut residuals = Vec::new();
     for s in 0..calib.lidars.len() {
-        residuals.extend(calib.depth_residuals(s, 4000));
+        // Per LiDAR, the median signed error by range: a systematic offset (not the tail) is
+        // what a LiDAR that looks one way reads as a translation.
+        let own = calib.depth_residuals(s, 4000);
+        let bands: Vec<String> = [(0.0, 10.0), (10.0, 20.0), (20.0, 40.0), (40.0, 1e9)]
+            .iter()
+            .map(|&(lo, hi)| {
+                let mut v: Vec<f32> = own
+                    .iter()
+                    .filter(|r| r.range_m >= lo && r.range_m < hi)
+                    .map(|r| r.error_m)
+                    .collect();
+                v.sort_by(f32::total_cmp);
+                match v.get(v.len() / 2) {
+                    Some(m) => format!("{lo}..{hi} m {:+.1} cm (n {})", m * 100.0, v.len()),
+                    None => format!("{lo}..{hi} m -"),
+                }
+            })
+            .collect();
+        eprintln!(
+            "{}: median signed error by range: {}",
+            calib.lidars[s].name,
+            bands.join(" · ")
+        );
+        residuals.extend(own);
     }
     let quantiles = |mut v: Vec<f32>| -> String {
         if v.is_empty() {
