@@ -12,7 +12,7 @@
 mod common;
 
 use glam::DVec3;
-use rigcal::unical::depth_calib::{DepthCalibConfig, DepthCalibration, LidarData};
+use rigcal::unical::depth_calib::{DepthCalibConfig, DepthCalibration};
 use rigcal::unical::pose::PoseParams;
 use rigcal::unical::pose_newton::{NewtonConfig, PoseUpdate};
 
@@ -24,11 +24,7 @@ fn main() {
     let seconds: f64 = args.get(4).and_then(|s| s.parse().ok()).unwrap_or(3.0);
     let lr_pose: f32 = args.get(5).and_then(|s| s.parse().ok()).unwrap_or(1e-3);
     let (rig, traj, world) = common::drive(seconds);
-    let lidars: Vec<LidarData> = rig
-        .lidars
-        .iter()
-        .map(|l| common::lidar_data(&world, l, &traj, seconds, l.vehicle_from_lidar))
-        .collect();
+    let lidars = common::lidars_at_truth(&world, &rig, &traj, seconds);
     let truth: Vec<_> = rig.lidars.iter().map(|l| l.vehicle_from_lidar).collect();
     let root = rig.lidars[0].name.clone();
     let config = DepthCalibConfig {
@@ -118,18 +114,22 @@ fn main() {
                 cover
             });
         let t0 = std::time::Instant::now();
-        for round in 0..rounds {
+        // The PandarGT's error and its translation's components, and the time so far.
+        let describe = |current: rigcal::geometry::Rigid| {
             let (er, et) = truth[1].difference(current);
             let dt = (current.translation - truth[1].translation) * 100.0;
-            eprintln!(
-                "round {round}: start {:.3}° {:.2} cm (vehicle x {:.2} y {:.2} z {:.2} cm) · {:.0} s",
+            format!(
+                "{:.3}° {:.2} cm (vehicle x {:.2} y {:.2} z {:.2} cm) · {:.0} s",
                 er.to_degrees(),
                 et * 100.0,
                 dt.x,
                 dt.y,
                 dt.z,
                 t0.elapsed().as_secs_f64()
-            );
+            )
+        };
+        for round in 0..rounds {
+            eprintln!("round {round}: start {}", describe(current));
             let mut lidars = lidars.clone();
             lidars[1].initial = current;
             let round_config = DepthCalibConfig {
@@ -163,17 +163,7 @@ fn main() {
             }
             current = pose.to_rigid();
         }
-        let (er, et) = truth[1].difference(current);
-        let dt = (current.translation - truth[1].translation) * 100.0;
-        eprintln!(
-            "end: {:.3}° {:.2} cm (vehicle x {:.2} y {:.2} z {:.2} cm) · {:.0} s",
-            er.to_degrees(),
-            et * 100.0,
-            dt.x,
-            dt.y,
-            dt.z,
-            t0.elapsed().as_secs_f64()
-        );
+        eprintln!("end: {}", describe(current));
         return;
     }
     let mut calib = DepthCalibration::new(config, traj, lidars);

@@ -15,7 +15,7 @@
 
 mod common;
 
-use rigcal::unical::depth_calib::{DepthCalibConfig, DepthCalibration, LidarData};
+use rigcal::unical::depth_calib::{DepthCalibConfig, DepthCalibration};
 
 fn peak_rss_mb() -> f64 {
     std::fs::read_to_string("/proc/self/status")
@@ -35,11 +35,7 @@ fn main() {
         .unwrap_or(60);
     let seconds = 3.0;
     let (rig, traj, world) = common::drive(seconds);
-    let lidars: Vec<LidarData> = rig
-        .lidars
-        .iter()
-        .map(|l| common::lidar_data(&world, l, &traj, seconds, l.vehicle_from_lidar))
-        .collect();
+    let lidars = common::lidars_at_truth(&world, &rig, &traj, seconds);
     let config = DepthCalibConfig::default();
     let (init_steps, rays_per_sensor) = (config.geometry_init_steps, config.rays_per_sensor);
     let started = std::time::Instant::now();

@@ -32,6 +32,7 @@ fn run(drive: &Drive, start: &Rig) -> (Rig, Vec<(String, usize)>) {
         &cameras,
         &[],
         TargetConfig::default(),
+        &BoardCache::default(),
     )
     .unwrap();
     for _ in 0..cal.max_steps() {
@@ -179,9 +180,17 @@ fn a_board_cache_searches_each_image_once_and_changes_nothing() {
     let shared = BoardCache::default();
     for lidar in ["pandar64", "pandar_gt"] {
         let cached =
-            TargetProblem::from_drive_cached(&drive, &rig, cam, lidar, &[], &config, &shared)
-                .unwrap();
-        let fresh = TargetProblem::from_drive(&drive, &rig, cam, lidar, &[], &config).unwrap();
+            TargetProblem::from_drive(&drive, &rig, cam, lidar, &[], &config, &shared).unwrap();
+        let fresh = TargetProblem::from_drive(
+            &drive,
+            &rig,
+            cam,
+            lidar,
+            &[],
+            &config,
+            &BoardCache::default(),
+        )
+        .unwrap();
         assert!(!fresh.views.is_empty(), "{lidar}");
         assert_eq!(cached.views, fresh.views, "{lidar}");
     }

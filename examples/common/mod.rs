@@ -46,3 +46,17 @@ pub fn lidar_data(
             .collect(),
     }
 }
+
+/// Every LiDAR's sweeps over the first `seconds`, starting from its true pose.
+#[allow(dead_code)] // unical_lidar starts from perturbed poses instead
+pub fn lidars_at_truth(
+    world: &World,
+    rig: &SimRig,
+    traj: &Trajectory,
+    seconds: f64,
+) -> Vec<LidarData> {
+    rig.lidars
+        .iter()
+        .map(|l| lidar_data(world, l, traj, seconds, l.vehicle_from_lidar))
+        .collect()
+}

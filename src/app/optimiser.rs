@@ -263,6 +263,7 @@ pub fn start(studio: &mut Studio) {
                 &cameras,
                 &segments,
                 config,
+                &Default::default(),
             )
             .map(|c| Box::new(c) as Box<dyn Calibrator>)
         }));

@@ -174,7 +174,7 @@ impl PoseGraphCalibrator {
                 let made: Vec<_> = cameras
                     .par_iter()
                     .map(|cam| {
-                        TargetCalibrator::from_drive_cached(
+                        TargetCalibrator::from_drive(
                             drive,
                             rig,
                             l,

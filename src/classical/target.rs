@@ -238,28 +238,9 @@ pub struct TargetSolution {
 impl TargetProblem {
     /// Prepare `camera` against `lidar` from up to `config.frames` sweep–image pairs of the log
     /// (within `segments_nanos`; empty: the whole log), associating boards with the rig's
-    /// current guess.
+    /// current guess. The camera's boards are taken from (and added to) `boards`, so several
+    /// LiDARs search each image once.
     pub fn from_drive(
-        drive: &Drive,
-        rig: &Rig,
-        camera: &str,
-        lidar: &str,
-        segments_nanos: &[(i64, i64)],
-        config: &TargetConfig,
-    ) -> Result<Self, AlignError> {
-        Self::from_drive_cached(
-            drive,
-            rig,
-            camera,
-            lidar,
-            segments_nanos,
-            config,
-            &BoardCache::default(),
-        )
-    }
-
-    /// [`TargetProblem::from_drive`] with the camera's boards taken from (and added to) `boards`.
-    pub fn from_drive_cached(
         drive: &Drive,
         rig: &Rig,
         camera: &str,

@@ -19,22 +19,9 @@ pub struct TargetCalibrator {
 }
 
 impl TargetCalibrator {
-    /// Prepare `cameras` against `lidar` (within `segments_nanos`; empty: the whole drive).
+    /// Prepare `cameras` against `lidar` (within `segments_nanos`; empty: the whole drive), the
+    /// cameras' boards taken from (and added to) `boards`.
     pub fn from_drive(
-        drive: &Drive,
-        rig: &Rig,
-        lidar: &str,
-        cameras: &[String],
-        segments_nanos: &[(i64, i64)],
-        config: TargetConfig,
-    ) -> Result<Self, String> {
-        let boards = BoardCache::default();
-        Self::from_drive_cached(drive, rig, lidar, cameras, segments_nanos, config, &boards)
-    }
-
-    /// [`TargetCalibrator::from_drive`] with the cameras' boards taken from (and added to)
-    /// `boards`.
-    pub fn from_drive_cached(
         drive: &Drive,
         rig: &Rig,
         lidar: &str,
@@ -46,7 +33,7 @@ impl TargetCalibrator {
         let problems = cameras
             .par_iter()
             .map(|cam| {
-                let p = TargetProblem::from_drive_cached(
+                let p = TargetProblem::from_drive(
                     drive,
                     rig,
                     cam,

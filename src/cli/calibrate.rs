@@ -185,7 +185,13 @@ pub fn calibrate(
                 ..TargetConfig::default()
             };
             Box::new(TargetCalibrator::from_drive(
-                &drive, &rig, &reference, &cameras, &segments, config,
+                &drive,
+                &rig,
+                &reference,
+                &cameras,
+                &segments,
+                config,
+                &Default::default(),
             )?)
         }
         "pose-graph" => {

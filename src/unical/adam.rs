@@ -105,9 +105,7 @@ impl SparseAdam {
             }
         }
     }
-}
 
-impl SparseAdam {
     /// [`Self::step`] on the sum of `accs` (added in order, so the sums are deterministic),
     /// read and cleared block by block in parallel in index order instead of through a list of
     /// entries in touch order: the same sums and the same updates, in one pass over the table,

@@ -1136,7 +1136,8 @@ impl DepthCalibration {
             + weights.regulariser as f64 * part.regulariser_loss;
         let system = match self.config.lidar_pose_update {
             PoseUpdate::Newton(n) => {
-                let rows: Vec<_> = part.pose_rows.into_iter().filter(|r| keep(r)).collect();
+                let mut rows = part.pose_rows;
+                rows.retain(|r| keep(r));
                 robust_system(&rows, n.robust_scale, n.robust_floor_m)
             }
             PoseUpdate::Adam => TangentSystem::default(),

@@ -13,8 +13,6 @@
 //! touched entries (a step touches a tiny fraction of the table; method.md §18). Spatial gradient:
 //! the derivative of the trilinear weights times `scale_l`, used for pose gradients and Eikonal.
 
-use rayon::prelude::*;
-
 /// Features per entry.
 pub const F: usize = 2;
 
@@ -141,9 +139,6 @@ pub struct GradAccumulator {
     dirty: Vec<bool>,
 }
 
-/// Levels whose corners are found together before the table is read.
-const LEVEL_CHUNK: usize = 16;
-
 /// Entries per dirty flag of a [`GradAccumulator`].
 pub const ACC_BLOCK: usize = 64;
 
@@ -175,31 +170,6 @@ impl GradAccumulator {
         self.dirty[e / ACC_BLOCK] = true;
     }
 
-    /// Add every other accumulator into the first (in order, so the sums are deterministic) and
-    /// empty them; block-parallel.
-    pub fn reduce_into_first(accs: &mut [GradAccumulator]) {
-        let Some((first, rest)) = accs.split_first_mut() else {
-            return;
-        };
-        for acc in rest {
-            first
-                .grad
-                .par_chunks_mut(ACC_BLOCK * F)
-                .zip(first.dirty.par_iter_mut())
-                .zip(acc.grad.par_chunks_mut(ACC_BLOCK * F))
-                .zip(acc.dirty.par_iter_mut())
-                .with_min_len(256)
-                .for_each(|(((into, into_dirty), from), from_dirty)| {
-                    if std::mem::take(from_dirty) {
-                        for (a, b) in into.iter_mut().zip(from.iter_mut()) {
-                            *a += std::mem::take(b);
-                        }
-                        *into_dirty = true;
-                    }
-                });
-        }
-    }
-
     /// Blocks of [`ACC_BLOCK`] entries: their gradients (`ACC_BLOCK · F` values) and whether
     /// any was touched, for a consumer that clears both.
     pub(crate) fn blocks_mut(&mut self) -> impl Iterator<Item = (&mut [f32], &mut bool)> {
@@ -208,10 +178,17 @@ impl GradAccumulator {
             .zip(self.dirty.iter_mut())
     }
 
-    /// Sum several accumulators (in order, so the result is deterministic) and empty them.
+    /// Sum several accumulators (in order, so the result is deterministic) and empty them: the
+    /// plain path [`super::adam::SparseAdam::step_accumulated`] fuses with the optimiser.
     pub fn drain_all(accs: &mut [GradAccumulator]) -> SparseGrad {
-        Self::reduce_into_first(accs);
-        accs.first_mut().map(Self::drain).unwrap_or_default()
+        let Some((first, rest)) = accs.split_first_mut() else {
+            return SparseGrad::default();
+        };
+        for acc in rest {
+            let g = acc.drain();
+            first.add(&g, 1.0);
+        }
+        first.drain()
     }
 
     /// The summed gradient, in entry order: every entry of a touched block whose gradient is
@@ -240,6 +217,9 @@ impl GradAccumulator {
         out
     }
 }
+
+/// Levels whose corners are found together before the table is read.
+const LEVEL_CHUNK: usize = 16;
 
 /// The 8 corners of one level: entry indices and trilinear weights, plus what the spatial
 /// gradient needs.

@@ -26,25 +26,18 @@ pub struct MlpGrad {
 }
 
 /// Activations of one forward pass, all in one buffer (one allocation per sample on the hot
-/// path): activation `k` is `data[ends[k-1]..ends[k]]` (`ends[-1] = 0`); activation 0 is the
-/// input, activation k the output of layer k-1 (after ReLU for hidden layers).
+/// path): the input (`input_len` values), then each layer's output in turn (after ReLU for
+/// hidden layers); the network's widths say where each one starts ([`Mlp::activation`]).
 #[derive(Clone, Debug, Default)]
 pub struct Trace {
     data: Vec<f32>,
-    ends: Vec<usize>,
+    input_len: usize,
+    output_len: usize,
 }
 
 impl Trace {
-    fn act(&self, k: usize) -> &[f32] {
-        let start = if k == 0 { 0 } else { self.ends[k - 1] };
-        &self.data[start..self.ends[k]]
-    }
-
     pub fn output(&self) -> &[f32] {
-        match self.ends.len() {
-            0 => &[],
-            n => self.act(n - 1),
-        }
+        &self.data[self.data.len() - self.output_len..]
     }
 }
 
@@ -98,6 +91,19 @@ impl Mlp {
         }
     }
 
+    /// Activation `k` of `trace` (0: the input, k: layer k−1's output).
+    fn activation<'a>(&self, trace: &'a Trace, k: usize) -> &'a [f32] {
+        if k == 0 {
+            return &trace.data[..trace.input_len];
+        }
+        let start = trace.input_len
+            + self.layers[..k - 1]
+                .iter()
+                .map(|l| l.outputs)
+                .sum::<usize>();
+        &trace.data[start..start + self.layers[k - 1].outputs]
+    }
+
     /// Forward pass keeping the activations.
     pub fn forward(&self, input: &[f32]) -> Trace {
         self.forward_from(input.len(), |x| x.copy_from_slice(input))
@@ -106,17 +112,13 @@ impl Mlp {
     /// Forward pass on an input of `input_len` values that `write_input` writes in place (an
     /// encoding straight into the trace, without a buffer of its own).
     pub fn forward_from(&self, input_len: usize, write_input: impl FnOnce(&mut [f32])) -> Trace {
-        let mut ends = Vec::with_capacity(self.layers.len() + 1);
-        ends.push(input_len);
-        for layer in &self.layers {
-            ends.push(ends[ends.len() - 1] + layer.outputs);
-        }
-        let mut data = vec![0.0; ends[ends.len() - 1]];
+        let total = input_len + self.layers.iter().map(|l| l.outputs).sum::<usize>();
+        let mut data = vec![0.0; total];
         write_input(&mut data[..input_len]);
         let last = self.layers.len().saturating_sub(1);
-        let mut start = 0;
+        let (mut start, mut end) = (0, input_len);
         for (k, layer) in self.layers.iter().enumerate() {
-            let (done, rest) = data.split_at_mut(ends[k]);
+            let (done, rest) = data.split_at_mut(end);
             let x = &done[start..];
             let y = &mut rest[..layer.outputs];
             y.copy_from_slice(&layer.bias);
@@ -126,9 +128,17 @@ impl Mlp {
                     *yo = yo.max(0.0);
                 }
             }
-            start = ends[k];
+            (start, end) = (end, end + layer.outputs);
         }
-        Trace { data, ends }
+        Trace {
+            data,
+            input_len,
+            output_len: if self.layers.is_empty() {
+                input_len
+            } else {
+                self.output_dim()
+            },
+        }
     }
 
     /// Backward pass: accumulate parameter gradients into `grad`, return d(loss)/d(input).
@@ -142,13 +152,13 @@ impl Mlp {
             let layer = &self.layers[k];
             if k < last {
                 // ReLU: no gradient where the unit was off.
-                for (d, a) in delta.iter_mut().zip(trace.act(k + 1)) {
+                for (d, a) in delta.iter_mut().zip(self.activation(trace, k + 1)) {
                     if *a <= 0.0 {
                         *d = 0.0;
                     }
                 }
             }
-            let x = &trace.act(k)[..layer.inputs];
+            let x = &self.activation(trace, k)[..layer.inputs];
             d_in.clear();
             d_in.resize(layer.inputs, 0.0);
             let rows = layer.weights.chunks_exact(layer.inputs);
