@@ -74,6 +74,7 @@ fn main() {
         },
         beta_init,
         regulariser_weight,
+        opacity: common::opacity_from_env(defaults.opacity),
         ..defaults
     };
     let mut calib = DepthCalibration::new(config, traj, lidars);

@@ -55,6 +55,7 @@ fn main() {
                 ..n
             })
         },
+        opacity: common::opacity_from_env(DepthCalibConfig::default().opacity),
         ..DepthCalibConfig::default()
     };
     if args.get(3).is_some_and(|s| s == "rounds") {
@@ -267,7 +268,7 @@ fn main() {
         for ray in &rays {
             let c = rigcal::unical::lidar_terms::render_composite(
                 &calib.field,
-                calib.beta(),
+                calib.opacity(),
                 &pose,
                 ray,
             );

@@ -60,3 +60,16 @@ pub fn lidars_at_truth(
         .map(|l| lidar_data(world, l, traj, seconds, l.vehicle_from_lidar))
         .collect()
 }
+
+/// `RIGCAL_OPACITY=interval|per-sample` overrides the opacity model (`default` otherwise).
+#[allow(dead_code)] // not every example reads it
+pub fn opacity_from_env(
+    default: rigcal::unical::composite::OpacityModel,
+) -> rigcal::unical::composite::OpacityModel {
+    use rigcal::unical::composite::OpacityModel;
+    match std::env::var("RIGCAL_OPACITY").as_deref() {
+        Ok("interval") => OpacityModel::Interval,
+        Ok("per-sample") => OpacityModel::PerSample,
+        _ => default,
+    }
+}

@@ -13,6 +13,7 @@
 
 use glam::DVec3;
 
+use super::composite::Opacity;
 use super::field::{FieldSample, samples_backward};
 use super::hash_grid::{GradSink, HashGrid, HashGridConfig};
 use super::mlp::{Mlp, MlpGrad};
@@ -155,7 +156,7 @@ impl Background {
         (origin, dir): (DVec3, DVec3),
         samples: &[FieldSample],
         taus_m: &[f32],
-        beta: f32,
+        opacity: Opacity,
         (d_alpha, d_features): (&[f32], &[f32]),
         grid_grad: &mut impl GradSink,
         mlp_grad: &mut MlpGrad,
@@ -164,7 +165,7 @@ impl Background {
         samples_backward(
             samples,
             taus_m,
-            beta,
+            opacity,
             (d_alpha, d_features),
             dim,
             |i, s, d_s, d_f| {

@@ -16,7 +16,7 @@
 use glam::DVec3;
 
 use super::background::Background;
-use super::composite::{Upstream, alpha_from_sdf, composite, composite_backward};
+use super::composite::{Opacity, OpacityModel, Upstream, composite, composite_backward};
 use super::field::{FieldSample, SceneField};
 use super::hash_grid::GradSink;
 use super::mlp::{Mlp, MlpGrad};
@@ -141,21 +141,25 @@ fn march(
     query: &dyn Fn(DVec3) -> FieldSample,
     (o, d): (DVec3, DVec3),
     taus_m: &[f32],
-    beta: f32,
-    alphas: &mut Vec<f32>,
+    opacity: Opacity,
+    (alphas, at): (&mut Vec<f32>, &mut Vec<f32>),
     transmittance: &mut f32,
 ) -> Vec<FieldSample> {
-    let mut samples = Vec::new();
+    let (mut samples, mut sdfs) = (Vec::new(), Vec::new());
     for tau in taus_m {
         if *transmittance < MIN_TRANSMITTANCE {
             break;
         }
         let s = query(o + d * *tau as f64);
-        let a = alpha_from_sdf(s.sdf(), beta).0;
+        sdfs.push(s.sdf());
         samples.push(s);
-        alphas.push(a);
-        *transmittance *= 1.0 - a;
+        if let Some(a) = opacity.settled(&sdfs) {
+            *transmittance *= 1.0 - a;
+        }
     }
+    let (a, t) = opacity.alphas(&sdfs, taus_m);
+    alphas.extend(a);
+    at.extend(t);
     samples
 }
 
@@ -166,6 +170,24 @@ pub struct CameraModel<'a> {
     pub background: Option<&'a Background>,
     pub appearance: &'a Appearance,
     pub beta: f32,
+    /// The scene's opacity model (the background's samples are always per-sample).
+    pub opacity: OpacityModel,
+}
+
+impl CameraModel<'_> {
+    fn scene_opacity(&self) -> Opacity {
+        Opacity {
+            model: self.opacity,
+            beta: self.beta,
+        }
+    }
+
+    fn background_opacity(&self) -> Opacity {
+        Opacity {
+            model: OpacityModel::PerSample,
+            beta: self.beta,
+        }
+    }
 }
 
 /// Everything one camera ray's forward pass computed, kept for its backward pass.
@@ -177,7 +199,9 @@ struct ColourForward {
     /// How many of the samples lie in the scene box (the rest are background samples).
     in_box: usize,
     alphas: Vec<f32>,
+    /// The samples' distances along the ray, and where each one's weight sits.
     taus: Vec<f32>,
+    at: Vec<f32>,
     features: Vec<f32>,
     c: super::composite::Composite,
     sky: super::mlp::Trace,
@@ -194,18 +218,23 @@ fn colour_forward(model: CameraModel, pose: &PoseParams, ray: &ColourRay) -> Col
         field,
         background,
         appearance,
-        beta,
+        ..
     } = model;
     let dim = field.geo.output_dim().saturating_sub(1);
     let (o, d) = pose.ray(ray.world_from_vehicle, ray.dir_in_sensor);
-    let (mut alphas, mut transmittance) = (Vec::new(), 1.0f32);
-    let mut march_along = |query: &dyn Fn(DVec3) -> FieldSample, taus: &[f32]| {
-        march(query, (o, d), taus, beta, &mut alphas, &mut transmittance)
+    let (mut alphas, mut at, mut transmittance) = (Vec::new(), Vec::new(), 1.0f32);
+    let mut march_along = |query: &dyn Fn(DVec3) -> FieldSample, taus: &[f32], opacity: Opacity| {
+        let out = (&mut alphas, &mut at);
+        march(query, (o, d), taus, opacity, out, &mut transmittance)
     };
-    let samples = march_along(&|x| field.query(x), &ray.taus_m);
+    let samples = march_along(&|x| field.query(x), &ray.taus_m, model.scene_opacity());
     let in_box = samples.len();
     let far_samples = match background {
-        Some(bg) => march_along(&|x| bg.query(x), &ray.background_taus_m),
+        Some(bg) => march_along(
+            &|x| bg.query(x),
+            &ray.background_taus_m,
+            model.background_opacity(),
+        ),
         None => Vec::new(),
     };
     let mut taus = ray.taus_m[..in_box].to_vec();
@@ -215,7 +244,7 @@ fn colour_forward(model: CameraModel, pose: &PoseParams, ray: &ColourRay) -> Col
         .chain(&far_samples)
         .flat_map(|s| s.feature().iter().copied())
         .collect();
-    let c = composite(&alphas, &taus, &features, dim);
+    let c = composite(&alphas, &at, &features, dim);
     let sh: Vec<f32> = sh_encoding(d).iter().map(|v| *v as f32).collect();
     let sky = appearance.sky.forward(&sh);
     let t_sky = 1.0 - c.accumulation;
@@ -236,6 +265,7 @@ fn colour_forward(model: CameraModel, pose: &PoseParams, ray: &ColourRay) -> Col
         in_box,
         alphas,
         taus,
+        at,
         features,
         c,
         sky,
@@ -276,7 +306,7 @@ pub fn colour_step(
         field,
         background,
         appearance,
-        beta,
+        ..
     } = model;
     let mut out = ColourStep {
         loss: 0.0,
@@ -299,6 +329,7 @@ pub fn colour_step(
             in_box,
             alphas,
             taus,
+            at,
             features,
             c,
             sky,
@@ -333,12 +364,12 @@ pub fn colour_step(
             feature: d_feature,
             ..Upstream::default()
         };
-        let (d_alpha, d_features) = composite_backward(&alphas, &taus, &features, dim, &c, &up);
+        let (d_alpha, d_features) = composite_backward(&alphas, &at, &features, dim, &c, &up);
         let split = (in_box, in_box * dim);
         let (mut d_o, mut d_d, d_beta) = field.ray_backward(
             &samples,
             &taus[..in_box],
-            beta,
+            model.scene_opacity(),
             (&d_alpha[..split.0], &d_features[..split.1]),
             grid,
             &mut out.geo,
@@ -349,7 +380,7 @@ pub fn colour_step(
                 (o, d),
                 &far_samples,
                 &taus[in_box..],
-                beta,
+                model.background_opacity(),
                 (&d_alpha[split.0..], &d_features[split.1..]),
                 background_grid,
                 &mut out.background_mlp,
@@ -462,6 +493,7 @@ mod tests {
             background: Some(&background),
             appearance: &appearance,
             beta: 3.0,
+            opacity: OpacityModel::Interval,
         };
         let exposure = ExposureMap {
             scale: [0.9, 0.8, 0.85],
@@ -494,6 +526,12 @@ mod tests {
 
     #[test]
     fn pose_and_exposure_gradients_match_finite_differences() {
+        for opacity in [OpacityModel::PerSample, OpacityModel::Interval] {
+            pose_and_exposure_gradients_of(opacity);
+        }
+    }
+
+    fn pose_and_exposure_gradients_of(opacity: OpacityModel) {
         let (field, background, appearance, pose, rays) = setup();
         let beta = 3.0;
         let model = CameraModel {
@@ -501,6 +539,7 @@ mod tests {
             background: Some(&background),
             appearance: &appearance,
             beta,
+            opacity,
         };
         let exposure = ExposureMap {
             scale: [0.9, 1.1, 1.0],

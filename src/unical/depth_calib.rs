@@ -19,6 +19,7 @@ use super::background::{Background, BackgroundConfig};
 use super::camera_rgb::{
     Appearance, CameraModel, ColourRay, ExposureMap, colour_step, render_colour,
 };
+use super::composite::{Opacity, OpacityModel};
 use super::correspondences::Correspondences;
 use super::field::{FieldConfig, SceneField};
 use super::hash_grid::{GradAccumulator, HashGridConfig, Scaled};
@@ -101,6 +102,9 @@ pub struct DepthCalibConfig {
     pub heatmap_sigma_px: (f64, f64),
     /// Share of camera pixels still drawn uniformly once heat maps are on.
     pub heatmap_uniform_share: f64,
+    /// How signed distances become opacities (method.md §3's per-sample form, or the
+    /// unbiased per-section form; [`OpacityModel`]).
+    pub opacity: OpacityModel,
 }
 
 impl Default for DepthCalibConfig {
@@ -139,6 +143,7 @@ impl Default for DepthCalibConfig {
             heatmap_start_fraction: 2000.0 / 30_000.0,
             heatmap_sigma_px: (40.0, 5.0),
             heatmap_uniform_share: 0.2,
+            opacity: OpacityModel::PerSample,
         }
     }
 }
@@ -520,6 +525,14 @@ impl DepthCalibration {
         self.ln_beta.exp()
     }
 
+    /// The opacity model at the current β.
+    pub fn opacity(&self) -> Opacity {
+        Opacity {
+            model: self.config.opacity,
+            beta: self.beta(),
+        }
+    }
+
     /// Add cameras: their extrinsics, exposure maps and the colour term join the optimisation.
     pub fn with_cameras(self, cameras: Vec<CameraData>) -> Self {
         self.with_cameras_reporting(cameras, &|_, _| {})
@@ -670,6 +683,7 @@ impl DepthCalibration {
             background: stage.background.as_ref().map(|b| &b.field),
             appearance: &stage.appearance,
             beta: self.ln_beta.exp(),
+            opacity: self.config.opacity,
         };
         let (w, h) = (cam.intrinsics.width, cam.intrinsics.height);
         let rows: Vec<Vec<u8>> = (0..h)
@@ -786,7 +800,7 @@ impl DepthCalibration {
         let Some(stage) = self.camera.as_ref() else {
             return out;
         };
-        let beta = self.ln_beta.exp();
+        let opacity = self.opacity();
         let w = self.config.alignment_weight as f64 / cameras.max(1) as f64;
         let settings = self.config.alignment_settings;
         let alignment = self.config.alignment;
@@ -811,7 +825,7 @@ impl DepthCalibration {
                         let step = match alignment {
                             AlignmentLoss::SurfaceAlignment => surface_alignment_step(
                                 field,
-                                beta,
+                                opacity,
                                 (camera(*a), camera(*b)),
                                 rays,
                                 &settings,
@@ -1074,10 +1088,10 @@ impl DepthCalibration {
     /// rad)` for `count` random returns of LiDAR `sensor` under the current state.
     pub fn depth_residuals(&mut self, sensor: usize, count: usize) -> Vec<DepthResidual> {
         let rays = self.draw_rays(sensor, count);
-        let (field, beta, pose) = (&self.field, self.beta(), self.poses[sensor]);
+        let (field, opacity, pose) = (&self.field, self.opacity(), self.poses[sensor]);
         rays.par_iter()
             .map(|r| {
-                let c = super::lidar_terms::render_composite(field, beta, &pose, r);
+                let c = super::lidar_terms::render_composite(field, opacity, &pose, r);
                 let (_, d) = pose.ray(r.world_from_vehicle, r.dir_in_sensor);
                 DepthResidual {
                     range_m: r.range_m,
@@ -1119,6 +1133,7 @@ impl DepthCalibration {
         let model = LidarModel {
             field: &self.field,
             beta: self.beta(),
+            opacity: self.config.opacity,
             decoder: self.intensity_norm[sensor].map(|_| &self.decoder),
         };
         let weights = self.config.lidar_weights();
@@ -1200,6 +1215,7 @@ impl DepthCalibration {
             let model = LidarModel {
                 field: &self.field,
                 beta: self.beta(),
+                opacity: self.config.opacity,
                 decoder: self.intensity_norm[s].map(|_| &self.decoder),
             };
             let (pose, map) = (&self.poses[s], &self.intensity_maps[s]);
@@ -1313,6 +1329,7 @@ impl DepthCalibration {
                     background,
                     appearance: &stage.appearance,
                     beta: self.ln_beta.exp(),
+                    opacity: self.config.opacity,
                 };
                 let (pose, exposure) = (&stage.poses[k], &stage.exposure[k]);
                 let total_rays = rays.len() as f64;

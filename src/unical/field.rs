@@ -8,7 +8,7 @@
 
 use glam::DVec3;
 
-use super::composite::alpha_from_sdf;
+use super::composite::Opacity;
 use super::hash_grid::{GradSink, HashGrid, HashGridConfig};
 use super::mlp::{Mlp, MlpGrad, Trace};
 
@@ -117,7 +117,7 @@ impl SceneField {
         &self,
         samples: &[FieldSample],
         taus_m: &[f32],
-        beta: f32,
+        opacity: Opacity,
         (d_alpha, d_features): (&[f32], &[f32]),
         grid_grad: &mut impl GradSink,
         mlp_grad: &mut MlpGrad,
@@ -126,7 +126,7 @@ impl SceneField {
         samples_backward(
             samples,
             taus_m,
-            beta,
+            opacity,
             (d_alpha, d_features),
             dim,
             |_, s, d_s, d_f| self.backward(s, d_s, d_f, grid_grad, mlp_grad),
@@ -134,26 +134,26 @@ impl SceneField {
     }
 }
 
-/// The part of a ray's backward pass every field shares: per sample, `∂L/∂s = ∂L/∂α·∂α/∂s`
-/// and the feature rows go to `point_backward(i, sample, ∂L/∂s, ∂L/∂f)`, which returns
+/// The part of a ray's backward pass every field shares: `∂L/∂s_i` from `∂L/∂α` through the
+/// opacity model, then per sample `point_backward(i, sample, ∂L/∂s_i, ∂L/∂f_i)`, which returns
 /// `∂L/∂x_i`; sums `(∂L/∂o, ∂L/∂d, ∂L/∂β)` over `x_i = o + τ_i d`.
 pub fn samples_backward(
     samples: &[FieldSample],
     taus_m: &[f32],
-    beta: f32,
+    opacity: Opacity,
     (d_alpha, d_features): (&[f32], &[f32]),
     feature_dim: usize,
     mut point_backward: impl FnMut(usize, &FieldSample, f32, &[f32]) -> DVec3,
 ) -> (DVec3, DVec3, f64) {
     let zeros = vec![0.0; feature_dim];
-    let (mut d_o, mut d_d, mut d_beta) = (DVec3::ZERO, DVec3::ZERO, 0.0);
+    let sdfs: Vec<f32> = samples.iter().map(|s| s.sdf()).collect();
+    let (d_sdf, d_beta) = opacity.backward(&sdfs, d_alpha);
+    let (mut d_o, mut d_d) = (DVec3::ZERO, DVec3::ZERO);
     for (i, (s, tau)) in samples.iter().zip(taus_m).enumerate() {
-        let (_, da_ds, da_db) = alpha_from_sdf(s.sdf(), beta);
-        d_beta += (d_alpha[i] * da_db) as f64;
         let d_f = d_features
             .get(i * feature_dim..(i + 1) * feature_dim)
             .unwrap_or(&zeros);
-        let d_x = point_backward(i, s, d_alpha[i] * da_ds, d_f);
+        let d_x = point_backward(i, s, d_sdf[i], d_f);
         d_o += d_x;
         d_d += d_x * *tau as f64;
     }

@@ -18,7 +18,7 @@
 use glam::DVec3;
 
 use super::camera_rgb::{sh_backward, sh_encoding};
-use super::composite::{Composite, Upstream, alpha_from_sdf, composite, composite_backward};
+use super::composite::{Composite, Opacity, OpacityModel, Upstream, composite, composite_backward};
 use super::field::SceneField;
 use super::hash_grid::GradSink;
 use super::intensity::{IntensityDecoder, IntensityMap};
@@ -93,23 +93,34 @@ pub struct LidarStep {
 pub struct LidarModel<'a> {
     pub field: &'a SceneField,
     pub beta: f32,
+    pub opacity: OpacityModel,
     pub decoder: Option<&'a IntensityDecoder>,
+}
+
+impl LidarModel<'_> {
+    pub fn opacity(&self) -> Opacity {
+        Opacity {
+            model: self.opacity,
+            beta: self.beta,
+        }
+    }
 }
 
 /// The composite (depth, accumulation, weights) of one LiDAR ray, forward only (diagnostics).
 pub fn render_composite(
     field: &SceneField,
-    beta: f32,
+    opacity: Opacity,
     pose: &PoseParams,
     ray: &DepthRay,
 ) -> Composite {
     let (o, d) = pose.ray(ray.world_from_vehicle, ray.dir_in_sensor);
-    let alphas: Vec<f32> = ray
+    let sdfs: Vec<f32> = ray
         .taus_m
         .iter()
-        .map(|t| alpha_from_sdf(field.query(o + d * *t as f64).sdf(), beta).0)
+        .map(|t| field.query(o + d * *t as f64).sdf())
         .collect();
-    composite(&alphas, &ray.taus_m, &[], 0)
+    let (alphas, at) = opacity.alphas(&sdfs, &ray.taus_m);
+    composite(&alphas, &at, &[], 0)
 }
 
 /// The LiDAR terms of `rays`, all from one sensor at `pose` with intensity mapping `map`; the
@@ -152,10 +163,9 @@ pub fn lidar_step(
             .iter()
             .map(|t| field.query(o + d * *t as f64))
             .collect();
-        let alphas: Vec<f32> = samples
-            .iter()
-            .map(|s| alpha_from_sdf(s.sdf(), model.beta).0)
-            .collect();
+        let sdfs: Vec<f32> = samples.iter().map(|s| s.sdf()).collect();
+        // Where each weight sits: `at` (the samples, or the sections' midpoints).
+        let (alphas, at) = model.opacity().alphas(&sdfs, &ray.taus_m);
         let decode = model
             .decoder
             .zip(ray.intensity)
@@ -169,7 +179,7 @@ pub fn lidar_step(
         } else {
             (Vec::new(), 0)
         };
-        let c = composite(&alphas, &ray.taus_m, &features, fdim);
+        let c = composite(&alphas, &at, &features, fdim);
         // Depth (Eq. 5).
         let r = (c.depth_m - ray.range_m) as f64;
         out.depth_loss += r * r / n;
@@ -203,13 +213,11 @@ pub fn lidar_step(
         let mut d_weights = Vec::new();
         if weights.free_space_only {
             let carve = (weights.depth as f64 / n) as f32;
-            let (penalty, d_w) =
-                free_space_suppression(&c.weights, &ray.taus_m, ray.range_m, carve);
+            let (penalty, d_w) = free_space_suppression(&c.weights, &at, ray.range_m, carve);
             out.regulariser_loss += penalty / n;
             d_weights = d_w;
         } else if weights.regulariser != 0.0 {
-            let (suppression, d_w) =
-                weight_suppression(&c.weights, &ray.taus_m, ray.range_m, reg_weight);
+            let (suppression, d_w) = weight_suppression(&c.weights, &at, ray.range_m, reg_weight);
             out.regulariser_loss += suppression / n;
             d_weights = d_w;
             for tau in &ray.taus_m {
@@ -225,11 +233,11 @@ pub fn lidar_step(
             feature: &d_feature,
             weights: &d_weights,
         };
-        let upstream = composite_backward(&alphas, &ray.taus_m, &features, fdim, &c, &up);
+        let upstream = composite_backward(&alphas, &at, &features, fdim, &c, &up);
         let (d_o, d_d, d_beta) = field.ray_backward(
             &samples,
             &ray.taus_m,
-            model.beta,
+            model.opacity(),
             (&upstream.0, &upstream.1),
             grid,
             &mut out.mlp,
@@ -305,7 +313,6 @@ mod tests {
     #[test]
     fn pose_beta_and_mapping_gradients_match_finite_differences() {
         let (field, decoder, pose, rays) = setup();
-        let beta = 3.0;
         let map = IntensityMap {
             scale: 0.9,
             offset: 0.05,
@@ -318,23 +325,40 @@ mod tests {
             pose_rows: None,
             free_space_only: false,
         };
+        for opacity in [OpacityModel::PerSample, OpacityModel::Interval] {
+            pose_beta_and_mapping_gradients_of(opacity, &field, &decoder, &pose, &rays, &w, map);
+        }
+    }
+
+    fn pose_beta_and_mapping_gradients_of(
+        opacity: OpacityModel,
+        field: &SceneField,
+        decoder: &IntensityDecoder,
+        pose: &PoseParams,
+        rays: &[DepthRay],
+        w: &LidarWeights,
+        map: IntensityMap,
+    ) {
+        let (pose, w) = (*pose, *w);
+        let beta = 3.0;
         let model = |beta| LidarModel {
-            field: &field,
+            field,
             beta,
-            decoder: Some(&decoder),
+            opacity,
+            decoder: Some(decoder),
         };
         let step = lidar_step(
             model(beta),
             &pose,
             &map,
             &w,
-            &rays,
+            rays,
             &mut SparseGrad::default(),
         );
         assert!(step.depth_loss > 0.0 && step.intensity_loss > 0.0);
         let loss = |p: &PoseParams| {
             total(
-                &lidar_step(model(beta), p, &map, &w, &rays, &mut SparseGrad::default()),
+                &lidar_step(model(beta), p, &map, &w, rays, &mut SparseGrad::default()),
                 &w,
             )
         };
@@ -348,7 +372,7 @@ mod tests {
         assert_pose_gradient(pose, &step.pose, eps, tol, loss);
         let at_beta = |b| {
             total(
-                &lidar_step(model(b), &pose, &map, &w, &rays, &mut SparseGrad::default()),
+                &lidar_step(model(b), &pose, &map, &w, rays, &mut SparseGrad::default()),
                 &w,
             )
         };
@@ -365,7 +389,7 @@ mod tests {
             }
             let l = |m: &IntensityMap| {
                 total(
-                    &lidar_step(model(beta), &pose, m, &w, &rays, &mut SparseGrad::default()),
+                    &lidar_step(model(beta), &pose, m, &w, rays, &mut SparseGrad::default()),
                     &w,
                 )
             };
@@ -383,6 +407,12 @@ mod tests {
     /// Eikonal part through the stencil).
     #[test]
     fn scene_and_decoder_gradients_of_all_terms_match_finite_differences() {
+        for opacity in [OpacityModel::PerSample, OpacityModel::Interval] {
+            scene_and_decoder_gradients_of(opacity);
+        }
+    }
+
+    fn scene_and_decoder_gradients_of(opacity: OpacityModel) {
         let (field, decoder, pose, mut rays) = setup();
         // Put the hits inside the sampled range so both regulariser parts are active.
         for r in &mut rays {
@@ -400,6 +430,7 @@ mod tests {
             let model = LidarModel {
                 field: f,
                 beta: 3.0,
+                opacity,
                 decoder: Some(dec),
             };
             lidar_step(model, &pose, &map, &w, &rays, &mut SparseGrad::default())
@@ -418,7 +449,7 @@ mod tests {
                 let an = step.mlp.weights[layer][k] as f64;
                 assert!(
                     (fd - an).abs() < 0.03 * (fd.abs() + an.abs()) + 2e-3,
-                    "geometry layer {layer} weight {k}: {fd} vs {an}"
+                    "{opacity:?} geometry layer {layer} weight {k}: {fd} vs {an}"
                 );
                 checked += usize::from(an.abs() > 2e-3);
             }
@@ -457,6 +488,7 @@ mod tests {
         let model = LidarModel {
             field: &field,
             beta: 3.0,
+            opacity: OpacityModel::PerSample,
             decoder: None,
         };
         for ray in &rays {
@@ -468,7 +500,7 @@ mod tests {
                 std::slice::from_ref(ray),
                 &mut SparseGrad::default(),
             );
-            let rendered = render_composite(&field, 3.0, &pose, ray).depth_m;
+            let rendered = render_composite(&field, model.opacity(), &pose, ray).depth_m;
             let error = (rendered - ray.range_m).abs() as f64;
             assert!((error - step.mean_abs_error_m).abs() < 1e-5, "{error}");
         }
@@ -482,6 +514,7 @@ mod tests {
         let model = LidarModel {
             field: &field,
             beta: 3.0,
+            opacity: OpacityModel::PerSample,
             decoder: Some(&decoder),
         };
         let w = LidarWeights {
@@ -498,7 +531,7 @@ mod tests {
         let step = lidar_step(model, &pose, &map, &w, &rays, &mut SparseGrad::default());
         assert!(!step.pose_rows.is_empty() && step.pose_rows.len() <= rays.len());
         for ray in &rays {
-            let c = render_composite(&field, 3.0, &pose, ray);
+            let c = render_composite(&field, model.opacity(), &pose, ray);
             if c.accumulation > 0.5 {
                 let r = (c.depth_m / c.accumulation - ray.range_m) as f64;
                 assert!(step.pose_rows.iter().any(|row| row.residual_m * r >= 0.0));

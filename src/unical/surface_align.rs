@@ -16,7 +16,7 @@
 
 use glam::{DMat3, DVec2, DVec3};
 
-use super::composite::{Composite, Upstream, alpha_from_sdf, composite, composite_backward};
+use super::composite::{Composite, Opacity, Upstream, composite, composite_backward};
 use super::field::{FieldSample, SceneField};
 use super::hash_grid::GradSink;
 use super::mlp::MlpGrad;
@@ -117,6 +117,8 @@ struct Rendered {
     d: DVec3,
     samples: Vec<FieldSample>,
     alphas: Vec<f32>,
+    /// Where each sample's weight sits along the ray.
+    at: Vec<f32>,
     composite: Composite,
     depth_m: f64,
     point: DVec3,
@@ -125,26 +127,29 @@ struct Rendered {
 /// Samples stop once this little light gets through (as for colour rays).
 const MIN_TRANSMITTANCE: f32 = 1e-3;
 
-fn render(field: &SceneField, beta: f32, pose: &PoseParams, ray: &AlignRay) -> Rendered {
+fn render(field: &SceneField, opacity: Opacity, pose: &PoseParams, ray: &AlignRay) -> Rendered {
     let (o, d) = pose.ray(ray.world_from_vehicle, ray.dir_in_sensor);
-    let (mut samples, mut alphas) = (Vec::new(), Vec::new());
+    let (mut samples, mut sdfs) = (Vec::new(), Vec::new());
     let mut transmittance = 1.0f32;
     for t in &ray.taus_m {
         if transmittance < MIN_TRANSMITTANCE {
             break;
         }
         let s = field.query(o + d * *t as f64);
-        let a = alpha_from_sdf(s.sdf(), beta).0;
-        transmittance *= 1.0 - a;
+        sdfs.push(s.sdf());
         samples.push(s);
-        alphas.push(a);
+        if let Some(a) = opacity.settled(&sdfs) {
+            transmittance *= 1.0 - a;
+        }
     }
-    let composite = composite(&alphas, &ray.taus_m[..samples.len()], &[], 0);
+    let (alphas, at) = opacity.alphas(&sdfs, &ray.taus_m);
+    let composite = composite(&alphas, &at, &[], 0);
     let depth_m = composite.depth_m as f64 / (composite.accumulation as f64).max(1e-6);
     Rendered {
         d,
         samples,
         alphas,
+        at,
         composite,
         depth_m,
         point: o + d * depth_m,
@@ -189,7 +194,7 @@ fn reproject(from: &Rendered, to: AlignCamera, to_ray: &AlignRay) -> Option<Repr
 /// table's gradients go to `grid`.
 pub fn surface_alignment_step(
     field: &SceneField,
-    beta: f32,
+    opacity: Opacity,
     (cam_a, cam_b): (AlignCamera, AlignCamera),
     matches: &[(AlignRay, AlignRay)],
     settings: &AlignSettings,
@@ -202,8 +207,8 @@ pub fn surface_alignment_step(
     // Forward every match, then keep those that pass the filters.
     let mut kept = Vec::new();
     for (ray_a, ray_b) in matches {
-        let ra = render(field, beta, cam_a.pose, ray_a);
-        let rb = render(field, beta, cam_b.pose, ray_b);
+        let ra = render(field, opacity, cam_a.pose, ray_a);
+        let rb = render(field, opacity, cam_b.pose, ray_b);
         if ra.composite.accumulation < settings.min_accumulation
             || rb.composite.accumulation < settings.min_accumulation
         {
@@ -227,7 +232,7 @@ pub fn surface_alignment_step(
         // e_ab: a's surface into b; e_ba: b's surface into a.
         let (ga, gb) = backward_direction(
             field,
-            beta,
+            opacity,
             (cam_a, ray_a, ra),
             (cam_b, ray_b),
             ab,
@@ -240,7 +245,7 @@ pub fn surface_alignment_step(
         out.beta_grad += ga.1;
         let (gb2, ga2) = backward_direction(
             field,
-            beta,
+            opacity,
             (cam_b, ray_b, rb),
             (cam_a, ray_a),
             ba,
@@ -260,7 +265,7 @@ pub fn surface_alignment_step(
 /// `((pose gradient of from, ∂L/∂β), pose gradient of to)`.
 fn backward_direction(
     field: &SceneField,
-    beta: f32,
+    opacity: Opacity,
     (from_cam, from_ray, rendered): (AlignCamera, &AlignRay, &Rendered),
     (to_cam, to_ray): (AlignCamera, &AlignRay),
     reprojection: &Reprojection,
@@ -298,9 +303,16 @@ fn backward_direction(
         ..Upstream::default()
     };
     let taus = &from_ray.taus_m[..rendered.samples.len()];
-    let (d_alpha, _) = composite_backward(&rendered.alphas, taus, &[], 0, &rendered.composite, &up);
+    let (d_alpha, _) = composite_backward(
+        &rendered.alphas,
+        &rendered.at,
+        &[],
+        0,
+        &rendered.composite,
+        &up,
+    );
     let (d_o, d_d, d_beta) =
-        field.ray_backward(&rendered.samples, taus, beta, (&d_alpha, &[]), grid, geo);
+        field.ray_backward(&rendered.samples, taus, opacity, (&d_alpha, &[]), grid, geo);
     let from_grad = from_cam.pose.ray_backward(
         from_ray.world_from_vehicle,
         from_ray.dir_in_sensor,
@@ -415,6 +427,7 @@ mod tests {
     use super::super::field::tiny_field;
     use super::super::pose::assert_pose_gradient;
     use super::*;
+    use crate::unical::composite::OpacityModel;
     use crate::unical::hash_grid::SparseGrad;
     use glam::DQuat;
 
@@ -490,8 +503,13 @@ mod tests {
 
     #[test]
     fn surface_alignment_pose_gradients_match_finite_differences() {
+        for model in [OpacityModel::PerSample, OpacityModel::Interval] {
+            surface_alignment_pose_gradients_of(Opacity { model, beta: 0.5 });
+        }
+    }
+
+    fn surface_alignment_pose_gradients_of(opacity: Opacity) {
         let (field, pose_a, pose_b, k, matches) = setup();
-        let beta = 0.5;
         fn cam<'a>(pose: &'a PoseParams, k: &'a CameraIntrinsics) -> AlignCamera<'a> {
             AlignCamera {
                 pose,
@@ -501,7 +519,7 @@ mod tests {
         }
         let step = surface_alignment_step(
             &field,
-            beta,
+            opacity,
             (cam(&pose_a, &k), cam(&pose_b, &k)),
             &matches,
             &settings(),
@@ -512,7 +530,7 @@ mod tests {
         let loss = |pa: &PoseParams, pb: &PoseParams| {
             surface_alignment_step(
                 &field,
-                beta,
+                opacity,
                 (cam(pa, &k), cam(pb, &k)),
                 &matches,
                 &settings(),
@@ -535,8 +553,13 @@ mod tests {
 
     #[test]
     fn surface_alignment_geometry_gradients_match_finite_differences() {
+        for model in [OpacityModel::PerSample, OpacityModel::Interval] {
+            surface_alignment_geometry_gradients_of(Opacity { model, beta: 0.5 });
+        }
+    }
+
+    fn surface_alignment_geometry_gradients_of(opacity: Opacity) {
         let (field, pose_a, pose_b, k, matches) = setup();
-        let beta = 0.5;
         let cam = |pose| AlignCamera {
             pose,
             intrinsics: &k,
@@ -545,7 +568,7 @@ mod tests {
         let mut grid = SparseGrad::default();
         let step = surface_alignment_step(
             &field,
-            beta,
+            opacity,
             (cam(&pose_a), cam(&pose_b)),
             &matches,
             &settings(),
@@ -569,7 +592,7 @@ mod tests {
                     moved.grid.params[entry * 2 + f] += delta;
                     surface_alignment_step(
                         &moved,
-                        beta,
+                        opacity,
                         (cam(&pose_a), cam(&pose_b)),
                         &matches,
                         &settings(),
@@ -602,7 +625,10 @@ mod tests {
         };
         let none = surface_alignment_step(
             &field,
-            0.5,
+            Opacity {
+                model: OpacityModel::PerSample,
+                beta: 0.5,
+            },
             (cam(&pose_a), cam(&pose_b)),
             &matches,
             &strict,
@@ -615,7 +641,10 @@ mod tests {
         };
         let none = surface_alignment_step(
             &field,
-            0.5,
+            Opacity {
+                model: OpacityModel::PerSample,
+                beta: 0.5,
+            },
             (cam(&pose_a), cam(&pose_b)),
             &matches,
             &opaque_only,
