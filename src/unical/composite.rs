@@ -3,7 +3,9 @@
 //! Per sample i: opacity `α_i = sigmoid(−β·s_i)` from the signed distance s_i (β > 0 learnable,
 //! 1/m), transmittance `T_i = Π_{j<i}(1 − α_j)`, weight `w_i = T_i·α_i`. A ray renders its
 //! expected range `D = Σ w_i τ_i` (Eq. 5), accumulated opacity `A = Σ w_i` and feature
-//! `F = Σ w_i f_i` (feature rendering: decoders then run once per ray, §4(a)).
+//! `F = Σ w_i f_i` (feature rendering: decoders then run once per ray, §4(a)). [`Opacity`]
+//! also offers NeuS's per-section opacity, whose weights sit at the sections' midpoints τ_i
+//! (unbiased on a plane; the default stays the paper's per-sample form, see [`OpacityModel`]).
 //!
 //! Backward without dividing by (1 − α): with per-sample scalar `g_i = ∂L/∂w_i + ∂L/∂D·τ_i +
 //! ∂L/∂A + ∂L/∂F·f_i`, `∂L/∂α_k = T_k (g_k − R_k)` where `R_k = Σ_{i>k} Π_{k<j<i}(1 − α_j) α_i g_i`
