@@ -25,6 +25,14 @@ pub fn floor(x: f32) -> f32 {
     if t > x { t - 1.0 } else { t }
 }
 
+/// `x.rem_euclid(period)` for a positive period, without libm's `fmod`: in [0, period).
+#[inline]
+pub fn wrap(x: f32, period: f32) -> f32 {
+    let r = x - floor(x / period) * period;
+    // Rounding can land exactly on the period for tiny negative x.
+    if r >= period { 0.0 } else { r }
+}
+
 fn smooth(t: f32) -> f32 {
     t * t * (3.0 - 2.0 * t)
 }
@@ -122,6 +130,22 @@ mod tests {
             assert_eq!(floor(x), x.floor(), "{x}");
         }
         assert!(floor(f32::NAN).is_nan());
+    }
+
+    #[test]
+    fn wrap_matches_rem_euclid() {
+        for x in [
+            -250.3f32, -11.0, -1e-7, 0.0, 0.4, 10.99, 11.0, 119.5, 3000.25,
+        ] {
+            for period in [1.0f32, 1.8, 2.4, 11.0, 120.0] {
+                let (a, b) = (wrap(x, period), x.rem_euclid(period));
+                assert!((0.0..period).contains(&a), "{x} {period} {a}");
+                assert!(
+                    (a - b).abs() < 1e-3 || (a - b).abs() > period - 1e-3,
+                    "{x} {period}"
+                );
+            }
+        }
     }
 
     #[test]

@@ -17,6 +17,7 @@ use glam::{Quat, Vec2, Vec3};
 use rayon::prelude::*;
 
 use super::bvh::Triangle;
+use super::noise::floor;
 
 /// A virtual pinhole camera: `u = fx·x/z + cx`, `v = fy·y/z + cy`, samples at integer (u, v).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -226,7 +227,7 @@ impl VisibilityBuffer {
             return Candidate::Trace;
         }
         let q = self.camera.project(dir);
-        let (x0, y0) = (q.x.floor(), q.y.floor());
+        let (x0, y0) = (floor(q.x), floor(q.y));
         if !(x0 >= 0.0
             && y0 >= 0.0
             && x0 + 1.0 < self.camera.width as f32

@@ -15,7 +15,7 @@ use std::str::FromStr;
 use glam::{DVec3, Vec3};
 
 use super::bvh::{Bvh, Triangle};
-use super::noise::{band, fbm2, hash3, hash64, stripe, value2};
+use super::noise::{band, fbm2, floor, hash3, hash64, stripe, value2, wrap};
 use super::raster::Candidate;
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
@@ -658,7 +658,7 @@ impl World {
             let (lx, ly) = (p.x / 2.6, p.y / 11.0);
             let bay_line =
                 stripe(lx + 0.02, 0.04, fp / 2.6) * (1.0 - stripe(ly + 0.25, 0.5, fp / 11.0));
-            let row_line = band((p.y.rem_euclid(11.0)) - 5.5, 0.06, fp);
+            let row_line = band((wrap(p.y, 11.0)) - 5.5, 0.06, fp);
             let paint = (bay_line + row_line).min(1.0) * if ad > 4.0 { 1.0 } else { 0.0 };
             let albedo = asphalt * (1.0 - paint) + Vec3::splat(0.80) * paint;
             return Surface {
@@ -675,7 +675,7 @@ impl World {
                 paint += band(ad - 1.85, 0.07, fp) * dash;
                 paint += band(ad - 5.25, 0.07, fp) * dash;
                 // Crosswalk blocks every 120 m.
-                let cw = band((s + 30.0).rem_euclid(120.0) - 60.0, 2.0, fp)
+                let cw = band(wrap(s + 30.0, 120.0) - 60.0, 2.0, fp)
                     * stripe(d / 1.2, 0.5, fp / 1.2)
                     * if ad < 6.5 { 1.0 } else { 0.0 };
                 paint += cw;
@@ -723,9 +723,9 @@ fn material_surface(
                 Vec3::from_array(color) * (0.85 + 0.3 * fbm2(u, v, 0.8, 5, fp, s(21 + fs as u64)));
             // Bricks on some façades.
             let brick = if fs % 3 == 0 {
-                let row = (v / 0.075).floor();
+                let row = floor(v / 0.075);
                 let mortar = stripe(v / 0.075, 0.15, fp / 0.075).max(stripe(
-                    u / 0.24 + 0.5 * (row % 2.0),
+                    u / 0.24 + 0.5 * (row as i32 % 2) as f32,
                     0.06,
                     fp / 0.24,
                 ));
@@ -745,8 +745,8 @@ fn material_surface(
                     - stripe(u / bay + 0.23, 0.49, fp / bay)
                         * stripe((v - 0.82) / floor, 0.45, fp / floor));
             // Mullions and transoms split each window into panes.
-            let fu = (u / bay + 0.2).rem_euclid(1.0);
-            let fv = ((v - 0.9) / floor).rem_euclid(1.0);
+            let fu = wrap(u / bay + 0.2, 1.0);
+            let fv = wrap((v - 0.9) / floor, 1.0);
             let mullion = (band(fu - 0.275, 0.012, fp / bay) + band(fv - 0.33, 0.016, fp / floor))
                 .min(1.0)
                 * wu
@@ -862,8 +862,8 @@ fn material_surface(
 
 /// A high-contrast poster: coloured panels, bold "text" bars and a logo disc.
 fn poster(u: f32, v: f32, fp: f32, seed: u64) -> Surface {
-    let cell = (u / 0.8).floor() as i32;
-    let row = (v / 0.6).floor() as i32;
+    let cell = floor(u / 0.8) as i32;
+    let row = floor(v / 0.6) as i32;
     let palette = [
         Vec3::new(0.9, 0.15, 0.1),
         Vec3::new(0.95, 0.85, 0.1),
@@ -886,8 +886,8 @@ fn poster(u: f32, v: f32, fp: f32, seed: u64) -> Surface {
             0.0
         };
     let ink = pick(cell, row, 2);
-    let cu = u.rem_euclid(2.4) - 1.2;
-    let cv = v.rem_euclid(1.8) - 0.9;
+    let cu = wrap(u, 2.4) - 1.2;
+    let cv = wrap(v, 1.8) - 0.9;
     let disc = band((cu * cu + cv * cv).sqrt() - 0.0, 0.45, fp);
     let logo = pick(cell / 3, row / 3, 3);
     let albedo = bg * (1.0 - text) + ink * text;
