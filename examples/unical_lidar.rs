@@ -2,6 +2,9 @@
 //! UniCal's LiDAR stage on a simulated drive: perturb every LiDAR, learn the scene and the
 //! extrinsics from depth, print the error against the ground truth as it goes.
 //! `cargo run --release --example unical_lidar -- [ITERATIONS] [SECONDS] [PERTURBATION_SCALE] [BETA_INIT] [REGULARISER_WEIGHT]`
+//! Environment: `RIGCAL_ROOT` (first LiDAR frozen at the truth), `RIGCAL_NEWTON` (preconditioned
+//! pose steps), `RIGCAL_REGISTRATION=N`, `RIGCAL_C2F=LEVELS,FRACTION`, `RIGCAL_LR_POSE=RATE`,
+//! `RIGCAL_OPACITY=interval|per-sample`.
 
 mod common;
 
@@ -52,6 +55,10 @@ fn main() {
     );
     let truth: Vec<_> = rig.lidars.iter().map(|l| l.vehicle_from_lidar).collect();
     let config = DepthCalibConfig {
+        lr_pose: std::env::var("RIGCAL_LR_POSE")
+            .ok()
+            .and_then(|v| v.parse().ok())
+            .unwrap_or(defaults.lr_pose),
         frozen_sensor: std::env::var("RIGCAL_ROOT")
             .is_ok()
             .then(|| rig.lidars[0].name.clone()),
