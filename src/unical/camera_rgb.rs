@@ -136,8 +136,9 @@ pub(super) fn sigmoid(x: f32) -> f32 {
 }
 
 /// Query the samples `o + τ d` front to back until the ray is opaque (`transmittance` below
-/// [`MIN_TRANSMITTANCE`], carried over between calls); appends their opacities to `alphas`.
-fn march(
+/// [`MIN_TRANSMITTANCE`], carried over between calls); appends their opacities to `alphas` and
+/// where their weights sit to `at`. Camera and surface-alignment rays both march this way.
+pub(super) fn march(
     query: &dyn Fn(DVec3) -> FieldSample,
     (o, d): (DVec3, DVec3),
     taus_m: &[f32],
@@ -169,23 +170,15 @@ pub struct CameraModel<'a> {
     pub field: &'a SceneField,
     pub background: Option<&'a Background>,
     pub appearance: &'a Appearance,
-    pub beta: f32,
-    /// The scene's opacity model (the background's samples are always per-sample).
-    pub opacity: OpacityModel,
+    /// The scene's opacity model and β (the background's samples are per-sample at that β).
+    pub opacity: Opacity,
 }
 
 impl CameraModel<'_> {
-    fn scene_opacity(&self) -> Opacity {
-        Opacity {
-            model: self.opacity,
-            beta: self.beta,
-        }
-    }
-
     fn background_opacity(&self) -> Opacity {
         Opacity {
             model: OpacityModel::PerSample,
-            beta: self.beta,
+            ..self.opacity
         }
     }
 }
@@ -227,7 +220,7 @@ fn colour_forward(model: CameraModel, pose: &PoseParams, ray: &ColourRay) -> Col
         let out = (&mut alphas, &mut at);
         march(query, (o, d), taus, opacity, out, &mut transmittance)
     };
-    let samples = march_along(&|x| field.query(x), &ray.taus_m, model.scene_opacity());
+    let samples = march_along(&|x| field.query(x), &ray.taus_m, model.opacity);
     let in_box = samples.len();
     let far_samples = match background {
         Some(bg) => march_along(
@@ -369,7 +362,7 @@ pub fn colour_step(
         let (mut d_o, mut d_d, d_beta) = field.ray_backward(
             &samples,
             &taus[..in_box],
-            model.scene_opacity(),
+            model.opacity,
             (&d_alpha[..split.0], &d_features[..split.1]),
             grid,
             &mut out.geo,
@@ -492,8 +485,10 @@ mod tests {
             field: &field,
             background: Some(&background),
             appearance: &appearance,
-            beta: 3.0,
-            opacity: OpacityModel::Interval,
+            opacity: Opacity {
+                model: OpacityModel::Interval,
+                beta: 3.0,
+            },
         };
         let exposure = ExposureMap {
             scale: [0.9, 0.8, 0.85],
@@ -533,13 +528,14 @@ mod tests {
 
     fn pose_and_exposure_gradients_of(opacity: OpacityModel) {
         let (field, background, appearance, pose, rays) = setup();
-        let beta = 3.0;
         let model = CameraModel {
             field: &field,
             background: Some(&background),
             appearance: &appearance,
-            beta,
-            opacity,
+            opacity: Opacity {
+                model: opacity,
+                beta: 3.0,
+            },
         };
         let exposure = ExposureMap {
             scale: [0.9, 1.1, 1.0],

@@ -682,8 +682,7 @@ impl DepthCalibration {
             field: &self.field,
             background: stage.background.as_ref().map(|b| &b.field),
             appearance: &stage.appearance,
-            beta: self.ln_beta.exp(),
-            opacity: self.config.opacity,
+            opacity: self.opacity(),
         };
         let (w, h) = (cam.intrinsics.width, cam.intrinsics.height);
         let rows: Vec<Vec<u8>> = (0..h)
@@ -1132,8 +1131,7 @@ impl DepthCalibration {
     ) -> (f64, super::pose::PoseGrad, TangentSystem) {
         let model = LidarModel {
             field: &self.field,
-            beta: self.beta(),
-            opacity: self.config.opacity,
+            opacity: self.opacity(),
             decoder: self.intensity_norm[sensor].map(|_| &self.decoder),
         };
         let weights = self.config.lidar_weights();
@@ -1214,8 +1212,7 @@ impl DepthCalibration {
             let chunk = rays.len().div_ceil(self.grid_accs.len()).max(1);
             let model = LidarModel {
                 field: &self.field,
-                beta: self.beta(),
-                opacity: self.config.opacity,
+                opacity: self.opacity(),
                 decoder: self.intensity_norm[s].map(|_| &self.decoder),
             };
             let (pose, map) = (&self.poses[s], &self.intensity_maps[s]);
@@ -1311,6 +1308,7 @@ impl DepthCalibration {
                 .as_ref()
                 .map_or_else(super::mlp::MlpGrad::default, |b| b.field.geo.zero_grad());
             let rgb_weight = self.config.rgb_weight as f64;
+            let opacity = self.opacity();
             for k in 0..cameras {
                 let rays = self.draw_camera_rays(k);
                 let Some(stage) = self.camera.as_mut() else {
@@ -1328,8 +1326,7 @@ impl DepthCalibration {
                     field: &self.field,
                     background,
                     appearance: &stage.appearance,
-                    beta: self.ln_beta.exp(),
-                    opacity: self.config.opacity,
+                    opacity,
                 };
                 let (pose, exposure) = (&stage.poses[k], &stage.exposure[k]);
                 let total_rays = rays.len() as f64;

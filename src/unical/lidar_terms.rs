@@ -18,7 +18,7 @@
 use glam::DVec3;
 
 use super::camera_rgb::{sh_backward, sh_encoding};
-use super::composite::{Composite, Opacity, OpacityModel, Upstream, composite, composite_backward};
+use super::composite::{Composite, Opacity, Upstream, composite, composite_backward};
 use super::field::SceneField;
 use super::hash_grid::GradSink;
 use super::intensity::{IntensityDecoder, IntensityMap};
@@ -92,18 +92,9 @@ pub struct LidarStep {
 #[derive(Clone, Copy)]
 pub struct LidarModel<'a> {
     pub field: &'a SceneField,
-    pub beta: f32,
-    pub opacity: OpacityModel,
+    /// The opacity model and β.
+    pub opacity: Opacity,
     pub decoder: Option<&'a IntensityDecoder>,
-}
-
-impl LidarModel<'_> {
-    pub fn opacity(&self) -> Opacity {
-        Opacity {
-            model: self.opacity,
-            beta: self.beta,
-        }
-    }
 }
 
 /// The composite (depth, accumulation, weights) of one LiDAR ray, forward only (diagnostics).
@@ -165,7 +156,7 @@ pub fn lidar_step(
             .collect();
         let sdfs: Vec<f32> = samples.iter().map(|s| s.sdf()).collect();
         // Where each weight sits: `at` (the samples, or the sections' midpoints).
-        let (alphas, at) = model.opacity().alphas(&sdfs, &ray.taus_m);
+        let (alphas, at) = model.opacity.alphas(&sdfs, &ray.taus_m);
         let decode = model
             .decoder
             .zip(ray.intensity)
@@ -237,7 +228,7 @@ pub fn lidar_step(
         let (d_o, d_d, d_beta) = field.ray_backward(
             &samples,
             &ray.taus_m,
-            model.opacity(),
+            model.opacity,
             (&upstream.0, &upstream.1),
             grid,
             &mut out.mlp,
@@ -276,6 +267,7 @@ mod tests {
     use super::super::field::tiny_field;
     use super::super::pose::assert_pose_gradient;
     use super::*;
+    use crate::unical::composite::OpacityModel;
     use crate::unical::hash_grid::SparseGrad;
     use glam::DQuat;
 
@@ -343,8 +335,10 @@ mod tests {
         let beta = 3.0;
         let model = |beta| LidarModel {
             field,
-            beta,
-            opacity,
+            opacity: Opacity {
+                model: opacity,
+                beta,
+            },
             decoder: Some(decoder),
         };
         let step = lidar_step(
@@ -429,8 +423,10 @@ mod tests {
         let run = |f: &SceneField, dec: &IntensityDecoder| {
             let model = LidarModel {
                 field: f,
-                beta: 3.0,
-                opacity,
+                opacity: Opacity {
+                    model: opacity,
+                    beta: 3.0,
+                },
                 decoder: Some(dec),
             };
             lidar_step(model, &pose, &map, &w, &rays, &mut SparseGrad::default())
@@ -487,8 +483,10 @@ mod tests {
         };
         let model = LidarModel {
             field: &field,
-            beta: 3.0,
-            opacity: OpacityModel::PerSample,
+            opacity: Opacity {
+                model: OpacityModel::PerSample,
+                beta: 3.0,
+            },
             decoder: None,
         };
         for ray in &rays {
@@ -500,7 +498,7 @@ mod tests {
                 std::slice::from_ref(ray),
                 &mut SparseGrad::default(),
             );
-            let rendered = render_composite(&field, model.opacity(), &pose, ray).depth_m;
+            let rendered = render_composite(&field, model.opacity, &pose, ray).depth_m;
             let error = (rendered - ray.range_m).abs() as f64;
             assert!((error - step.mean_abs_error_m).abs() < 1e-5, "{error}");
         }
@@ -513,8 +511,10 @@ mod tests {
         let (field, decoder, pose, rays) = setup();
         let model = LidarModel {
             field: &field,
-            beta: 3.0,
-            opacity: OpacityModel::PerSample,
+            opacity: Opacity {
+                model: OpacityModel::PerSample,
+                beta: 3.0,
+            },
             decoder: Some(&decoder),
         };
         let w = LidarWeights {
@@ -531,7 +531,7 @@ mod tests {
         let step = lidar_step(model, &pose, &map, &w, &rays, &mut SparseGrad::default());
         assert!(!step.pose_rows.is_empty() && step.pose_rows.len() <= rays.len());
         for ray in &rays {
-            let c = render_composite(&field, model.opacity(), &pose, ray);
+            let c = render_composite(&field, model.opacity, &pose, ray);
             if c.accumulation > 0.5 {
                 let r = (c.depth_m / c.accumulation - ray.range_m) as f64;
                 assert!(step.pose_rows.iter().any(|row| row.residual_m * r >= 0.0));

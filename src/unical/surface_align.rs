@@ -16,6 +16,7 @@
 
 use glam::{DMat3, DVec2, DVec3};
 
+use super::camera_rgb::march;
 use super::composite::{Composite, Opacity, Upstream, composite, composite_backward};
 use super::field::{FieldSample, SceneField};
 use super::hash_grid::GradSink;
@@ -124,25 +125,17 @@ struct Rendered {
     point: DVec3,
 }
 
-/// Samples stop once this little light gets through (as for colour rays).
-const MIN_TRANSMITTANCE: f32 = 1e-3;
-
 fn render(field: &SceneField, opacity: Opacity, pose: &PoseParams, ray: &AlignRay) -> Rendered {
     let (o, d) = pose.ray(ray.world_from_vehicle, ray.dir_in_sensor);
-    let (mut samples, mut sdfs) = (Vec::new(), Vec::new());
-    let mut transmittance = 1.0f32;
-    for t in &ray.taus_m {
-        if transmittance < MIN_TRANSMITTANCE {
-            break;
-        }
-        let s = field.query(o + d * *t as f64);
-        sdfs.push(s.sdf());
-        samples.push(s);
-        if let Some(a) = opacity.settled(&sdfs) {
-            transmittance *= 1.0 - a;
-        }
-    }
-    let (alphas, at) = opacity.alphas(&sdfs, &ray.taus_m);
+    let (mut alphas, mut at, mut transmittance) = (Vec::new(), Vec::new(), 1.0f32);
+    let samples = march(
+        &|x| field.query(x),
+        (o, d),
+        &ray.taus_m,
+        opacity,
+        (&mut alphas, &mut at),
+        &mut transmittance,
+    );
     let composite = composite(&alphas, &at, &[], 0);
     let depth_m = composite.depth_m as f64 / (composite.accumulation as f64).max(1e-6);
     Rendered {
