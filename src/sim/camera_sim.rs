@@ -16,7 +16,7 @@ use image::RgbImage;
 use rayon::prelude::*;
 
 use super::noise::{fbm2, hash64};
-use super::raster::{Candidate, Pinhole, VisibilityBuffer};
+use super::raster::{Candidate, OUTSIDE, Pinhole, VisibilityBuffer};
 use super::world::World;
 use crate::geometry::Rigid;
 use crate::geometry::camera::CameraIntrinsics;
@@ -31,6 +31,8 @@ pub struct RayTable {
     pub pixel_angle: f32,
     /// The virtual pinhole camera primary visibility is rasterised in (`None`: trace every ray).
     pinhole: Option<Pinhole>,
+    /// Each pixel's sample in that camera's image ([`Pinhole::sample_of`]).
+    samples: Vec<u32>,
 }
 
 impl RayTable {
@@ -51,12 +53,24 @@ impl RayTable {
             intr.cx as f32,
             intr.cy as f32,
         );
+        let samples = pinhole.map_or_else(Vec::new, |pin| {
+            dirs.par_iter()
+                .map(|d| {
+                    if *d == Vec3::ZERO {
+                        OUTSIDE
+                    } else {
+                        pin.sample_of(*d)
+                    }
+                })
+                .collect()
+        });
         Self {
             width: w,
             height: h,
             dirs,
             pixel_angle: (1.0 / intr.fx.max(1.0)) as f32,
             pinhole,
+            samples,
         }
     }
 
@@ -243,6 +257,8 @@ struct Scratch {
     anchors: Vec<(Vec3, u32, u8)>,
     radiance: Vec<Vec3>,
     prim: Vec<u32>,
+    /// Whether the sun reached each pixel's sample (`NO_SUN` also when unknown).
+    sun: Vec<u8>,
 }
 
 /// Buffers of finished images; at most as many as images rendered at once.
@@ -280,17 +296,18 @@ pub fn render(
     let visibility = rays
         .pinhole
         .map(|pin| VisibilityBuffer::render(&world.bvh.triangles, pin, origin, rot.inverse()));
-    let candidate = |d: Vec3| {
+    // The rasterised candidate for pixel k's own ray (its sample looked up once per camera).
+    let candidate_at = |k: usize| {
         visibility
             .as_ref()
-            .map_or(Candidate::Trace, |v| v.candidate(d))
+            .map_or(Candidate::Trace, |v| v.candidate_at(rays.samples[k]))
     };
     let shade = |k: usize| {
         let d = rays.dirs[k];
         if d == Vec3::ZERO {
             return (Vec3::ZERO, INVALID, NO_SUN);
         }
-        let hit = world.trace_with(origin, rot * d, SKY_DISTANCE_M, candidate(d));
+        let hit = world.trace_with(origin, rot * d, SKY_DISTANCE_M, candidate_at(k));
         shade_hit(world, rot * d, hit, rays.pixel_angle, None)
     };
     // Pass 1: shade the anchors, every other pixel of every other row. The coarse anchors
@@ -309,11 +326,13 @@ pub fn render(
         anchors,
         radiance: radiance_buf,
         prim,
+        sun,
     } = &mut scratch;
     // Every slot of the three buffers is written below before it is read.
     anchors.resize(aw * h.div_ceil(2), (Vec3::ZERO, INVALID, NO_SUN));
     radiance_buf.resize(w * h, Vec3::ZERO);
     prim.resize(w * h, INVALID);
+    sun.resize(w * h, NO_SUN);
     anchors
         .par_chunks_mut(aw)
         .enumerate()
@@ -329,7 +348,8 @@ pub fn render(
                         (Vec3::ZERO, INVALID, NO_SUN)
                     } else {
                         let dir = rot * d;
-                        let hit = world.trace_with(origin, dir, SKY_DISTANCE_M, candidate(d));
+                        let hit =
+                            world.trace_with(origin, dir, SKY_DISTANCE_M, candidate_at(y * w + x));
                         let hint = hit.and_then(|hit| {
                             let spacing = 4.0 * footprint(&hit, dir, rays.pixel_angle);
                             (spacing <= COARSE_SUN_SPACING_M)
@@ -348,22 +368,20 @@ pub fn render(
     radiance_buf
         .par_chunks_mut(w)
         .zip(prim.par_chunks_mut(w))
+        .zip(sun.par_chunks_mut(w))
         .enumerate()
-        .for_each(|(y, (row, prow))| {
+        .for_each(|(y, ((row, prow), srow))| {
             for x in 0..w {
                 let k = y * w + x;
                 if x % 2 == 0 && y % 2 == 0 {
-                    (row[x], prow[x], _) = anchor(x, y);
+                    (row[x], prow[x], srow[x]) = anchor(x, y);
                     continue;
                 }
                 let d = rays.dirs[k];
                 let xs: &[usize] = if x % 2 == 0 { &[x] } else { &[x - 1, x + 1] };
                 let ys: &[usize] = if y % 2 == 0 { &[y] } else { &[y - 1, y + 1] };
                 if d == Vec3::ZERO || xs.iter().any(|&ax| ax >= w) || ys.iter().any(|&ay| ay >= h) {
-                    (row[x], prow[x]) = {
-                        let (c, p, _) = shade(k);
-                        (c, p)
-                    };
+                    (row[x], prow[x], srow[x]) = shade(k);
                     continue;
                 }
                 let (mut lo, mut hi, mut sum) = (Vec3::MAX, Vec3::MIN, Vec3::ZERO);
@@ -382,13 +400,14 @@ pub fn render(
                     (hi - lo).max_element() <= SMOOTH_RELATIVE * hi.max_element() + SMOOTH_ABSOLUTE;
                 // The rasterised candidate names the face without an exact intersection: when it
                 // is the anchors' face, the pixel sees it too.
-                let cand = candidate(d);
+                let cand = candidate_at(k);
                 if anchors_agree
                     && smooth
                     && let Candidate::Triangle(id) = cand
                     && world.bvh.triangles[id as usize].face == face
                 {
                     (row[x], prow[x]) = (sum / n, face);
+                    srow[x] = if same_sun { first_sun } else { NO_SUN };
                     continue;
                 }
                 let dir = rot * d;
@@ -397,11 +416,11 @@ pub fn render(
                 let same_face = anchors_agree && face == own;
                 if same_face && smooth {
                     (row[x], prow[x]) = (sum / n, own);
+                    srow[x] = if same_sun { first_sun } else { NO_SUN };
                 } else {
                     let hint =
                         (same_face && same_sun && first_sun != NO_SUN).then_some(first_sun == LIT);
-                    let (c, p, _) = shade_hit(world, dir, hit, rays.pixel_angle, hint);
-                    (row[x], prow[x]) = (c, p);
+                    (row[x], prow[x], srow[x]) = shade_hit(world, dir, hit, rays.pixel_angle, hint);
                 }
             }
         });
@@ -426,8 +445,16 @@ pub fn render(
                 continue;
             }
             let dir = rot * d;
-            let hit = world.trace_with(origin, dir, SKY_DISTANCE_M, candidate(d));
-            sum += shade_hit(world, dir, hit, rays.pixel_angle * 0.5, None).0;
+            let hit = match visibility.as_ref().and_then(|v| v.neighbourhood(d)) {
+                Some(ids) => world.trace_among(origin, dir, SKY_DISTANCE_M, ids),
+                None => world.trace(origin, dir, SKY_DISTANCE_M),
+            };
+            // On the pixel's own face the sun's answer is the pixel's (a shadow edge moves by
+            // at most the sub-sample's quarter-pixel offset).
+            let hint = hit
+                .filter(|h| h.primitive == p && sun[k] != NO_SUN)
+                .map(|_| sun[k] == LIT);
+            sum += shade_hit(world, dir, hit, rays.pixel_angle * 0.5, hint).0;
         }
         Some(sum * 0.25)
     };

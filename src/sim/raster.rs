@@ -34,6 +34,8 @@ pub struct Pinhole {
 const MIN_Z: f32 = 0.08;
 const NEAR_M: f32 = 0.02;
 const NONE: u32 = u32::MAX;
+/// [`Pinhole::sample_of`] for a ray outside the virtual image.
+pub const OUTSIDE: u32 = u32::MAX;
 /// Largest virtual image side; wider fields of view get a smaller virtual focal length.
 const MAX_SIDE: f32 = 4096.0;
 
@@ -79,6 +81,24 @@ impl Pinhole {
 
     fn project(&self, p: Vec3) -> Vec2 {
         Vec2::new(self.fx * p.x / p.z + self.cx, self.fy * p.y / p.z + self.cy)
+    }
+
+    /// The top-left of the four samples around a camera-frame ray direction (their index in
+    /// the image), or [`OUTSIDE`] when the ray is not inside the rasterised image.
+    pub fn sample_of(&self, dir: Vec3) -> u32 {
+        if dir.z < MIN_Z * 0.5 {
+            return OUTSIDE;
+        }
+        let q = self.project(dir);
+        let (x0, y0) = (floor(q.x), floor(q.y));
+        if !(x0 >= 0.0
+            && y0 >= 0.0
+            && x0 + 1.0 < self.width as f32
+            && y0 + 1.0 < self.height as f32)
+        {
+            return OUTSIDE;
+        }
+        y0 as u32 * self.width + x0 as u32
     }
 }
 
@@ -223,20 +243,17 @@ impl VisibilityBuffer {
 
     /// The candidate first triangle along a camera-frame ray direction.
     pub fn candidate(&self, dir: Vec3) -> Candidate {
-        if dir.z < MIN_Z * 0.5 {
-            return Candidate::Trace;
-        }
-        let q = self.camera.project(dir);
-        let (x0, y0) = (floor(q.x), floor(q.y));
-        if !(x0 >= 0.0
-            && y0 >= 0.0
-            && x0 + 1.0 < self.camera.width as f32
-            && y0 + 1.0 < self.camera.height as f32)
-        {
+        self.candidate_at(self.camera.sample_of(dir))
+    }
+
+    /// The candidate for a ray whose [`Pinhole::sample_of`] is `sample` (rays of a fixed
+    /// pixel grid look it up once per camera instead of projecting every image).
+    pub fn candidate_at(&self, sample: u32) -> Candidate {
+        if sample == OUTSIDE {
             return Candidate::Trace;
         }
         let w = self.camera.width as usize;
-        let k = y0 as usize * w + x0 as usize;
+        let k = sample as usize;
         let id = self.ids[k];
         if self.ids[k + 1] != id || self.ids[k + w] != id || self.ids[k + w + 1] != id {
             return Candidate::Trace;
@@ -246,6 +263,22 @@ impl VisibilityBuffer {
         } else {
             Candidate::Triangle(id)
         }
+    }
+
+    /// The triangles of the four samples around a camera-frame ray direction (`u32::MAX` for
+    /// a sample that sees none), or `None` when the ray is outside the rasterised image.
+    pub fn neighbourhood(&self, dir: Vec3) -> Option<[u32; 4]> {
+        let sample = self.camera.sample_of(dir);
+        if sample == OUTSIDE {
+            return None;
+        }
+        let (k, w) = (sample as usize, self.camera.width as usize);
+        Some([
+            self.ids[k],
+            self.ids[k + 1],
+            self.ids[k + w],
+            self.ids[k + w + 1],
+        ])
     }
 
     /// Share of samples that see a triangle (for tests and diagnostics).
@@ -320,6 +353,54 @@ mod tests {
         assert!(sole > 10_000, "{sole}");
         // Silhouettes are a small share of the image.
         assert!(trace < dirs.len() / 5, "{trace} of {}", dirs.len());
+    }
+
+    #[test]
+    fn sub_pixel_rays_hit_a_triangle_their_neighbourhood_saw() {
+        // What `World::trace_among` relies on: between four samples, the first triangle is
+        // one of theirs (or, when the ray misses all of them, it is traced).
+        let tris = scene();
+        let bvh = Bvh::build(tris.clone());
+        let world_from_camera =
+            Quat::from_mat3(&glam::Mat3::from_cols(-Vec3::Y, -Vec3::Z, Vec3::X));
+        let origin = Vec3::new(0.0, 0.0, 1.5);
+        let (width, height, f) = (320u32, 200u32, 180.0f32);
+        let (cx, cy) = (159.5f32, 99.5f32);
+        let dir = |x: f32, y: f32| Vec3::new((x - cx) / f, (y - cy) / f, 1.0).normalize_or_zero();
+        let dirs: Vec<Vec3> = (0..width * height)
+            .map(|k| dir((k % width) as f32, (k / width) as f32))
+            .collect();
+        let pin = Pinhole::covering(&dirs, f, f, cx, cy).unwrap();
+        let vis =
+            VisibilityBuffer::render(&bvh.triangles, pin, origin, world_from_camera.inverse());
+        let (mut silhouettes, mut outside_set) = (0, 0);
+        for k in 0..width * height {
+            let (x, y) = ((k % width) as f32 + 0.25, (k / width) as f32 - 0.25);
+            let d = dir(x, y);
+            if vis.candidate(d) != Candidate::Trace {
+                continue;
+            }
+            let Some(ids) = vis.neighbourhood(d) else {
+                continue;
+            };
+            silhouettes += 1;
+            let truth = bvh.intersect(origin, world_from_camera * d, 1e-3, f32::MAX);
+            let seen = truth.is_none_or(|h| ids.contains(&h.triangle));
+            let missed_all = ids.iter().all(|&id| {
+                id == NONE
+                    || bvh
+                        .intersect_triangle(id, origin, world_from_camera * d, 1e-3, f32::MAX)
+                        .is_none()
+            });
+            if !seen && !missed_all {
+                outside_set += 1;
+            }
+        }
+        assert!(silhouettes > 1000, "{silhouettes}");
+        assert!(
+            outside_set * 200 < silhouettes,
+            "{outside_set} of {silhouettes} sub-pixel rays hit a triangle no sample saw"
+        );
     }
 
     #[test]

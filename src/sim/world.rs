@@ -557,6 +557,39 @@ impl World {
             .unwrap_or_else(|| self.trace(origin, dir, t_max))
     }
 
+    /// The first surface along a ray whose rasterised neighbourhood saw `triangles`
+    /// (`u32::MAX`: a sample that saw none): the nearest of their exact intersections and the
+    /// ground, by at most four triangle tests instead of a BVH trace; a ray that misses them
+    /// all is traced (it may hit a triangle no sample saw). A thin occluder that fell between
+    /// the samples in front of a hit triangle can be missed; anti-aliasing sub-samples, which
+    /// sit between samples that already disagree, use it.
+    pub fn trace_among(
+        &self,
+        origin: Vec3,
+        dir: Vec3,
+        t_max: f32,
+        triangles: [u32; 4],
+    ) -> Option<SurfaceHit> {
+        let ground = self.ground_hit(origin, dir, t_max);
+        let limit = ground.map_or(t_max, |h| h.t);
+        let mut best: Option<(f32, u32)> = None;
+        for (i, &id) in triangles.iter().enumerate() {
+            if id == u32::MAX || triangles[..i].contains(&id) {
+                continue;
+            }
+            if let Some(t) = self.bvh.intersect_triangle(id, origin, dir, 1e-3, f32::MAX)
+                && t < best.map_or(f32::MAX, |b| b.0)
+            {
+                best = Some((t, id));
+            }
+        }
+        match best {
+            Some((t, id)) if t < limit => Some(self.triangle_hit(origin, dir, t, id)),
+            Some(_) => ground,
+            None => self.trace(origin, dir, t_max),
+        }
+    }
+
     /// The first surface from a rasterised candidate and at most one exact intersection
     /// (`Some(None)`: nothing within range), or `None` when only a BVH trace can tell.
     fn resolve(
