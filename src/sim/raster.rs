@@ -217,8 +217,21 @@ impl VisibilityBuffer {
                     let mut y = ylo;
                     while y <= yhi {
                         let row = (y - y0) as usize * width;
-                        let mut x = t.min.x;
-                        while x <= t.max.x {
+                        // The row's span inside the triangle, one pixel wider on each side than
+                        // the edge functions' zero crossings (the test below decides).
+                        let (mut lo, mut hi) = (t.min.x, t.max.x);
+                        for (a, b) in [(t.b, t.c), (t.c, t.a), (t.a, t.b)] {
+                            // edge(a, b, (x, y)) · inv_area = f0 + slope · x
+                            let slope = -(b.y - a.y) * inv_area;
+                            let f0 = ((b.x - a.x) * (y - a.y) + (b.y - a.y) * a.x) * inv_area;
+                            if slope > 0.0 {
+                                lo = lo.max(floor(-f0 / slope) - 1.0);
+                            } else if slope < 0.0 {
+                                hi = hi.min(floor(-f0 / slope) + 2.0);
+                            }
+                        }
+                        let mut x = lo;
+                        while x <= hi {
                             let p = Vec2::new(x, y);
                             // Barycentric weights; inclusive on every edge for either winding.
                             let w0 = edge(t.b, t.c, p) * inv_area;
