@@ -682,9 +682,14 @@ impl World {
         let speck_fade = ((1.0 / 25.0) / (2.0 * fp)).clamp(0.0, 1.0);
         let speck =
             ((value2(p.x * 25.0, p.y * 25.0, seed ^ 16) - 0.7) * 8.0).clamp(0.0, 1.0) * speck_fade;
-        let crack_noise = fbm2(p.x, p.y, 0.35, 3, fp, seed ^ 17);
-        let crack = band(crack_noise - 0.5, 0.004, fp * 0.5)
-            * ((value2(p.x * 0.1, p.y * 0.1, seed ^ 18) - 0.55) * 5.0).clamp(0.0, 1.0);
+        // Cracks only where their mask is open (most of the road has none: no noise there).
+        let crack_mask = ((value2(p.x * 0.1, p.y * 0.1, seed ^ 18) - 0.55) * 5.0).clamp(0.0, 1.0);
+        let crack = if crack_mask > 0.0 {
+            let crack_noise = fbm2(p.x, p.y, 0.35, 3, fp, seed ^ 17);
+            band(crack_noise - 0.5, 0.004, fp * 0.5) * crack_mask
+        } else {
+            0.0
+        };
         let asphalt = (asphalt + Vec3::splat(0.08 * speck)) * (1.0 - 0.6 * crack);
         if self.kind == SceneKind::ParkingLot {
             // Parking bays: lines every 2.6 m across, rows 5.5 m deep.
@@ -716,8 +721,13 @@ impl World {
             }
             paint += band(ad - 6.7, 0.08, fp);
             let paint = paint.min(1.0);
-            let wear = 0.75 + 0.25 * value2(p.x * 3.0, p.y * 3.0, seed ^ 13);
-            let marking = Vec3::new(0.85, 0.85, 0.82) * wear;
+            // Worn paint (its noise only where there is paint).
+            let marking = if paint > 0.0 {
+                Vec3::new(0.85, 0.85, 0.82)
+                    * (0.75 + 0.25 * value2(p.x * 3.0, p.y * 3.0, seed ^ 13))
+            } else {
+                Vec3::ZERO
+            };
             let albedo =
                 asphalt * (1.0 - paint) + marking * paint + Vec3::new(0.1, 0.08, 0.0) * yellow;
             // Road paint is retro-reflective: bright in LiDAR intensity.
@@ -786,8 +796,12 @@ fn material_surface(
                 * wv
                 * (1.0 - ground_floor);
             let window = window * (1.0 - mullion);
-            let sky_reflection = Vec3::new(0.25, 0.32, 0.40)
-                * (0.6 + 0.8 * value2(u * 0.3, v * 0.5, s(23 + fs as u64)));
+            let sky_reflection = if window > 0.0 {
+                Vec3::new(0.25, 0.32, 0.40)
+                    * (0.6 + 0.8 * value2(u * 0.3, v * 0.5, s(23 + fs as u64)))
+            } else {
+                Vec3::ZERO
+            };
             let albedo = Vec3::splat(0.85) * mullion
                 + base * brick * (1.0 - window - mullion).max(0.0)
                 + sky_reflection * window * 0.6
