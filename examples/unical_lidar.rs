@@ -116,8 +116,18 @@ fn main() {
             let ext = calib.extrinsics();
             let relative = (ext.len() >= 2).then(|| {
                 let est = ext[0].1.inverse() * ext[1].1;
-                let (r, d) = (truth[0].inverse() * truth[1]).difference(est);
-                format!(" · relative {:.3}° {:.1} cm", r.to_degrees(), d * 100.0)
+                let want = truth[0].inverse() * truth[1];
+                let (r, d) = want.difference(est);
+                // The translation error's components in the first LiDAR's frame.
+                let e = (est.translation - want.translation) * 100.0;
+                format!(
+                    " · relative {:.3}° {:.1} cm ({:+.1} {:+.1} {:+.1})",
+                    r.to_degrees(),
+                    d * 100.0,
+                    e.x,
+                    e.y,
+                    e.z
+                )
             });
             let errs = errs.join(" · ") + &relative.unwrap_or_default();
             eprintln!(
