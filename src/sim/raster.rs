@@ -328,25 +328,54 @@ mod tests {
         tris
     }
 
-    #[test]
-    fn candidates_agree_with_ray_tracing() {
-        let tris = scene();
-        let bvh = Bvh::build(tris.clone());
-        // Camera frame: x right, y down, z forward; world: camera looks along +x, z up.
+    /// The random street of [`scene`] seen by a 320 × 200 pinhole camera at the origin looking
+    /// along +x (camera frame: x right, y down, z forward; world: z up), rasterised.
+    struct View {
+        bvh: Bvh,
+        world_from_camera: Quat,
+        origin: Vec3,
+        dirs: Vec<Vec3>,
+        vis: VisibilityBuffer,
+    }
+
+    const WIDTH: u32 = 320;
+    const HEIGHT: u32 = 200;
+
+    /// The camera-frame ray through pixel (x, y).
+    fn pixel_dir(x: f32, y: f32) -> Vec3 {
+        let (f, cx, cy) = (180.0f32, 159.5f32, 99.5f32);
+        Vec3::new((x - cx) / f, (y - cy) / f, 1.0).normalize_or_zero()
+    }
+
+    fn view() -> View {
+        let bvh = Bvh::build(scene());
         let world_from_camera =
             Quat::from_mat3(&glam::Mat3::from_cols(-Vec3::Y, -Vec3::Z, Vec3::X));
         let origin = Vec3::new(0.0, 0.0, 1.5);
-        let (width, height, f) = (320u32, 200u32, 180.0f32);
-        let (cx, cy) = (159.5f32, 99.5f32);
-        let dirs: Vec<Vec3> = (0..width * height)
-            .map(|k| {
-                let (x, y) = ((k % width) as f32, (k / width) as f32);
-                Vec3::new((x - cx) / f, (y - cy) / f, 1.0).normalize_or_zero()
-            })
+        let dirs: Vec<Vec3> = (0..WIDTH * HEIGHT)
+            .map(|k| pixel_dir((k % WIDTH) as f32, (k / WIDTH) as f32))
             .collect();
-        let pin = Pinhole::covering(&dirs, f, f, cx, cy).unwrap();
+        let pin = Pinhole::covering(&dirs, 180.0, 180.0, 159.5, 99.5).unwrap();
         let vis =
             VisibilityBuffer::render(&bvh.triangles, pin, origin, world_from_camera.inverse());
+        View {
+            bvh,
+            world_from_camera,
+            origin,
+            dirs,
+            vis,
+        }
+    }
+
+    #[test]
+    fn candidates_agree_with_ray_tracing() {
+        let View {
+            bvh,
+            world_from_camera,
+            origin,
+            dirs,
+            vis,
+        } = view();
         assert!(vis.coverage() > 0.2, "{}", vis.coverage());
         let (mut sole, mut trace) = (0, 0);
         for d in &dirs {
@@ -372,24 +401,17 @@ mod tests {
     fn sub_pixel_rays_hit_a_triangle_their_neighbourhood_saw() {
         // What `World::trace_among` relies on: between four samples, the first triangle is
         // one of theirs (or, when the ray misses all of them, it is traced).
-        let tris = scene();
-        let bvh = Bvh::build(tris.clone());
-        let world_from_camera =
-            Quat::from_mat3(&glam::Mat3::from_cols(-Vec3::Y, -Vec3::Z, Vec3::X));
-        let origin = Vec3::new(0.0, 0.0, 1.5);
-        let (width, height, f) = (320u32, 200u32, 180.0f32);
-        let (cx, cy) = (159.5f32, 99.5f32);
-        let dir = |x: f32, y: f32| Vec3::new((x - cx) / f, (y - cy) / f, 1.0).normalize_or_zero();
-        let dirs: Vec<Vec3> = (0..width * height)
-            .map(|k| dir((k % width) as f32, (k / width) as f32))
-            .collect();
-        let pin = Pinhole::covering(&dirs, f, f, cx, cy).unwrap();
-        let vis =
-            VisibilityBuffer::render(&bvh.triangles, pin, origin, world_from_camera.inverse());
+        let View {
+            bvh,
+            world_from_camera,
+            origin,
+            vis,
+            ..
+        } = view();
         let (mut silhouettes, mut outside_set) = (0, 0);
-        for k in 0..width * height {
-            let (x, y) = ((k % width) as f32 + 0.25, (k / width) as f32 - 0.25);
-            let d = dir(x, y);
+        for k in 0..WIDTH * HEIGHT {
+            let (x, y) = ((k % WIDTH) as f32 + 0.25, (k / WIDTH) as f32 - 0.25);
+            let d = pixel_dir(x, y);
             if vis.candidate(d) != Candidate::Trace {
                 continue;
             }
