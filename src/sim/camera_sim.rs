@@ -4,7 +4,9 @@
 //! visibility buffer confirmed by an exact intersection, the BVH on silhouettes; `raster`), its band-limited
 //! albedo, sun light with a shadow ray plus sky ambient, aerial perspective, then the camera's
 //! exposure gain and colour tone, vignetting, gamma and sensor noise. Pixels whose neighbours hit
-//! a different primitive are re-rendered with 4 sub-samples (edge-adaptive anti-aliasing).
+//! a different primitive are re-rendered with 4 sub-samples (edge-adaptive anti-aliasing),
+//! each resolved among the triangles of the visibility-buffer samples around it and, on the
+//! pixel's own face, lit as the pixel is.
 //!
 //! Not every pixel is shaded: anchors on a 2-pixel grid are, and the pixels between them take
 //! the anchors' mean when they see the same flat face and the anchors' colours agree (textures
