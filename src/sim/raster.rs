@@ -33,7 +33,8 @@ pub struct Pinhole {
 /// Rays closer than this to the image plane's horizon (z / |d|) are not rasterised.
 const MIN_Z: f32 = 0.08;
 const NEAR_M: f32 = 0.02;
-const NONE: u32 = u32::MAX;
+/// The triangle id of a sample that sees no triangle.
+pub const NONE: u32 = u32::MAX;
 /// [`Pinhole::sample_of`] for a ray outside the virtual image.
 pub const OUTSIDE: u32 = u32::MAX;
 /// Largest virtual image side; wider fields of view get a smaller virtual focal length.
@@ -265,10 +266,8 @@ impl VisibilityBuffer {
         if sample == OUTSIDE {
             return Candidate::Trace;
         }
-        let w = self.camera.width as usize;
-        let k = sample as usize;
-        let id = self.ids[k];
-        if self.ids[k + 1] != id || self.ids[k + w] != id || self.ids[k + w + 1] != id {
+        let [id, right, below, diagonal] = self.around(sample);
+        if right != id || below != id || diagonal != id {
             return Candidate::Trace;
         }
         if id == NONE {
@@ -278,20 +277,23 @@ impl VisibilityBuffer {
         }
     }
 
-    /// The triangles of the four samples around a camera-frame ray direction (`u32::MAX` for
-    /// a sample that sees none), or `None` when the ray is outside the rasterised image.
+    /// The triangles of the four samples around a camera-frame ray direction ([`NONE`] for a
+    /// sample that sees none), or `None` when the ray is outside the rasterised image.
     pub fn neighbourhood(&self, dir: Vec3) -> Option<[u32; 4]> {
         let sample = self.camera.sample_of(dir);
-        if sample == OUTSIDE {
-            return None;
-        }
+        (sample != OUTSIDE).then(|| self.around(sample))
+    }
+
+    /// The triangles of the sample `sample` (not [`OUTSIDE`]) and of its right, lower and
+    /// lower-right neighbours.
+    fn around(&self, sample: u32) -> [u32; 4] {
         let (k, w) = (sample as usize, self.camera.width as usize);
-        Some([
+        [
             self.ids[k],
             self.ids[k + 1],
             self.ids[k + w],
             self.ids[k + w + 1],
-        ])
+        ]
     }
 
     /// Share of samples that see a triangle (for tests and diagnostics).

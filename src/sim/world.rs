@@ -16,7 +16,7 @@ use glam::{DVec3, Vec3};
 
 use super::bvh::{Bvh, Triangle};
 use super::noise::{band, fbm2, floor, hash3, hash64, stripe, value2, wrap};
-use super::raster::Candidate;
+use super::raster::{Candidate, NONE};
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
 #[serde(rename_all = "kebab-case")]
@@ -558,7 +558,7 @@ impl World {
     }
 
     /// The first surface along a ray whose rasterised neighbourhood saw `triangles`
-    /// (`u32::MAX`: a sample that saw none): the nearest of their exact intersections and the
+    /// ([`NONE`]: a sample that saw none): the nearest of their exact intersections and the
     /// ground, by at most four triangle tests instead of a BVH trace; a ray that misses them
     /// all is traced (it may hit a triangle no sample saw). A thin occluder that fell between
     /// the samples in front of a hit triangle can be missed; anti-aliasing sub-samples, which
@@ -574,7 +574,7 @@ impl World {
         let limit = ground.map_or(t_max, |h| h.t);
         let mut best: Option<(f32, u32)> = None;
         for (i, &id) in triangles.iter().enumerate() {
-            if id == u32::MAX || triangles[..i].contains(&id) {
+            if id == NONE || triangles[..i].contains(&id) {
                 continue;
             }
             if let Some(t) = self.bvh.intersect_triangle(id, origin, dir, 1e-3, f32::MAX)
