@@ -243,8 +243,18 @@ impl Gamma {
                 .collect(),
         }
     }
+    #[cfg(test)]
     fn apply(&self, v: f32) -> f32 {
-        let s = v.clamp(0.0, 1.0).sqrt() * Self::N as f32;
+        self.lookup(Self::argument(v))
+    }
+    /// The table position of `v`: `sqrt(v)` on [0, 1] in table steps (apart from the lookup,
+    /// so a row of them vectorises).
+    #[inline]
+    fn argument(v: f32) -> f32 {
+        v.clamp(0.0, 1.0).sqrt() * Self::N as f32
+    }
+    #[inline]
+    fn lookup(&self, s: f32) -> f32 {
         let i = s as usize;
         let f = s - i as f32;
         self.table[i] + (self.table[i + 1] - self.table[i]) * f
@@ -466,21 +476,37 @@ pub fn render(
     let tint = Vec3::from_array(exposure.tint);
     let gamma = Gamma::new();
     let mut img = RgbImage::new(w as u32, h as u32);
-    img.par_chunks_mut(3 * w).enumerate().for_each(|(y, row)| {
-        for x in 0..w {
-            let r2 = (((x as f32 - cx).powi(2) + (y as f32 - cy).powi(2)) * inv_diag2).min(2.25);
-            let vignette = 1.0 - 0.25 * r2;
-            let radiance = edge_sample(x, y).unwrap_or(radiance_buf[y * w + x]);
-            let c = radiance * exposure.gain * tint * vignette * 0.8;
-            let noise = gaussian3(x as u32, y as u32, exposure.seed);
-            for ch in 0..3 {
-                // Filmic-ish shoulder, then gamma.
-                let v = c[ch] / (1.0 + 0.15 * c[ch]);
-                let v = gamma.apply(v) * 255.0 + exposure.noise_sigma * noise[ch];
-                row[3 * x + ch] = v.clamp(0.0, 255.0) as u8;
+    img.par_chunks_mut(3 * w)
+        .enumerate()
+        .for_each_init(Vec::new, |tone, (y, row)| {
+            // Linear values of the row's channels, then the shoulder and the square root of
+            // the gamma table's argument over the whole row at once (vectorised: a division and
+            // a square root each), then table, noise and quantisation per channel.
+            tone.clear();
+            for x in 0..w {
+                let r2 =
+                    (((x as f32 - cx).powi(2) + (y as f32 - cy).powi(2)) * inv_diag2).min(2.25);
+                let vignette = 1.0 - 0.25 * r2;
+                let radiance = edge_sample(x, y).unwrap_or(radiance_buf[y * w + x]);
+                let c = radiance * exposure.gain * tint * vignette * 0.8;
+                tone.extend_from_slice(&c.to_array());
             }
-        }
-    });
+            for v in tone.iter_mut() {
+                // Filmic-ish shoulder.
+                *v = Gamma::argument(*v / (1.0 + 0.15 * *v));
+            }
+            for (x, (px, s)) in row
+                .chunks_exact_mut(3)
+                .zip(tone.chunks_exact(3))
+                .enumerate()
+            {
+                let noise = gaussian3(x as u32, y as u32, exposure.seed);
+                for ch in 0..3 {
+                    let v = gamma.lookup(s[ch]) * 255.0 + exposure.noise_sigma * noise[ch];
+                    px[ch] = v.clamp(0.0, 255.0) as u8;
+                }
+            }
+        });
     scratch.give_back();
     img
 }

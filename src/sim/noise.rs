@@ -58,10 +58,12 @@ pub fn fbm2(x: f32, y: f32, base_scale: f32, octaves: u32, footprint: f32, seed:
     let mut norm = 0.0;
     let mut amp = 1.0;
     let mut scale = base_scale;
+    // 1 / scale, halved with every octave (exactly the reciprocal: powers of two scale exactly).
+    let mut feature = 1.0 / base_scale;
     let inv_footprint = 1.0 / (2.0 * footprint.max(1e-6));
     for o in 0..octaves {
         // Feature size of this octave is 1/scale; fade when it drops below two footprints.
-        let fade = ((1.0 / scale) * inv_footprint).clamp(0.0, 1.0);
+        let fade = (feature * inv_footprint).clamp(0.0, 1.0);
         // A faded octave is its mean; so are all finer ones (cheap far away).
         let v = if fade > 0.0 {
             value2(x * scale, y * scale, seed.wrapping_add(o as u64 * 1013))
@@ -72,6 +74,7 @@ pub fn fbm2(x: f32, y: f32, base_scale: f32, octaves: u32, footprint: f32, seed:
         norm += amp;
         amp *= 0.5;
         scale *= 2.0;
+        feature *= 0.5;
     }
     sum / norm
 }
