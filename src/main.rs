@@ -71,6 +71,10 @@ enum Command {
         /// ray-distance (SC-NeRF's projected ray distance) | surface (UniCal's surface alignment)
         #[arg(long, default_value = "surface")]
         alignment: String,
+        /// unical: register every LiDAR to the reference LiDAR (the root, else the first) by
+        /// point-to-plane ICP first, then hold the LiDARs while UniCal calibrates the cameras
+        #[arg(long)]
+        lidar_icp: bool,
         #[arg(long)]
         out: PathBuf,
     },
@@ -215,6 +219,7 @@ fn run() -> Result<()> {
             camera_frames,
             root,
             alignment,
+            lidar_icp,
             out,
         }) => {
             let alignment = alignment.parse().map_err(anyhow::Error::msg)?;
@@ -229,6 +234,7 @@ fn run() -> Result<()> {
                 camera_frames,
                 root,
                 alignment,
+                lidar_icp,
                 out: out.clone(),
             };
             let started = std::time::Instant::now();

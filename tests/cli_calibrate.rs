@@ -1,13 +1,16 @@
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 //! `rigcal calibrate` end to end on the real PandaSet drive: a camera rotated in the initial
 //! guess comes back (edge method), the other sensors keep their extrinsics, the output is a
-//! native calibration file with provenance; bad arguments fail with a one-line reason.
+//! native calibration file with provenance; bad arguments fail with a one-line reason; UniCal
+//! with `--lidar-icp` registers the LiDARs first and holds them, and holds what `--sensors`
+//! leaves out.
 
 use std::path::PathBuf;
 use std::process::Command;
 
 use glam::DVec3;
 use rigcal::calib::CalibrationFile;
+use rigcal::geometry::{Rigid, so3};
 use rigcal::log::Drive;
 
 fn pandaset() -> PathBuf {
@@ -102,4 +105,67 @@ fn bad_arguments_fail_with_one_line() {
     let (ok, err) = run(&["--method", "edge", "--segment", "5..1"]);
     assert!(!ok && err.contains("--segment"), "{err}");
     assert_eq!(err.trim().lines().count(), 1, "{err}");
+}
+
+#[test]
+fn unical_with_lidar_icp_registers_the_lidars_first_and_holds_them() {
+    let drive = Drive::open(&pandaset()).unwrap();
+    let dir = std::env::temp_dir().join(format!("rigcal-cli-icp-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let truth = drive.rig.clone();
+    let mut init = truth.clone();
+    let s = init.sensor_mut("pandar_gt").unwrap();
+    let t = s.vehicle_from_sensor;
+    s.vehicle_from_sensor = Rigid::new(
+        so3::exp(DVec3::new(0.0, 0.6, 0.8) * 1f64.to_radians()) * t.rotation,
+        t.translation + DVec3::new(0.06, -0.08, 0.0),
+    );
+    let init_path = dir.join("init.yaml");
+    CalibrationFile::from_rig(&init).save(&init_path).unwrap();
+    let out = dir.join("out.yaml");
+    let o = Command::new(env!("CARGO_BIN_EXE_rigcal"))
+        .args(["calibrate"])
+        .arg(pandaset())
+        .args([
+            "--method",
+            "unical",
+            "--lidar-icp",
+            "--iterations",
+            "2",
+            "--segment",
+            "0..4",
+        ])
+        .arg("--init")
+        .arg(&init_path)
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{err}");
+    assert!(err.contains("lidar icp: pandar_gt moved"), "{err}");
+    let rig = CalibrationFile::load(&out).unwrap().to_rig(&out).unwrap();
+    // Registered (the reference itself is good to about 0.08° / 2.6 cm, the data's README) ...
+    let (rot, trans) = truth
+        .sensor("pandar_gt")
+        .unwrap()
+        .vehicle_from_sensor
+        .difference(rig.sensor("pandar_gt").unwrap().vehicle_from_sensor);
+    assert!(
+        rot.to_degrees() < 0.2 && trans < 0.04,
+        "{:.3}° {:.1} cm",
+        rot.to_degrees(),
+        trans * 100.0
+    );
+    // ... and nothing else moved: the root is the reference, UniCal held both LiDARs, and the
+    // cameras had no images (`--camera-frames 0`).
+    for s in &init.sensors {
+        if s.name != "pandar_gt" {
+            let (r, t) = s
+                .vehicle_from_sensor
+                .difference(rig.sensor(&s.name).unwrap().vehicle_from_sensor);
+            assert!(r < 1e-12 && t < 1e-12, "{} moved", s.name);
+        }
+    }
+    let _ = std::fs::remove_dir_all(dir);
 }

@@ -102,6 +102,36 @@ fn cameras_join_the_stage_through_the_colour_term() {
         })
         .count();
     assert_eq!(cameras_moved, 6);
+    // Held sensors (those a user did not ask to calibrate) stay while the others move.
+    let held = ["front_camera".to_string(), "pandar_gt".to_string()];
+    let mut stage = UnicalLidarStage::from_drive(
+        &drive,
+        &drive.rig,
+        1,
+        &[],
+        DepthCalibConfig {
+            held_sensors: held.to_vec(),
+            ..config.clone()
+        },
+    )
+    .unwrap()
+    .with_cameras(&drive, 1, &[], 0.0625)
+    .unwrap();
+    for _ in 0..2 {
+        stage.step();
+    }
+    let now = stage.current();
+    for s in &drive.rig.sensors {
+        let (rot, trans) = s
+            .vehicle_from_sensor
+            .difference(now.sensor(&s.name).unwrap().vehicle_from_sensor);
+        assert_eq!(
+            rot + trans > 1e-9,
+            !held.contains(&s.name),
+            "{}: moved {rot} rad / {trans} m",
+            s.name
+        );
+    }
     let e = UnicalLidarStage::from_drive(&drive, &drive.rig, 1, &[], config)
         .unwrap()
         .with_cameras(&drive, 1, &[], 1.5)

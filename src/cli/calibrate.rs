@@ -14,7 +14,7 @@
 
 use std::path::PathBuf;
 
-use crate::calib::{CalibrationFile, Rig};
+use crate::calib::{CalibrationFile, Rig, SensorKind};
 use crate::classical::icp::IcpConfig;
 use crate::classical::icp_calibrator::IcpCalibrator;
 use crate::classical::mi_calibrator::MiCalibrator;
@@ -48,6 +48,10 @@ pub struct CalibrateArgs {
     pub root: Option<String>,
     /// unical: the correspondence term between cameras (with `camera_frames` > 0).
     pub alignment: AlignmentLoss,
+    /// unical: register every LiDAR to the reference LiDAR by point-to-plane ICP first, then
+    /// hold the LiDARs (UniCal's joint objective moves a registered LiDAR pair centimetres off
+    /// the truth; BENCHMARKS.md) while the cameras are calibrated.
+    pub lidar_icp: bool,
     pub out: PathBuf,
 }
 
@@ -61,6 +65,68 @@ fn reference_lidar(args: &CalibrateArgs, rig: &Rig) -> Result<String, String> {
             .map(|l| l.name.clone())
             .ok_or_else(|| "the log has no LiDAR".to_string()),
     }
+}
+
+/// The sensors UniCal keeps fixed besides the root: those `--sensors` leaves out, and with
+/// `--lidar-icp` every LiDAR (registered already).
+fn held_sensors(args: &CalibrateArgs, rig: &Rig) -> Vec<String> {
+    rig.sensors
+        .iter()
+        .filter(|s| {
+            (!args.sensors.is_empty() && !args.sensors.contains(&s.name))
+                || (args.lidar_icp && s.kind == SensorKind::Lidar)
+        })
+        .map(|s| s.name.clone())
+        .collect()
+}
+
+/// `rig` with every LiDAR (of those `--sensors` selects) registered to the reference LiDAR by
+/// point-to-plane ICP on the drive, run to convergence; the result of each is printed.
+fn register_lidars(
+    drive: &Drive,
+    rig: &Rig,
+    args: &CalibrateArgs,
+    segments: &[(i64, i64)],
+) -> Result<Rig, String> {
+    let reference = match &args.root {
+        Some(r) if rig.lidars().any(|l| &l.name == r) => r.clone(),
+        _ => rig
+            .lidars()
+            .next()
+            .map(|l| l.name.clone())
+            .ok_or("--lidar-icp: the log has no LiDAR")?,
+    };
+    let mut icp =
+        IcpCalibrator::from_drive(drive, rig, &reference, 3, segments, IcpConfig::default())
+            .map_err(|e| format!("--lidar-icp: {e}"))?;
+    let bars = super::progress::PhasedProgress::default();
+    let total = icp.max_steps();
+    for step in 1..=total {
+        bars.report("lidar icp", step, total);
+        if icp.step().done {
+            break;
+        }
+    }
+    bars.finish();
+    let mut out = rig.clone();
+    for lidar in icp.best().lidars() {
+        let asked = args.sensors.is_empty() || args.sensors.contains(&lidar.name);
+        if let Some(s) = out.sensor_mut(&lidar.name)
+            && asked
+        {
+            let (rot, trans) = s.vehicle_from_sensor.difference(lidar.vehicle_from_sensor);
+            if rot + trans > 0.0 {
+                eprintln!(
+                    "lidar icp: {} moved {:.3}° / {:.1} cm against {reference}",
+                    lidar.name,
+                    rot.to_degrees(),
+                    trans * 100.0
+                );
+            }
+            s.vehicle_from_sensor = lidar.vehicle_from_sensor;
+        }
+    }
+    Ok(out)
 }
 
 /// The cameras with intrinsics that `--sensors` selects (all when empty).
@@ -133,10 +199,15 @@ pub fn calibrate(
             )
         }
         "unical" => {
+            if args.lidar_icp {
+                rig = register_lidars(&drive, &rig, args, &segments)?;
+            }
             let config = DepthCalibConfig {
                 iterations: args.iterations.unwrap_or(300),
                 seed: args.seed,
                 frozen_sensor: args.root.clone(),
+                // Sensors not asked for stay where they are while the others move.
+                held_sensors: held_sensors(args, &rig),
                 alignment: args.alignment,
                 correspondence_cache: Some(crate::session::state_dir().join("matches")),
                 ..DepthCalibConfig::default()

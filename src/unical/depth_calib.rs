@@ -86,6 +86,9 @@ pub struct DepthCalibConfig {
     /// A sensor whose extrinsic stays fixed (the root); `None`: all move, the trajectory fixes
     /// the gauge (§11).
     pub frozen_sensor: Option<String>,
+    /// Further sensors whose extrinsics stay at their initial values (they still shape the
+    /// scene): the sensors a user did not ask to calibrate.
+    pub held_sensors: Vec<String>,
     /// The correspondence term between cameras (§9; the Table A9 ablation switch).
     pub alignment: AlignmentLoss,
     /// Its weight λ_align (the paper: 0.001 on 1920-wide pixels).
@@ -135,6 +138,7 @@ impl Default for DepthCalibConfig {
             camera_far_m: 120.0,
             background: Some(BackgroundConfig::default()),
             frozen_sensor: None,
+            held_sensors: Vec::new(),
             alignment: AlignmentLoss::SurfaceAlignment,
             alignment_weight: 0.001,
             alignment_matches_per_camera: 32,
@@ -632,8 +636,10 @@ impl DepthCalibration {
             || self.config.lidar_pose_update == PoseUpdate::Adam
     }
 
+    /// Whether `name`'s extrinsic stays fixed: the root or a held sensor.
     fn is_frozen(&self, name: &str) -> bool {
         self.config.frozen_sensor.as_deref() == Some(name)
+            || self.config.held_sensors.iter().any(|h| h == name)
     }
 
     /// Current intensity mappings, by LiDAR name (only LiDARs that report intensity).
