@@ -75,6 +75,9 @@ enum Command {
         /// point-to-plane ICP first, then hold the LiDARs while UniCal calibrates the cameras
         #[arg(long)]
         lidar_icp: bool,
+        /// unical with cameras: the scale images are used at (0.125: 1920×1080 → 240×135)
+        #[arg(long, default_value_t = 0.125)]
+        camera_scale: f64,
         #[arg(long)]
         out: PathBuf,
     },
@@ -220,6 +223,7 @@ fn run() -> Result<()> {
             root,
             alignment,
             lidar_icp,
+            camera_scale,
             out,
         }) => {
             let alignment = alignment.parse().map_err(anyhow::Error::msg)?;
@@ -235,6 +239,7 @@ fn run() -> Result<()> {
                 root,
                 alignment,
                 lidar_icp,
+                camera_scale,
                 out: out.clone(),
             };
             let started = std::time::Instant::now();

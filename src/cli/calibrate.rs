@@ -52,6 +52,8 @@ pub struct CalibrateArgs {
     /// hold the LiDARs (UniCal's joint objective moves a registered LiDAR pair centimetres off
     /// the truth; BENCHMARKS.md) while the cameras are calibrated.
     pub lidar_icp: bool,
+    /// unical with cameras: the scale images are used at, in (0, 1].
+    pub camera_scale: f64,
     pub out: PathBuf,
 }
 
@@ -218,7 +220,7 @@ pub fn calibrate(
                     &drive,
                     args.camera_frames,
                     &segments,
-                    0.125,
+                    args.camera_scale,
                     &|phase, done, total| bars.report(phase, done, total),
                 )?;
             bars.finish();
