@@ -53,6 +53,8 @@ pub struct OptimiserPanel {
     pub reference_lidar: Option<String>,
     /// Cameras to optimise (empty = all).
     pub cameras: Vec<String>,
+    /// UniCal with cameras: every LiDAR keeps its extrinsic (e.g. registered by ICP first).
+    pub hold_lidars: bool,
     pub frames: usize,
     pub run: Option<Run>,
     /// The rig when the run started (restored by undo).
@@ -180,9 +182,20 @@ pub fn start(studio: &mut Studio) {
                 ""
             }
         ));
-        // The reference LiDAR is the root: its extrinsic stays fixed.
+        // The reference LiDAR is the root: its extrinsic stays fixed; so do the cameras not
+        // ticked (when some are) and, if asked, every LiDAR.
+        let held_sensors = prepare_rig
+            .sensors
+            .iter()
+            .filter(|s| match s.kind {
+                SensorKind::Lidar => method == Method::Unical && studio.optimiser.hold_lidars,
+                _ => !studio.optimiser.cameras.is_empty() && !cameras.contains(&s.name),
+            })
+            .map(|s| s.name.clone())
+            .collect();
         let config = crate::unical::depth_calib::DepthCalibConfig {
             frozen_sensor: Some(lidar),
+            held_sensors,
             correspondence_cache: Some(crate::session::state_dir().join("matches")),
             ..Default::default()
         };
@@ -348,6 +361,12 @@ pub fn optimiser_ui(studio: &mut Studio, ui: &mut egui::Ui) {
             }
         });
         ui.add(egui::Slider::new(&mut studio.optimiser.frames, 1..=12).text("frames"));
+        if studio.optimiser.method == Method::Unical {
+            ui.checkbox(
+                &mut studio.optimiser.hold_lidars,
+                "hold every LiDAR (e.g. registered by ICP first)",
+            );
+        }
     });
     ui.horizontal(|ui| {
         if !running {
