@@ -6,15 +6,13 @@
 
 use std::path::PathBuf;
 
-use glam::DVec3;
 use rigcal::calib::CalibrationFile;
-use rigcal::eval::{edges, fast};
-use rigcal::geometry::projection::{SweepView, project_sweep};
-use rigcal::geometry::{Rigid, Trajectory, so3};
+use rigcal::eval::fast;
+use rigcal::geometry::{Trajectory, so3};
 use rigcal::log::Drive;
 use rigcal::sim::camera_sim::{self, Exposure, RayTable};
-use rigcal::sim::lidar_sim;
 use rigcal::sim::rigs::{RigPreset, SimRig};
+use rigcal::sim::silhouettes::SilhouetteCheck;
 use rigcal::sim::synth::{EPOCH_NANOS, SynthConfig, synthesize};
 use rigcal::sim::trajectories::{self, TrajectoryConfig, TrajectoryKind};
 use rigcal::sim::world::{SceneKind, World};
@@ -89,86 +87,15 @@ fn output_reads_back_as_asked() {
 }
 
 /// Mean distance (px) of LiDAR silhouettes to image edges in the stationary checkerboard scene,
-/// with the camera extrinsic rotated by `error_deg`.
+/// with the camera extrinsic rotated by `error_deg` ([`SilhouetteCheck`]).
 fn stationary_edge_distances(errors_deg: &[f64]) -> Vec<f64> {
-    let rig = SimRig::preset(RigPreset::Pandaset);
-    let tcfg = TrajectoryConfig {
-        kind: TrajectoryKind::Stationary,
-        duration_secs: 3.0,
-        rate_hz: 100.0,
-        speed_mps: 0.0,
-        seed: 3,
-    };
-    let traj = Trajectory::new(trajectories::generate(&tcfg));
-    let world = World::build(
-        SceneKind::Checkerboard,
-        &trajectories::path_polyline(&tcfg, 1.0),
-        3,
-    );
-    let lidar = &rig.lidars[0];
-    let cam = rig
-        .cameras
-        .iter()
-        .find(|c| c.name == "front_camera")
-        .unwrap();
-    let img = camera_sim::render(
-        &world,
-        &RayTable::new(&cam.intrinsics),
-        &cam.intrinsics,
-        traj.world_from_vehicle(1_000_000_000).unwrap() * cam.vehicle_from_camera,
-        Exposure {
-            gain: 1.0,
-            tint: [1.0; 3],
-            noise_sigma: 2.0,
-            seed: 1,
-        },
-    );
-    let (w, h) = (img.width() as usize, img.height() as usize);
-    let dt = edges::distance_transform(&edges::image_edges(&img), w, h);
-    // Accumulate 16 sweeps (the vehicle stands still; firing azimuths drift between sweeps).
-    // Silhouettes are found on the union of the sweeps, so the outermost return of all of them
-    // marks each edge (one sweep alone lands up to one azimuth step, ~7 px, inside it).
-    let mut accumulated: Vec<[f32; 3]> = Vec::new();
-    for k in 0..16 {
-        let sweep =
-            lidar_sim::simulate_sweep(&world, lidar, &traj, 500_000_000 + k * 100_000_000, 5)
-                .unwrap();
-        accumulated.extend_from_slice(&sweep.points_in_sensor);
-    }
-    let silhouettes: Vec<[f32; 3]> = edges::depth_discontinuities(&accumulated, 0.05)
-        .into_iter()
-        .map(|i| accumulated[i])
-        .collect();
-    let intensity = vec![0.0; silhouettes.len()];
+    let check = SilhouetteCheck::stationary(3).unwrap();
     errors_deg
         .iter()
         .map(|e| {
-            let wrong = cam.vehicle_from_camera
-                * Rigid::new(
-                    so3::exp(DVec3::new(0.0, 1.0, 0.0) * e.to_radians()),
-                    DVec3::ZERO,
-                );
-            let view = SweepView {
-                points_in_lidar: &silhouettes,
-                intensity: &intensity,
-                time_offset_secs: None,
-                stamp_nanos: 1_000_000_000,
-            };
-            let px: Vec<[f32; 2]> = project_sweep(
-                &view,
-                &traj,
-                lidar.vehicle_from_lidar,
-                wrong,
-                &cam.intrinsics,
-                1_000_000_000,
-                1,
-            )
-            .unwrap()
-            .iter()
-            .map(|p| p.pixel)
-            .collect();
+            let px = check.pixels(*e).unwrap();
             assert!(px.len() > 200, "{} silhouette points in view", px.len());
-            edges::mean_edge_distance(&px, &dt, w, h).unwrap()
+            check.mean_distance(&px).unwrap()
         })
         .collect()
 }

@@ -8,6 +8,7 @@ pub mod lidar_sim;
 pub mod noise;
 pub mod raster;
 pub mod rigs;
+pub mod silhouettes;
 pub mod synth;
 pub mod trajectories;
 pub mod world;
