@@ -78,6 +78,10 @@ enum Command {
         /// unical with cameras: the scale images are used at (0.125: 1920×1080 → 240×135)
         #[arg(long, default_value_t = 0.125)]
         camera_scale: f64,
+        /// unical with cameras: rays per camera and step (more: less noisy pose gradients,
+        /// slower steps)
+        #[arg(long, default_value_t = 512)]
+        camera_rays: usize,
         #[arg(long)]
         out: PathBuf,
     },
@@ -224,6 +228,7 @@ fn run() -> Result<()> {
             alignment,
             lidar_icp,
             camera_scale,
+            camera_rays,
             out,
         }) => {
             let alignment = alignment.parse().map_err(anyhow::Error::msg)?;
@@ -240,6 +245,7 @@ fn run() -> Result<()> {
                 alignment,
                 lidar_icp,
                 camera_scale,
+                camera_rays,
                 out: out.clone(),
             };
             let started = std::time::Instant::now();

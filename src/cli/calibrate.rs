@@ -54,6 +54,8 @@ pub struct CalibrateArgs {
     pub lidar_icp: bool,
     /// unical with cameras: the scale images are used at, in (0, 1].
     pub camera_scale: f64,
+    /// unical with cameras: rays per camera and step.
+    pub camera_rays: usize,
     pub out: PathBuf,
 }
 
@@ -210,6 +212,7 @@ pub fn calibrate(
                 frozen_sensor: args.root.clone(),
                 // Sensors not asked for stay where they are while the others move.
                 held_sensors: held_sensors(args, &rig),
+                rays_per_camera: args.camera_rays.max(1),
                 alignment: args.alignment,
                 correspondence_cache: Some(crate::session::state_dir().join("matches")),
                 ..DepthCalibConfig::default()
