@@ -82,6 +82,10 @@ enum Command {
         /// slower steps)
         #[arg(long, default_value_t = 512)]
         camera_rays: usize,
+        /// unical: coarse-to-fine hash grid, LEVELS,FRACTION: the scene starts with LEVELS open
+        /// levels and opens the rest evenly until FRACTION of the run (BARF)
+        #[arg(long)]
+        coarse_to_fine: Option<String>,
         #[arg(long)]
         out: PathBuf,
     },
@@ -229,6 +233,7 @@ fn run() -> Result<()> {
             lidar_icp,
             camera_scale,
             camera_rays,
+            coarse_to_fine,
             out,
         }) => {
             let alignment = alignment.parse().map_err(anyhow::Error::msg)?;
@@ -246,6 +251,7 @@ fn run() -> Result<()> {
                 lidar_icp,
                 camera_scale,
                 camera_rays,
+                coarse_to_fine,
                 out: out.clone(),
             };
             let started = std::time::Instant::now();

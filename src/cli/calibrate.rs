@@ -26,7 +26,7 @@ use crate::log::Drive;
 use crate::optim::edge_refine::EdgeRefiner;
 use crate::optim::runner::Calibrator;
 use crate::unical::calibrator::UnicalLidarStage;
-use crate::unical::depth_calib::DepthCalibConfig;
+use crate::unical::depth_calib::{CoarseToFine, DepthCalibConfig};
 use crate::unical::surface_align::AlignmentLoss;
 
 /// What `rigcal calibrate` was asked to do.
@@ -56,6 +56,8 @@ pub struct CalibrateArgs {
     pub camera_scale: f64,
     /// unical with cameras: rays per camera and step.
     pub camera_rays: usize,
+    /// unical: `LEVELS,FRACTION` of a coarse-to-fine hash grid.
+    pub coarse_to_fine: Option<String>,
     pub out: PathBuf,
 }
 
@@ -142,6 +144,22 @@ fn selected_cameras(args: &CalibrateArgs, rig: &Rig) -> Vec<String> {
         .collect()
 }
 
+/// Parse `--coarse-to-fine LEVELS,FRACTION` (levels open at the start ≥ 1, the fraction of the
+/// run by which all are open in (0, 1]).
+fn parse_coarse_to_fine(s: &str) -> Result<CoarseToFine, String> {
+    let bad = || format!("--coarse-to-fine: expected LEVELS,FRACTION (e.g. 4,0.6), got '{s}'");
+    let (a, b) = s.split_once(',').ok_or_else(bad)?;
+    let start_levels: f32 = a.trim().parse().map_err(|_| bad())?;
+    let end_fraction: f32 = b.trim().parse().map_err(|_| bad())?;
+    if !(start_levels >= 1.0 && end_fraction > 0.0 && end_fraction <= 1.0) {
+        return Err(bad());
+    }
+    Ok(CoarseToFine {
+        start_levels,
+        end_fraction,
+    })
+}
+
 /// Parse `START..END` (seconds from `t0`) into nanoseconds.
 pub fn parse_segment(text: &str, t0_nanos: i64) -> Result<(i64, i64), String> {
     let (a, b) = text
@@ -213,6 +231,11 @@ pub fn calibrate(
                 // Sensors not asked for stay where they are while the others move.
                 held_sensors: held_sensors(args, &rig),
                 rays_per_camera: args.camera_rays.max(1),
+                coarse_to_fine: args
+                    .coarse_to_fine
+                    .as_deref()
+                    .map(parse_coarse_to_fine)
+                    .transpose()?,
                 alignment: args.alignment,
                 correspondence_cache: Some(crate::session::state_dir().join("matches")),
                 ..DepthCalibConfig::default()
@@ -392,5 +415,19 @@ mod tests {
         assert!(parse_segment("4..1", 0).unwrap_err().contains("after"));
         assert!(parse_segment("a..1", 0).unwrap_err().contains("'a'"));
         assert!(parse_segment("3", 0).unwrap_err().contains("START..END"));
+    }
+
+    #[test]
+    fn coarse_to_fine_parses_levels_and_fraction() {
+        assert_eq!(
+            parse_coarse_to_fine("4,0.6"),
+            Ok(CoarseToFine {
+                start_levels: 4.0,
+                end_fraction: 0.6
+            })
+        );
+        for bad in ["4", "0,0.5", "4,0", "4,1.5", "a,0.5"] {
+            assert!(parse_coarse_to_fine(bad).is_err(), "{bad}");
+        }
     }
 }
