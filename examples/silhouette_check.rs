@@ -18,7 +18,8 @@ fn main() {
     let check = SilhouetteCheck::stationary(seed).unwrap();
     for error_deg in [0.0, 1.0] {
         let px = check.pixels(error_deg).unwrap();
-        let mut d = check.distances(&px);
+        let inside = check.distances(&px);
+        let mut d: Vec<f32> = inside.iter().map(|(_, d)| *d).collect();
         d.sort_by(f32::total_cmp);
         let n = d.len();
         let share = |lo: f32, hi: f32| d.iter().filter(|&&x| x >= lo && x < hi).count();
@@ -47,15 +48,7 @@ fn main() {
                     image::Rgb([g, g, g])
                 }
             });
-            let inside: Vec<[f32; 2]> = px
-                .iter()
-                .copied()
-                .filter(|p| {
-                    let (x, y) = (p[0].round(), p[1].round());
-                    x >= 0.0 && y >= 0.0 && x < w as f32 && y < h as f32
-                })
-                .collect();
-            for (p, dist) in inside.iter().zip(check.distances(&inside)) {
+            for &(p, dist) in &inside {
                 let (x, y) = (p[0].round() as u32, p[1].round() as u32);
                 let c = if dist <= 1.0 {
                     [0, 255, 0]

@@ -166,6 +166,21 @@ pub fn depth_discontinuities(points_in_lidar: &[[f32; 3]], elevation_bin_deg: f3
     out
 }
 
+/// The pixels that lie in the image (rounded to the nearest pixel), each with its distance (px)
+/// to the nearest edge from a precomputed distance transform.
+pub fn edge_distances<'a>(
+    pixels: &'a [[f32; 2]],
+    distance: &'a [f32],
+    w: usize,
+    h: usize,
+) -> impl Iterator<Item = ([f32; 2], f32)> + 'a {
+    pixels.iter().filter_map(move |p| {
+        let (x, y) = (p[0].round(), p[1].round());
+        (x >= 0.0 && y >= 0.0 && x < w as f32 && y < h as f32)
+            .then(|| (*p, distance[y as usize * w + x as usize]))
+    })
+}
+
 /// Mean distance (px) from pixels to the nearest edge, using a precomputed distance transform;
 /// `None` when no pixel lies in the image.
 pub fn mean_edge_distance(
@@ -174,16 +189,8 @@ pub fn mean_edge_distance(
     w: usize,
     h: usize,
 ) -> Option<f64> {
-    let mut sum = 0.0f64;
-    let mut n = 0usize;
-    for p in pixels {
-        let (x, y) = (p[0].round(), p[1].round());
-        if x < 0.0 || y < 0.0 || x >= w as f32 || y >= h as f32 {
-            continue;
-        }
-        sum += distance[y as usize * w + x as usize] as f64;
-        n += 1;
-    }
+    let (sum, n) = edge_distances(pixels, distance, w, h)
+        .fold((0.0f64, 0usize), |(sum, n), (_, d)| (sum + d as f64, n + 1));
     (n > 0).then(|| sum / n as f64)
 }
 

@@ -128,18 +128,11 @@ impl SilhouetteCheck {
         .collect())
     }
 
-    /// Each in-image pixel's distance (px) to the nearest image edge, as the mean of
-    /// [`edges::mean_edge_distance`] counts them (rounded to the pixel).
-    pub fn distances(&self, pixels: &[[f32; 2]]) -> Vec<f32> {
+    /// The in-image pixels of `pixels`, each with its distance (px) to the nearest image edge
+    /// ([`edges::edge_distances`], what the mean counts).
+    pub fn distances(&self, pixels: &[[f32; 2]]) -> Vec<([f32; 2], f32)> {
         let (w, h) = (self.image.width() as usize, self.image.height() as usize);
-        pixels
-            .iter()
-            .filter_map(|p| {
-                let (x, y) = (p[0].round(), p[1].round());
-                (x >= 0.0 && y >= 0.0 && x < w as f32 && y < h as f32)
-                    .then(|| self.distance[y as usize * w + x as usize])
-            })
-            .collect()
+        edges::edge_distances(pixels, &self.distance, w, h).collect()
     }
 
     /// Mean distance (px) of `pixels` to the nearest edge (`None`: none in the image).
