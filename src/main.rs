@@ -71,7 +71,8 @@ enum Command {
         /// ray-distance (SC-NeRF's projected ray distance) | surface (UniCal's surface alignment)
         #[arg(long, default_value = "surface")]
         alignment: String,
-        /// unical: register every LiDAR to the reference LiDAR (the root, else the first) by
+        /// unical: register the reference LiDAR (the root, else the first) to the trajectory
+        /// by its own sweeps (not the root: it stays) and every other LiDAR to it by
         /// point-to-plane ICP first, then hold the LiDARs while UniCal calibrates the cameras
         #[arg(long)]
         lidar_icp: bool,
@@ -82,6 +83,10 @@ enum Command {
         /// slower steps)
         #[arg(long, default_value_t = 512)]
         camera_rays: usize,
+        /// unical with cameras: the camera pose rate (Adam; it decays to 1 % over the run and
+        /// bounds how far a camera can move)
+        #[arg(long)]
+        camera_lr: Option<f32>,
         /// unical: coarse-to-fine hash grid, LEVELS,FRACTION: the scene starts with LEVELS open
         /// levels and opens the rest evenly until FRACTION of the run (BARF)
         #[arg(long)]
@@ -233,6 +238,7 @@ fn run() -> Result<()> {
             lidar_icp,
             camera_scale,
             camera_rays,
+            camera_lr,
             coarse_to_fine,
             out,
         }) => {
@@ -251,6 +257,7 @@ fn run() -> Result<()> {
                 lidar_icp,
                 camera_scale,
                 camera_rays,
+                camera_lr,
                 coarse_to_fine,
                 out: out.clone(),
             };

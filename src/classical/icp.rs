@@ -33,7 +33,7 @@ const REACH_MARGIN_M: f64 = 2.0;
 /// How many independent residuals an ICP result's information counts its points as.
 pub const EFFECTIVE_POINTS: f64 = 200.0;
 /// Radius of the neighbourhood a target normal is fitted to (m).
-const NORMAL_RADIUS_M: f64 = 0.4;
+pub(crate) const NORMAL_RADIUS_M: f64 = 0.4;
 /// Ranges this small are scanned linearly instead of descended (any order of a range is valid:
 /// the tree is implicit in the array).
 const LEAF: usize = 8;
@@ -41,7 +41,7 @@ const LEAF: usize = 8;
 /// A static k-d tree over the target points for nearest-neighbour queries: an implicit
 /// balanced tree over a reordered array (the node of a range is its middle element, split on
 /// the axis of the range's largest extent), built once by median selection.
-struct KdTree {
+pub(crate) struct KdTree {
     points: Vec<DVec3>,
     /// Original index of each reordered point.
     index: Vec<u32>,
@@ -49,7 +49,7 @@ struct KdTree {
 }
 
 impl KdTree {
-    fn new(points: &[DVec3]) -> Self {
+    pub(crate) fn new(points: &[DVec3]) -> Self {
         let mut order: Vec<(DVec3, u32)> = points.iter().copied().zip(0u32..).collect();
         let mut axis = vec![0u8; points.len()];
         Self::build(&mut order, &mut axis);
@@ -89,7 +89,7 @@ impl KdTree {
     /// [`Self::nearest`] starting from the point found last time for the same query point
     /// (`hint`, a position in the tree's order, updated): after the first iterations the
     /// answer barely moves, and a tight starting bound prunes most of the descent.
-    fn nearest_hinted(&self, p: DVec3, max_m: f64, hint: &AtomicU32) -> Option<u32> {
+    pub(crate) fn nearest_hinted(&self, p: DVec3, max_m: f64, hint: &AtomicU32) -> Option<u32> {
         let mut best = (max_m * max_m, u32::MAX);
         let h = hint.load(Ordering::Relaxed);
         if let Some(q) = self.points.get(h as usize) {
@@ -104,15 +104,14 @@ impl KdTree {
     }
 
     /// Original index of the nearest point within `max_m` of `p`.
-    #[cfg(test)]
-    fn nearest(&self, p: DVec3, max_m: f64) -> Option<u32> {
+    pub(crate) fn nearest(&self, p: DVec3, max_m: f64) -> Option<u32> {
         let mut best = (max_m * max_m, u32::MAX);
         self.search(0, self.points.len(), p, &mut best);
         (best.1 != u32::MAX).then(|| self.index[best.1 as usize])
     }
 
     /// Count, `Σ (q − p)` and `Σ (q − p)(q − p)ᵀ` over the points `q` within `radius_m` of `p`.
-    fn moments(&self, p: DVec3, radius_m: f64) -> (usize, DVec3, glam::DMat3) {
+    pub(crate) fn moments(&self, p: DVec3, radius_m: f64) -> (usize, DVec3, glam::DMat3) {
         let mut m = (0, DVec3::ZERO, glam::DMat3::ZERO);
         self.moments_in(0, self.points.len(), p, radius_m * radius_m, &mut m);
         m
@@ -228,6 +227,24 @@ pub struct IcpStats {
     pub step_m: f64,
 }
 
+impl IcpStats {
+    /// The statistics of `inliers` residuals with squared sum `sq` out of `points` on `level`
+    /// (no step yet).
+    pub(crate) fn of(inliers: usize, points: usize, sq: f64, level: usize) -> Self {
+        Self {
+            fitness: inliers as f64 / points.max(1) as f64,
+            inlier_rmse_m: if inliers > 0 {
+                (sq / inliers as f64).sqrt()
+            } else {
+                0.0
+            },
+            inliers,
+            level,
+            ..Self::default()
+        }
+    }
+}
+
 /// One LiDAR pair being registered.
 pub struct IcpProblem {
     target: Vec<DVec3>,
@@ -271,6 +288,36 @@ pub fn voxel_centroids(points: &[DVec3], voxel_m: f64) -> Vec<DVec3> {
         sums[k].1 += 1;
     }
     sums.into_iter().map(|(s, n)| s / n as f64).collect()
+}
+
+/// Apply a Gauss–Newton step `(ω, τ)` as `X ← (exp ω, τ) X` (left, in the vehicle frame),
+/// recording its size; whether the level has converged (no step, or one below 1e-6 rad / m).
+pub(crate) fn apply_step(x: &mut Rigid, step: Option<[f64; 6]>, stats: &mut IcpStats) -> bool {
+    let Some(xi) = step else {
+        return true;
+    };
+    let omega = DVec3::new(xi[0], xi[1], xi[2]);
+    let tau = DVec3::new(xi[3], xi[4], xi[5]);
+    *x = Rigid::new(so3::exp(omega), tau) * *x;
+    stats.step_rad = omega.length();
+    stats.step_m = tau.length();
+    stats.step_rad < 1e-6 && stats.step_m < 1e-6
+}
+
+/// `(level, iteration, done)` after an iteration of `level`: the next level once this one has
+/// converged or spent its budget.
+pub(crate) fn next_level(
+    config: &IcpConfig,
+    level: usize,
+    iteration: usize,
+    converged: bool,
+) -> (usize, usize, bool) {
+    let iteration = iteration + 1;
+    if converged || iteration >= config.iterations_per_level {
+        (level + 1, 0, level + 1 >= config.levels.len())
+    } else {
+        (level, iteration, false)
+    }
 }
 
 impl IcpProblem {
@@ -444,41 +491,15 @@ impl IcpProblem {
             return self.last;
         }
         let (h, g, sq, inliers) = self.normal_equations(self.level);
-        let source = &self.sources[self.level];
-        let mut stats = IcpStats {
-            fitness: inliers as f64 / source.len().max(1) as f64,
-            inlier_rmse_m: if inliers > 0 {
-                (sq / inliers as f64).sqrt()
-            } else {
-                0.0
-            },
-            inliers,
-            level: self.level,
-            ..IcpStats::default()
-        };
+        let mut stats = IcpStats::of(inliers, self.sources[self.level].len(), sq, self.level);
         let step = if inliers >= 6 {
             crate::geometry::spd::solve6(h, g.map(|v| -v))
         } else {
             None
         };
-        let converged = match step {
-            Some(xi) => {
-                let omega = DVec3::new(xi[0], xi[1], xi[2]);
-                let tau = DVec3::new(xi[3], xi[4], xi[5]);
-                let delta = Rigid::new(so3::exp(omega), tau);
-                self.vehicle_from_source = delta * self.vehicle_from_source;
-                stats.step_rad = omega.length();
-                stats.step_m = tau.length();
-                stats.step_rad < 1e-6 && stats.step_m < 1e-6
-            }
-            None => true,
-        };
-        self.iteration += 1;
-        if converged || self.iteration >= self.config.iterations_per_level {
-            self.level += 1;
-            self.iteration = 0;
-            self.done = self.level >= self.config.levels.len();
-        }
+        let converged = apply_step(&mut self.vehicle_from_source, step, &mut stats);
+        (self.level, self.iteration, self.done) =
+            next_level(&self.config, self.level, self.iteration, converged);
         self.last = stats;
         stats
     }

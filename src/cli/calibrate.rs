@@ -22,6 +22,7 @@ use crate::classical::mutual_info::MiConfig;
 use crate::classical::pose_graph_calibrator::{PoseGraphCalibrator, PoseGraphConfig};
 use crate::classical::target::TargetConfig;
 use crate::classical::target_calibrator::TargetCalibrator;
+use crate::classical::trajectory_icp::{MIN_TURN_DEG, TrajectoryFit, register_to_trajectory};
 use crate::log::Drive;
 use crate::optim::edge_refine::EdgeRefiner;
 use crate::optim::runner::Calibrator;
@@ -48,18 +49,25 @@ pub struct CalibrateArgs {
     pub root: Option<String>,
     /// unical: the correspondence term between cameras (with `camera_frames` > 0).
     pub alignment: AlignmentLoss,
-    /// unical: register every LiDAR to the reference LiDAR by point-to-plane ICP first, then
-    /// hold the LiDARs (UniCal's joint objective moves a registered LiDAR pair centimetres off
-    /// the truth; BENCHMARKS.md) while the cameras are calibrated.
+    /// unical: register the reference LiDAR (the root, else the first) to the trajectory by
+    /// its own sweeps unless it is the root, and every other LiDAR to it by point-to-plane
+    /// ICP, first; then hold the LiDARs (UniCal's joint objective moves a registered LiDAR
+    /// pair centimetres off the truth; BENCHMARKS.md) while the cameras are calibrated.
     pub lidar_icp: bool,
     /// unical with cameras: the scale images are used at, in (0, 1].
     pub camera_scale: f64,
     /// unical with cameras: rays per camera and step.
     pub camera_rays: usize,
+    /// unical with cameras: the camera pose rate (default: [`DepthCalibConfig::default`]'s).
+    pub camera_lr: Option<f32>,
     /// unical: `LEVELS,FRACTION` of a coarse-to-fine hash grid.
     pub coarse_to_fine: Option<String>,
     pub out: PathBuf,
 }
+
+/// Sweeps of the reference LiDAR registered to the trajectory (spread over the drive: the
+/// turns between them are what observes its extrinsic).
+const TRAJECTORY_SWEEPS: usize = 10;
 
 /// The reference LiDAR: `--root`, else the rig's first LiDAR.
 fn reference_lidar(args: &CalibrateArgs, rig: &Rig) -> Result<String, String> {
@@ -86,8 +94,10 @@ fn held_sensors(args: &CalibrateArgs, rig: &Rig) -> Vec<String> {
         .collect()
 }
 
-/// `rig` with every LiDAR (of those `--sensors` selects) registered to the reference LiDAR by
-/// point-to-plane ICP on the drive, run to convergence; the result of each is printed.
+/// `rig` with the reference LiDAR registered to the trajectory by its own sweeps (unless it
+/// is the `--root`, which stays where it is) and every other LiDAR (of those `--sensors`
+/// selects) registered to the reference by point-to-plane ICP, each run to convergence; the
+/// result of each is printed.
 fn register_lidars(
     drive: &Drive,
     rig: &Rig,
@@ -102,10 +112,59 @@ fn register_lidars(
             .map(|l| l.name.clone())
             .ok_or("--lidar-icp: the log has no LiDAR")?,
     };
+    let bars = super::progress::PhasedProgress::default();
+    let mut rig = rig.clone();
+    let asked = args.sensors.is_empty() || args.sensors.contains(&reference);
+    if args.root.is_none() && asked {
+        let fit = register_to_trajectory(
+            drive,
+            &rig,
+            &reference,
+            TRAJECTORY_SWEEPS,
+            segments,
+            IcpConfig::default(),
+            &mut |done, total| bars.report("lidar to trajectory", done, total),
+        )
+        .map_err(|e| format!("--lidar-icp: {e}"))?;
+        match (fit, rig.sensor_mut(&reference)) {
+            (
+                TrajectoryFit::Fitted {
+                    vehicle_from_lidar,
+                    unobserved,
+                },
+                Some(s),
+            ) => {
+                let (rot, trans) = s.vehicle_from_sensor.difference(vehicle_from_lidar);
+                let kept = if unobserved.is_empty() {
+                    String::new()
+                } else {
+                    format!(
+                        " ({} not observed by the drive: kept)",
+                        unobserved.join(", ")
+                    )
+                };
+                eprintln!(
+                    "lidar icp: {reference} moved {:.3}° / {:.1} cm to fit the trajectory{kept}",
+                    rot.to_degrees(),
+                    trans * 100.0
+                );
+                s.vehicle_from_sensor = vehicle_from_lidar;
+            }
+            (TrajectoryFit::TooStraight { turn_deg }, _) => eprintln!(
+                "lidar icp: {reference} kept: the drive turns {turn_deg:.1}°, too little to fit \
+                 it to the trajectory (at least {MIN_TURN_DEG}°)"
+            ),
+            (TrajectoryFit::Fitted { .. }, None) => {}
+        }
+    }
+    if rig.lidars().count() < 2 {
+        bars.finish();
+        return Ok(rig);
+    }
+    let rig = &rig;
     let mut icp =
         IcpCalibrator::from_drive(drive, rig, &reference, 3, segments, IcpConfig::default())
             .map_err(|e| format!("--lidar-icp: {e}"))?;
-    let bars = super::progress::PhasedProgress::default();
     let total = icp.max_steps();
     for step in 1..=total {
         bars.report("lidar icp", step, total);
@@ -231,6 +290,11 @@ pub fn calibrate(
                 // Sensors not asked for stay where they are while the others move.
                 held_sensors: held_sensors(args, &rig),
                 rays_per_camera: args.camera_rays.max(1),
+                lr_camera_pose: match args.camera_lr {
+                    Some(lr) if lr.is_finite() && lr > 0.0 => lr,
+                    Some(lr) => return Err(format!("--camera-lr {lr}: expected a rate above 0")),
+                    None => DepthCalibConfig::default().lr_camera_pose,
+                },
                 coarse_to_fine: args
                     .coarse_to_fine
                     .as_deref()

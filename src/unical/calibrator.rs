@@ -159,6 +159,11 @@ impl UnicalLidarStage {
         &self.calib
     }
 
+    /// The optimisation, to step it directly (probes and benchmarks).
+    pub fn calibration_mut(&mut self) -> &mut DepthCalibration {
+        &mut self.calib
+    }
+
     fn rig_now(&self) -> Rig {
         let mut rig = self.rig.clone();
         for (name, t) in self.calib.extrinsics() {

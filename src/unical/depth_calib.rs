@@ -46,7 +46,11 @@ pub struct DepthCalibConfig {
     pub max_samples_per_ray: usize,
     pub beta_init: f32,
     pub lr_field: f32,
+    /// LiDAR pose rate (Adam), decaying to 1 % of it from the end of the warm-up.
     pub lr_pose: f32,
+    /// Camera pose rate, same schedule. Adam moves each pose parameter by about its rate per
+    /// step, so the rate bounds how far a camera can travel in a run.
+    pub lr_camera_pose: f32,
     /// The first iterations fit the SDF directly to the LiDAR returns ([`super::sdf_init`])
     /// with this many rays each (split evenly across LiDARs); poses stay fixed.
     pub geometry_init_steps: usize,
@@ -122,6 +126,7 @@ impl Default for DepthCalibConfig {
             beta_init: 20.0,
             lr_field: 1e-2,
             lr_pose: 1e-3,
+            lr_camera_pose: 1e-2,
             geometry_init_steps: 150,
             geometry_init_rays: 8192,
             pose_warmup: 200,
@@ -178,6 +183,7 @@ impl DepthCalibConfig {
             rays_per_sensor: 625,
             rays_per_camera: 625,
             lr_pose: 1e-4,
+            lr_camera_pose: 1e-4,
             lidar_pose_update: PoseUpdate::Adam,
             registration_steps: 0,
             geometry_init_steps: 0,
@@ -1192,16 +1198,22 @@ impl DepthCalibration {
         // (decaying from iteration 0 would leave a short run's poses a few percent of their
         // rate by the time they start).
         let warmup = self.config.pose_warmup;
-        let lr_pose = if self.iteration < warmup {
-            0.0
-        } else {
-            decayed_lr(
-                self.config.lr_pose,
-                0.01,
-                self.iteration - warmup,
-                total.saturating_sub(warmup).max(1),
-            )
+        let pose_rate = |rate: f32| {
+            if self.iteration < warmup {
+                0.0
+            } else {
+                decayed_lr(
+                    rate,
+                    0.01,
+                    self.iteration - warmup,
+                    total.saturating_sub(warmup).max(1),
+                )
+            }
         };
+        let (lr_pose, lr_camera_pose) = (
+            pose_rate(self.config.lr_pose),
+            pose_rate(self.config.lr_camera_pose),
+        );
         let mut geo = self.field.geo.zero_grad();
         let mut beta_grad = 0.0;
         let (mut loss, mut mae, mut colour_loss) = (0.0, 0.0, 0.0);
@@ -1375,7 +1387,7 @@ impl DepthCalibration {
                         &mut stage.pose_opt[k],
                         &mut stage.poses[k],
                         &pose_grad,
-                        lr_pose,
+                        lr_camera_pose,
                     );
                 }
                 let e = &mut stage.exposure[k];
