@@ -7,7 +7,9 @@
 //! Environment: `RIGCAL_LR_CAMERA` (camera pose rate), `RIGCAL_FRAMES` (images per camera, 8),
 //! `RIGCAL_ALIGN=none|ray-distance|surface`, `RIGCAL_ALIGN_WEIGHT`, `RIGCAL_ALIGN_MAX_PX`,
 //! `RIGCAL_WARMUP` (pose warm-up iterations), `RIGCAL_SCALE` (image scale, 0.125),
-//! `RIGCAL_RGB_WEIGHT`.
+//! `RIGCAL_RGB_WEIGHT`. Frozen-scene probe: with `RIGCAL_PROBE=N` the cameras start at the
+//! truth and the scene learns for N iterations (poses fixed), then the cameras jump to their
+//! start and only their poses move (the scene frozen unless `RIGCAL_JOINT` is set).
 
 use std::path::PathBuf;
 
@@ -37,6 +39,11 @@ fn main() {
     for lidar in truth.lidars() {
         rig.sensor_mut(&lidar.name).unwrap().vehicle_from_sensor = lidar.vehicle_from_sensor;
     }
+    let start = rig.clone();
+    let probe: usize = env("RIGCAL_PROBE", 0);
+    if probe > 0 {
+        rig = truth.clone();
+    }
     let lidars: Vec<String> = truth.lidars().map(|l| l.name.clone()).collect();
     let defaults = DepthCalibConfig::default();
     let mut settings = defaults.alignment_settings;
@@ -46,7 +53,11 @@ fn main() {
         frozen_sensor: Some(lidars[0].clone()),
         held_sensors: lidars[1..].to_vec(),
         lr_camera_pose: env("RIGCAL_LR_CAMERA", defaults.lr_camera_pose),
-        pose_warmup: env("RIGCAL_WARMUP", defaults.pose_warmup),
+        pose_warmup: if probe > 0 {
+            probe
+        } else {
+            env("RIGCAL_WARMUP", defaults.pose_warmup)
+        },
         alignment: env("RIGCAL_ALIGN", defaults.alignment),
         alignment_weight: env("RIGCAL_ALIGN_WEIGHT", defaults.alignment_weight),
         alignment_settings: settings,
@@ -85,6 +96,16 @@ fn main() {
     };
     let (mut colour, mut align, mut kept, mut n) = (0.0, 0.0, 0usize, 0usize);
     for it in 0..iterations {
+        if probe > 0 && it == probe {
+            let calib = stage.calibration_mut();
+            for cam in start.cameras() {
+                calib.set_extrinsic(&cam.name, cam.vehicle_from_sensor);
+            }
+            if std::env::var("RIGCAL_JOINT").is_err() {
+                calib.config.lr_field = 0.0;
+            }
+            println!("probe: cameras back at their start");
+        }
         let r = stage.calibration_mut().step();
         colour += r.colour_loss;
         align += r.alignment_loss;

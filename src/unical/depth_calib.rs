@@ -633,6 +633,26 @@ impl DepthCalibration {
         out
     }
 
+    /// Move sensor `name` to `vehicle_from_sensor` and restart its pose optimiser (probes:
+    /// a scene learned at one calibration, the sensor started elsewhere). False for an unknown
+    /// name.
+    pub fn set_extrinsic(&mut self, name: &str, vehicle_from_sensor: Rigid) -> bool {
+        if let Some(k) = self.lidars.iter().position(|l| l.name == name) {
+            self.poses[k] = PoseParams::from_rigid(vehicle_from_sensor);
+            self.pose_opt[k] = DenseAdam::new(9, AdamConfig::STANDARD);
+            return true;
+        }
+        let Some(stage) = self.camera.as_mut() else {
+            return false;
+        };
+        let Some(k) = stage.cameras.iter().position(|c| c.name == name) else {
+            return false;
+        };
+        stage.poses[k] = PoseParams::from_rigid(vehicle_from_sensor);
+        stage.pose_opt[k] = DenseAdam::new(9, AdamConfig::STANDARD);
+        true
+    }
+
     /// Whether LiDAR `s` shapes the scene at this iteration (outside the registration phase
     /// every LiDAR does; inside it only the anchor).
     fn shapes_scene(&self, s: usize) -> bool {
