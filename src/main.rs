@@ -87,6 +87,11 @@ enum Command {
         /// bounds how far a camera can move)
         #[arg(long)]
         camera_lr: Option<f32>,
+        /// unical: run in ROUNDS rounds of --iterations each, every one with a fresh scene
+        /// formed at the extrinsics the previous round reached (a scene formed around the
+        /// cameras' errors holds them back)
+        #[arg(long, default_value_t = 1)]
+        rounds: usize,
         /// unical: coarse-to-fine hash grid, LEVELS,FRACTION: the scene starts with LEVELS open
         /// levels and opens the rest evenly until FRACTION of the run (BARF)
         #[arg(long)]
@@ -239,6 +244,7 @@ fn run() -> Result<()> {
             camera_scale,
             camera_rays,
             camera_lr,
+            rounds,
             coarse_to_fine,
             out,
         }) => {
@@ -258,6 +264,7 @@ fn run() -> Result<()> {
                 camera_scale,
                 camera_rays,
                 camera_lr,
+                rounds,
                 coarse_to_fine,
                 out: out.clone(),
             };

@@ -26,13 +26,17 @@ fn the_lidar_stage_runs_as_a_calibrator_on_the_real_drive_with_a_frozen_root() {
         frozen_sensor: Some(root.clone()),
         ..DepthCalibConfig::default()
     };
-    let mut stage = UnicalLidarStage::from_drive(&drive, &drive.rig, 2, &[], config).unwrap();
-    assert_eq!(stage.max_steps(), 3);
+    // Two rounds of three iterations: done only at the end of the second.
+    let mut stage = UnicalLidarStage::from_drive(&drive, &drive.rig, 2, &[], config)
+        .unwrap()
+        .in_rounds(2);
+    assert_eq!(stage.max_steps(), 6);
     let mut last = None;
-    for k in 0..3 {
+    for k in 0..6 {
         let r = stage.step();
         assert!(r.losses.iter().all(|(_, v)| v.is_finite()), "{r:?}");
-        assert_eq!(r.done, k == 2);
+        assert_eq!(r.done, k == 5);
+        assert_eq!(stage.calibration().iteration, k % 3 + 1);
         last = Some(r);
     }
     let names: Vec<String> = last.unwrap().losses.into_iter().map(|(n, _)| n).collect();

@@ -60,6 +60,9 @@ pub struct CalibrateArgs {
     pub camera_rays: usize,
     /// unical with cameras: the camera pose rate (default: [`DepthCalibConfig::default`]'s).
     pub camera_lr: Option<f32>,
+    /// unical: rounds of `iterations` each, every one with a fresh scene formed at the
+    /// extrinsics the previous round reached (1: one run).
+    pub rounds: usize,
     /// unical: `LEVELS,FRACTION` of a coarse-to-fine hash grid.
     pub coarse_to_fine: Option<String>,
     pub out: PathBuf,
@@ -283,6 +286,9 @@ pub fn calibrate(
             if args.lidar_icp {
                 rig = register_lidars(&drive, &rig, args, &segments)?;
             }
+            if args.rounds == 0 {
+                return Err("--rounds 0: expected at least one round".into());
+            }
             let config = DepthCalibConfig {
                 iterations: args.iterations.unwrap_or(300),
                 seed: args.seed,
@@ -314,7 +320,7 @@ pub fn calibrate(
                     &|phase, done, total| bars.report(phase, done, total),
                 )?;
             bars.finish();
-            Box::new(stage)
+            Box::new(stage.in_rounds(args.rounds))
         }
         "icp" => {
             let reference = reference_lidar(args, &rig)?;

@@ -22,6 +22,10 @@ pub const MATCHING: &str = "matching keypoints";
 pub struct UnicalLidarStage {
     calib: DepthCalibration,
     rig: Rig,
+    /// Rounds of `config.iterations` each, every one with a fresh scene
+    /// ([`DepthCalibration::restart`]), and the current one.
+    rounds: usize,
+    round: usize,
 }
 
 impl UnicalLidarStage {
@@ -56,6 +60,8 @@ impl UnicalLidarStage {
         Ok(Self {
             calib: DepthCalibration::new(config, drive.trajectory.clone(), lidars),
             rig: rig.clone(),
+            rounds: 1,
+            round: 0,
         })
     }
 
@@ -154,6 +160,13 @@ impl UnicalLidarStage {
         Ok(self)
     }
 
+    /// Run in `rounds` rounds of the configured iterations, each with a fresh scene formed
+    /// at the extrinsics the previous one reached (at least 1).
+    pub fn in_rounds(mut self, rounds: usize) -> Self {
+        self.rounds = rounds.max(1);
+        self
+    }
+
     /// The optimisation itself (its scene can render cameras: `render_camera`).
     pub fn calibration(&self) -> &DepthCalibration {
         &self.calib
@@ -185,15 +198,21 @@ impl Calibrator for UnicalLidarStage {
     }
 
     fn max_steps(&self) -> usize {
-        self.calib.config.iterations
+        self.calib.config.iterations * self.rounds
     }
 
     fn step(&mut self) -> StepReport {
+        if self.calib.iteration >= self.calib.config.iterations && self.round + 1 < self.rounds {
+            self.calib.restart();
+            self.round += 1;
+        }
         let r = self.calib.step();
+        let done =
+            self.calib.iteration >= self.calib.config.iterations && self.round + 1 >= self.rounds;
         if let Some(loss) = r.geometry_init_loss {
             return StepReport {
                 losses: vec![("geometry init loss".into(), loss)],
-                done: self.calib.iteration >= self.calib.config.iterations,
+                done,
             };
         }
         let mut losses = vec![
@@ -210,10 +229,7 @@ impl Calibrator for UnicalLidarStage {
         if !self.calib.correspondences.pairs.is_empty() {
             losses.push(("alignment px".into(), r.alignment_loss));
         }
-        StepReport {
-            losses,
-            done: self.calib.iteration >= self.calib.config.iterations,
-        }
+        StepReport { losses, done }
     }
 
     fn current(&self) -> Rig {

@@ -559,6 +559,47 @@ impl DepthCalibration {
             self.camera = None;
             return self;
         }
+        if self.config.alignment != AlignmentLoss::None {
+            let extrinsics: Vec<Rigid> = cameras.iter().map(|c| c.initial).collect();
+            self.correspondences = super::correspondences::build_cached(
+                &cameras,
+                &extrinsics,
+                &self.trajectory,
+                self.config.correspondence_cache.as_deref(),
+                matching,
+            );
+        }
+        self.camera = Some(self.camera_stage(cameras));
+        self
+    }
+
+    /// A fresh scene (field, decoders, exposure maps, optimisers) with every sensor starting
+    /// where it is now, the data and the matched correspondences kept: the next round of a
+    /// calibration in rounds (a scene formed around the cameras' errors holds them back,
+    /// BENCHMARKS.md; a new one formed at their improved poses does less so).
+    pub fn restart(&mut self) {
+        let mut lidars = std::mem::take(&mut self.lidars);
+        for (l, p) in lidars.iter_mut().zip(&self.poses) {
+            l.initial = p.to_rigid();
+        }
+        let correspondences = std::mem::take(&mut self.correspondences);
+        let cameras = self.camera.take().map(|stage| {
+            let mut cameras = stage.cameras;
+            for (c, p) in cameras.iter_mut().zip(&stage.poses) {
+                c.initial = p.to_rigid();
+            }
+            cameras
+        });
+        let mut next = Self::new(self.config.clone(), self.trajectory.clone(), lidars);
+        next.correspondences = correspondences;
+        if let Some(cameras) = cameras.filter(|c| !c.is_empty()) {
+            next.camera = Some(next.camera_stage(cameras));
+        }
+        *self = next;
+    }
+
+    /// The colour term's state for `cameras`, starting at their `initial` extrinsics.
+    fn camera_stage(&self, cameras: Vec<CameraData>) -> CameraStage {
         let appearance = Appearance::new(self.config.field.feature_dim, self.config.seed);
         let (colour_params, sky_params) = (mlp_flat(&appearance.colour), mlp_flat(&appearance.sky));
         let poses: Vec<PoseParams> = cameras
@@ -582,17 +623,7 @@ impl DepthCalibration {
                 field,
             }
         });
-        if self.config.alignment != AlignmentLoss::None {
-            let extrinsics: Vec<Rigid> = cameras.iter().map(|c| c.initial).collect();
-            self.correspondences = super::correspondences::build_cached(
-                &cameras,
-                &extrinsics,
-                &self.trajectory,
-                self.config.correspondence_cache.as_deref(),
-                matching,
-            );
-        }
-        self.camera = Some(CameraStage {
+        CameraStage {
             background,
             pose_opt: poses
                 .iter()
@@ -610,8 +641,7 @@ impl DepthCalibration {
             appearance,
             poses,
             cameras,
-        });
-        self
+        }
     }
 
     /// Current extrinsics, by sensor name (LiDARs, then cameras).
@@ -1680,6 +1710,52 @@ mod tests {
             b.last().map(|r| r.colour_loss)
         );
         assert_eq!(ea, eb);
+    }
+
+    /// A restart keeps every sensor where it got to and the data, and starts the scene and the
+    /// schedule afresh: the next step renders exactly what a new calibration started at those
+    /// extrinsics renders.
+    #[test]
+    fn a_restart_keeps_the_extrinsics_and_starts_a_fresh_scene() {
+        let (trajectory, mount, sweeps) = flat_drive();
+        let camera = ground_camera(&trajectory);
+        let lidar = LidarData {
+            name: "lidar".into(),
+            initial: mount,
+            sweeps,
+        };
+        let mut c = DepthCalibration::new(small_config(), trajectory.clone(), vec![lidar.clone()])
+            .with_cameras(vec![camera.clone()]);
+        for _ in 0..10 {
+            c.step();
+        }
+        let reached = c.extrinsics();
+        assert_ne!(
+            reached[1].1, camera.initial,
+            "the camera moved in the first round"
+        );
+        c.restart();
+        for ((_, now), (_, before)) in c.extrinsics().iter().zip(&reached) {
+            let (rot, trans) = now.difference(*before);
+            assert!(rot < 1e-12 && trans < 1e-12, "{rot} {trans}");
+        }
+        assert_eq!(c.iteration, 0);
+        let mut fresh = DepthCalibration::new(
+            small_config(),
+            trajectory,
+            vec![LidarData {
+                initial: reached[0].1,
+                ..lidar
+            }],
+        )
+        .with_cameras(vec![CameraData {
+            initial: reached[1].1,
+            ..camera
+        }]);
+        assert_eq!(c.field.grid.params, fresh.field.grid.params);
+        let (a, b) = (c.step(), fresh.step());
+        assert_eq!(a, b);
+        assert_eq!(c.extrinsics(), fresh.extrinsics());
     }
 
     /// A LiDAR 2 m above flat ground on a straight drive: the depth loss falls, the pose stays
