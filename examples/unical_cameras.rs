@@ -7,7 +7,8 @@
 //! Environment: `RIGCAL_LR_CAMERA` (camera pose rate), `RIGCAL_FRAMES` (images per camera, 8),
 //! `RIGCAL_ALIGN=none|ray-distance|surface`, `RIGCAL_ALIGN_WEIGHT`, `RIGCAL_ALIGN_MAX_PX`,
 //! `RIGCAL_WARMUP` (pose warm-up iterations), `RIGCAL_SCALE` (image scale, 0.125),
-//! `RIGCAL_RGB_WEIGHT`. Frozen-scene probe: with `RIGCAL_PROBE=N` the cameras start at the
+//! `RIGCAL_RGB_WEIGHT`, `RIGCAL_VIEW=false` (view-independent surface colour),
+//! `RIGCAL_TRANSLATION_RATE` (camera translation rate over the rotation's). Frozen-scene probe: with `RIGCAL_PROBE=N` the cameras start at the
 //! truth and the scene learns for N iterations (poses fixed), then the cameras jump to their
 //! start and only their poses move (the scene frozen unless `RIGCAL_JOINT` is set).
 
@@ -62,6 +63,8 @@ fn main() {
         alignment_weight: env("RIGCAL_ALIGN_WEIGHT", defaults.alignment_weight),
         alignment_settings: settings,
         rgb_weight: env("RIGCAL_RGB_WEIGHT", defaults.rgb_weight),
+        view_dependent_colour: env("RIGCAL_VIEW", defaults.view_dependent_colour),
+        camera_translation_rate: env("RIGCAL_TRANSLATION_RATE", defaults.camera_translation_rate),
         correspondence_cache: Some(std::env::temp_dir().join("rigcal-probe-matches")),
         ..defaults
     };

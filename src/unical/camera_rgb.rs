@@ -73,6 +73,11 @@ pub(super) fn sh_backward(d: DVec3, g: &[f32]) -> DVec3 {
 pub struct Appearance {
     pub colour: Mlp,
     pub sky: Mlp,
+    /// Whether the colour decoder sees the view direction (the paper's decoder does). Without
+    /// it surfaces are Lambertian: two cameras that disagree about a point cannot both be
+    /// explained by a colour that changes with the direction it is seen from (the sky still
+    /// depends on the direction).
+    pub view_dependent: bool,
 }
 
 impl Appearance {
@@ -81,6 +86,7 @@ impl Appearance {
         Self {
             colour: Mlp::new(&[feature_dim + SH_DIM, 64, 64, 3], seed ^ 0xC01),
             sky: Mlp::new(&[SH_DIM, 32, feature_dim], seed ^ 0x5C7),
+            view_dependent: true,
         }
     }
 }
@@ -247,7 +253,12 @@ fn colour_forward(model: CameraModel, pose: &PoseParams, ray: &ColourRay) -> Col
         .zip(sky.output())
         .map(|(f, s)| f + t_sky * s)
         .collect();
-    input.extend_from_slice(&sh);
+    if appearance.view_dependent {
+        input.extend_from_slice(&sh);
+    } else {
+        // Only the encoding's constant term.
+        input.extend((0..SH_DIM).map(|k| if k == 0 { sh[0] } else { 0.0 }));
+    }
     let dec = appearance.colour.forward(&input);
     let rgb: Vec<f32> = dec.output().iter().map(|v| sigmoid(*v)).collect();
     ColourForward {
@@ -347,10 +358,11 @@ pub fn colour_step(
         let d_sky: Vec<f32> = d_feature.iter().map(|g| g * t_sky).collect();
         let d_sh_sky = appearance.sky.backward(&sky, &d_sky, &mut out.sky);
         let d_t_sky: f32 = d_feature.iter().zip(sky.output()).map(|(g, s)| g * s).sum();
+        let view = if appearance.view_dependent { 1.0 } else { 0.0 };
         let d_sh: Vec<f32> = d_input[dim..]
             .iter()
             .zip(&d_sh_sky)
-            .map(|(a, b)| a + b)
+            .map(|(a, b)| view * a + b)
             .collect();
         let up = Upstream {
             accumulation: -d_t_sky,
@@ -522,12 +534,18 @@ mod tests {
     #[test]
     fn pose_and_exposure_gradients_match_finite_differences() {
         for opacity in [OpacityModel::PerSample, OpacityModel::Interval] {
-            pose_and_exposure_gradients_of(opacity);
+            pose_and_exposure_gradients_of(opacity, true);
         }
+        // View-independent surface colour (the sky still follows the direction).
+        pose_and_exposure_gradients_of(OpacityModel::PerSample, false);
     }
 
-    fn pose_and_exposure_gradients_of(opacity: OpacityModel) {
+    fn pose_and_exposure_gradients_of(opacity: OpacityModel, view_dependent: bool) {
         let (field, background, appearance, pose, rays) = setup();
+        let appearance = Appearance {
+            view_dependent,
+            ..appearance
+        };
         let model = CameraModel {
             field: &field,
             background: Some(&background),

@@ -51,6 +51,9 @@ pub struct DepthCalibConfig {
     /// Camera pose rate, same schedule. Adam moves each pose parameter by about its rate per
     /// step, so the rate bounds how far a camera can travel in a run.
     pub lr_camera_pose: f32,
+    /// The cameras' translation rate as a multiple of their rotation's (translations are the
+    /// weaker-observed and slower part of a camera's pose).
+    pub camera_translation_rate: f32,
     /// The first iterations fit the SDF directly to the LiDAR returns ([`super::sdf_init`])
     /// with this many rays each (split evenly across LiDARs); poses stay fixed.
     pub geometry_init_steps: usize,
@@ -112,6 +115,9 @@ pub struct DepthCalibConfig {
     /// How signed distances become opacities (method.md §3's per-sample form, or the
     /// unbiased per-section form; [`OpacityModel`]).
     pub opacity: OpacityModel,
+    /// Whether surface colour depends on the view direction (the paper's decoder;
+    /// [`Appearance::view_dependent`]).
+    pub view_dependent_colour: bool,
 }
 
 impl Default for DepthCalibConfig {
@@ -127,6 +133,7 @@ impl Default for DepthCalibConfig {
             lr_field: 1e-2,
             lr_pose: 1e-3,
             lr_camera_pose: 1e-2,
+            camera_translation_rate: 1.0,
             geometry_init_steps: 150,
             geometry_init_rays: 8192,
             pose_warmup: 200,
@@ -153,6 +160,10 @@ impl Default for DepthCalibConfig {
             heatmap_sigma_px: (40.0, 5.0),
             heatmap_uniform_share: 0.2,
             opacity: OpacityModel::PerSample,
+            // Lambertian surfaces: the paper's view-dependent decoder lets a colour that
+            // changes with the direction explain two cameras' disagreement (BENCHMARKS.md:
+            // 0.27° against 0.46° after 600 iterations from 2°); `paper()` keeps it.
+            view_dependent_colour: false,
         }
     }
 }
@@ -184,6 +195,8 @@ impl DepthCalibConfig {
             rays_per_camera: 625,
             lr_pose: 1e-4,
             lr_camera_pose: 1e-4,
+            camera_translation_rate: 1.0,
+            view_dependent_colour: true,
             lidar_pose_update: PoseUpdate::Adam,
             registration_steps: 0,
             geometry_init_steps: 0,
@@ -403,7 +416,14 @@ fn grad_flat(g: &super::mlp::MlpGrad) -> Vec<f32> {
 
 /// One Adam step of a pose from its 9 gradients, applied as a delta so the f64 pose keeps its
 /// precision.
-fn pose_step(opt: &mut DenseAdam, p: &mut PoseParams, grad: &[f32; 9], lr: f32) {
+/// `translation_scale` multiplies the translation's step (its rate relative to the rotation's).
+fn pose_step(
+    opt: &mut DenseAdam,
+    p: &mut PoseParams,
+    grad: &[f32; 9],
+    lr: f32,
+    translation_scale: f64,
+) {
     if lr == 0.0 {
         return;
     }
@@ -418,7 +438,7 @@ fn pose_step(opt: &mut DenseAdam, p: &mut PoseParams, grad: &[f32; 9], lr: f32) 
         p.r6[k] += (flat[k] - before[k]) as f64;
     }
     for k in 0..3 {
-        p.translation_m[k] += (flat[6 + k] - before[6 + k]) as f64;
+        p.translation_m[k] += (flat[6 + k] - before[6 + k]) as f64 * translation_scale;
     }
 }
 
@@ -600,7 +620,10 @@ impl DepthCalibration {
 
     /// The colour term's state for `cameras`, starting at their `initial` extrinsics.
     fn camera_stage(&self, cameras: Vec<CameraData>) -> CameraStage {
-        let appearance = Appearance::new(self.config.field.feature_dim, self.config.seed);
+        let appearance = Appearance {
+            view_dependent: self.config.view_dependent_colour,
+            ..Appearance::new(self.config.field.feature_dim, self.config.seed)
+        };
         let (colour_params, sky_params) = (mlp_flat(&appearance.colour), mlp_flat(&appearance.sky));
         let poses: Vec<PoseParams> = cameras
             .iter()
@@ -1331,6 +1354,7 @@ impl DepthCalibration {
                         &mut self.poses[s],
                         &pose_grad,
                         lr_pose,
+                        1.0,
                     ),
                     // The step fraction follows the pose learning rate's schedule.
                     // Full steps after the warm-up: each solves the gathered rows, which
@@ -1438,6 +1462,7 @@ impl DepthCalibration {
                         &mut stage.poses[k],
                         &pose_grad,
                         lr_camera_pose,
+                        self.config.camera_translation_rate as f64,
                     );
                 }
                 let e = &mut stage.exposure[k];
