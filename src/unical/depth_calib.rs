@@ -9,7 +9,10 @@
 //! pixels each through the colour term ([`super::camera_rgb`]). Gradients go to the hash table
 //! (sparse Adam), the geometry MLP, the decoders, β (through ln β), the per-sensor exposure and
 //! intensity mappings and the 6D + translation pose of each sensor (dense Adam), all computed
-//! in parallel chunks of rays and summed. One sensor can be frozen as the root.
+//! in parallel chunks of rays and summed. One sensor can be frozen as the root, others held.
+//! Cameras have their own pose rate (Adam moves a parameter by about its rate per step, so the
+//! rate bounds how far a camera can travel in a run). [`DepthCalibration::restart`] starts a
+//! fresh scene at the extrinsics reached (calibration in rounds).
 
 use glam::{DVec2, DVec3};
 use rayon::prelude::*;
