@@ -41,6 +41,9 @@ use crate::geometry::camera::CameraIntrinsics;
 use crate::geometry::{Rigid, Trajectory};
 use crate::log::LidarSweep;
 
+/// The camera ray budget [`DepthCalibConfig::lr_camera_pose`] is meant for.
+pub const CAMERA_RATE_RAYS: usize = 512;
+
 #[derive(Clone, Debug, PartialEq)]
 pub struct DepthCalibConfig {
     pub field: FieldConfig,
@@ -51,8 +54,11 @@ pub struct DepthCalibConfig {
     pub lr_field: f32,
     /// LiDAR pose rate (Adam), decaying to 1 % of it from the end of the warm-up.
     pub lr_pose: f32,
-    /// Camera pose rate, same schedule. Adam moves each pose parameter by about its rate per
-    /// step, so the rate bounds how far a camera can travel in a run.
+    /// Camera pose rate at [`CAMERA_RATE_RAYS`] rays per camera, same schedule. Adam moves
+    /// each pose parameter by about its rate per step, so the rate bounds how far a camera can
+    /// travel in a run; with fewer rays the gradient is noisier and the rate is scaled by
+    /// rays / [`CAMERA_RATE_RAYS`] (short runs with few rays otherwise random-walk the cameras
+    /// away: BENCHMARKS.md).
     pub lr_camera_pose: f32,
     /// The cameras' translation rate as a multiple of their rotation's (translations are the
     /// weaker-observed and slower part of a camera's pose).
@@ -1286,9 +1292,10 @@ impl DepthCalibration {
                 )
             }
         };
+        let ray_share = (self.config.rays_per_camera as f32 / CAMERA_RATE_RAYS as f32).min(1.0);
         let (lr_pose, lr_camera_pose) = (
             pose_rate(self.config.lr_pose),
-            pose_rate(self.config.lr_camera_pose),
+            pose_rate(self.config.lr_camera_pose * ray_share),
         );
         let mut geo = self.field.geo.zero_grad();
         let mut beta_grad = 0.0;
