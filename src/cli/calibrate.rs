@@ -283,11 +283,17 @@ pub fn calibrate(
             )
         }
         "unical" => {
-            if args.lidar_icp {
-                rig = register_lidars(&drive, &rig, args, &segments)?;
-            }
+            // Options are checked before the LiDARs are registered (seconds of work).
             if args.rounds == 0 {
                 return Err("--rounds 0: expected at least one round".into());
+            }
+            let lr_camera_pose = match args.camera_lr {
+                Some(lr) if lr.is_finite() && lr > 0.0 => lr,
+                Some(lr) => return Err(format!("--camera-lr {lr}: expected a rate above 0")),
+                None => DepthCalibConfig::default().lr_camera_pose,
+            };
+            if args.lidar_icp {
+                rig = register_lidars(&drive, &rig, args, &segments)?;
             }
             let config = DepthCalibConfig {
                 iterations: args.iterations.unwrap_or(300),
@@ -296,11 +302,7 @@ pub fn calibrate(
                 // Sensors not asked for stay where they are while the others move.
                 held_sensors: held_sensors(args, &rig),
                 rays_per_camera: args.camera_rays.max(1),
-                lr_camera_pose: match args.camera_lr {
-                    Some(lr) if lr.is_finite() && lr > 0.0 => lr,
-                    Some(lr) => return Err(format!("--camera-lr {lr}: expected a rate above 0")),
-                    None => DepthCalibConfig::default().lr_camera_pose,
-                },
+                lr_camera_pose,
                 coarse_to_fine: args
                     .coarse_to_fine
                     .as_deref()
