@@ -8,7 +8,8 @@
 //! `RIGCAL_ALIGN=none|ray-distance|surface`, `RIGCAL_ALIGN_WEIGHT`, `RIGCAL_ALIGN_MAX_PX`,
 //! `RIGCAL_WARMUP` (pose warm-up iterations), `RIGCAL_SCALE` (image scale, 0.125),
 //! `RIGCAL_RGB_WEIGHT`, `RIGCAL_VIEW=false` (view-independent surface colour),
-//! `RIGCAL_TRANSLATION_RATE` (camera translation rate over the rotation's). Frozen-scene probe: with `RIGCAL_PROBE=N` the cameras start at the
+//! `RIGCAL_TRANSLATION_RATE` (camera translation rate over the rotation's), `RIGCAL_CAMERA_DECAY`
+//! (the camera pose rate's final fraction), `RIGCAL_VECTORS` (print every camera's error vector). Frozen-scene probe: with `RIGCAL_PROBE=N` the cameras start at the
 //! truth and the scene learns for N iterations (poses fixed), then the cameras jump to their
 //! start and only their poses move (the scene frozen unless `RIGCAL_JOINT` is set).
 
@@ -65,6 +66,7 @@ fn main() {
         rgb_weight: env("RIGCAL_RGB_WEIGHT", defaults.rgb_weight),
         view_dependent_colour: env("RIGCAL_VIEW", defaults.view_dependent_colour),
         camera_translation_rate: env("RIGCAL_TRANSLATION_RATE", defaults.camera_translation_rate),
+        camera_pose_final_fraction: env("RIGCAL_CAMERA_DECAY", defaults.camera_pose_final_fraction),
         correspondence_cache: Some(std::env::temp_dir().join("rigcal-probe-matches")),
         ..defaults
     };
@@ -78,6 +80,16 @@ fn main() {
             env("RIGCAL_SCALE", 0.125),
         )
         .unwrap();
+    if let Some(m) = drive
+        .trajectory
+        .time_range_nanos()
+        .and_then(|(a, b)| rigcal::geometry::motion::MotionSummary::of(&drive.trajectory, a, b))
+    {
+        eprintln!(
+            "drive: {:.1} s, {:.0} m, turns {:.0}° in all (yaw rate up to {:.0}°/s)",
+            m.duration_s, m.distance_m, m.total_turn_deg, m.max_abs_yaw_rate_deg_s
+        );
+    }
     let pairs = stage.calibration().correspondences.pairs.len();
     eprintln!(
         "prepared in {:.1} s, {pairs} matched pairs",
@@ -136,6 +148,40 @@ fn main() {
                 each.join(" ")
             );
             (colour, align, kept, n) = (0.0, 0.0, 0, 0);
+            if std::env::var("RIGCAL_VECTORS").is_ok() {
+                print_error_vectors(&stage, &truth);
+            }
         }
     }
+}
+
+/// Each camera's error as vectors in the vehicle frame (translation: estimated − true camera
+/// centre, cm; rotation: log(R_est R_true⁻¹), degrees) and their mean over the cameras: a
+/// common part is an offset every camera shares, which the learned texture can follow.
+fn print_error_vectors(stage: &UnicalLidarStage, truth: &rigcal::calib::Rig) {
+    let (mut sum_t, mut sum_r, mut k) = (glam::DVec3::ZERO, glam::DVec3::ZERO, 0.0);
+    for (name, t) in stage.calibration().extrinsics() {
+        let Some(s) = truth.sensor(&name) else {
+            continue;
+        };
+        if s.camera.is_none() {
+            continue;
+        }
+        let dt = (t.translation - s.vehicle_from_sensor.translation) * 100.0;
+        let dr =
+            rigcal::geometry::so3::log(t.rotation * s.vehicle_from_sensor.rotation.conjugate())
+                * (180.0 / std::f64::consts::PI);
+        println!(
+            "      {name:>20} dt ({:6.2} {:6.2} {:6.2}) cm  dr ({:6.3} {:6.3} {:6.3})°",
+            dt.x, dt.y, dt.z, dr.x, dr.y, dr.z
+        );
+        sum_t += dt;
+        sum_r += dr;
+        k += 1.0;
+    }
+    let (mt, mr) = (sum_t / k, sum_r / k);
+    println!(
+        "      {:>20} dt ({:6.2} {:6.2} {:6.2}) cm  dr ({:6.3} {:6.3} {:6.3})°",
+        "mean", mt.x, mt.y, mt.z, mr.x, mr.y, mr.z
+    );
 }

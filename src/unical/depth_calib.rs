@@ -63,6 +63,9 @@ pub struct DepthCalibConfig {
     /// The cameras' translation rate as a multiple of their rotation's (translations are the
     /// weaker-observed and slower part of a camera's pose).
     pub camera_translation_rate: f32,
+    /// What the camera pose rate decays to by the last iteration, as a fraction of
+    /// `lr_camera_pose` (geometric from the end of the warm-up).
+    pub camera_pose_final_fraction: f32,
     /// The first iterations fit the SDF directly to the LiDAR returns ([`super::sdf_init`])
     /// with this many rays each (split evenly across LiDARs); poses stay fixed.
     pub geometry_init_steps: usize,
@@ -143,6 +146,7 @@ impl Default for DepthCalibConfig {
             lr_pose: 1e-3,
             lr_camera_pose: 1e-2,
             camera_translation_rate: 1.0,
+            camera_pose_final_fraction: 0.01,
             geometry_init_steps: 150,
             geometry_init_rays: 8192,
             pose_warmup: 200,
@@ -1280,13 +1284,13 @@ impl DepthCalibration {
         // (decaying from iteration 0 would leave a short run's poses a few percent of their
         // rate by the time they start).
         let warmup = self.config.pose_warmup;
-        let pose_rate = |rate: f32| {
+        let pose_rate = |rate: f32, final_fraction: f32| {
             if self.iteration < warmup {
                 0.0
             } else {
                 decayed_lr(
                     rate,
-                    0.01,
+                    final_fraction,
                     self.iteration - warmup,
                     total.saturating_sub(warmup).max(1),
                 )
@@ -1294,8 +1298,11 @@ impl DepthCalibration {
         };
         let ray_share = (self.config.rays_per_camera as f32 / CAMERA_RATE_RAYS as f32).min(1.0);
         let (lr_pose, lr_camera_pose) = (
-            pose_rate(self.config.lr_pose),
-            pose_rate(self.config.lr_camera_pose * ray_share),
+            pose_rate(self.config.lr_pose, 0.01),
+            pose_rate(
+                self.config.lr_camera_pose * ray_share,
+                self.config.camera_pose_final_fraction,
+            ),
         );
         let mut geo = self.field.geo.zero_grad();
         let mut beta_grad = 0.0;
