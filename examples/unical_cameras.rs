@@ -7,7 +7,7 @@
 //! Environment: `RIGCAL_LR_CAMERA` (camera pose rate), `RIGCAL_FRAMES` (images per camera, 8),
 //! `RIGCAL_ALIGN=none|ray-distance|surface`, `RIGCAL_ALIGN_WEIGHT`, `RIGCAL_ALIGN_MAX_PX`,
 //! `RIGCAL_WARMUP` (pose warm-up iterations), `RIGCAL_SCALE` (image scale, 0.125),
-//! `RIGCAL_RGB_WEIGHT`, `RIGCAL_VIEW=false` (view-independent surface colour),
+//! `RIGCAL_RGB_WEIGHT`, `RIGCAL_INTENSITY_WEIGHT`, `RIGCAL_VIEW=false` (view-independent surface colour),
 //! `RIGCAL_TRANSLATION_RATE` (camera translation rate over the rotation's), `RIGCAL_CAMERA_DECAY`
 //! (the camera pose rate's final fraction), `RIGCAL_VECTORS` (print every camera's error vector). Frozen-scene probe: with `RIGCAL_PROBE=N` the cameras start at the
 //! truth and the scene learns for N iterations (poses fixed), then the cameras jump to their
@@ -64,6 +64,7 @@ fn main() {
         alignment_weight: env("RIGCAL_ALIGN_WEIGHT", defaults.alignment_weight),
         alignment_settings: settings,
         rgb_weight: env("RIGCAL_RGB_WEIGHT", defaults.rgb_weight),
+        intensity_weight: env("RIGCAL_INTENSITY_WEIGHT", defaults.intensity_weight),
         view_dependent_colour: env("RIGCAL_VIEW", defaults.view_dependent_colour),
         camera_translation_rate: env("RIGCAL_TRANSLATION_RATE", defaults.camera_translation_rate),
         camera_pose_final_fraction: env("RIGCAL_CAMERA_DECAY", defaults.camera_pose_final_fraction),
