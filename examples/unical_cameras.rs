@@ -7,11 +7,13 @@
 //! Environment: `RIGCAL_LR_CAMERA` (camera pose rate), `RIGCAL_FRAMES` (images per camera, 8),
 //! `RIGCAL_ALIGN=none|ray-distance|surface`, `RIGCAL_ALIGN_WEIGHT`, `RIGCAL_ALIGN_MAX_PX`,
 //! `RIGCAL_WARMUP` (pose warm-up iterations), `RIGCAL_SCALE` (image scale, 0.125),
-//! `RIGCAL_RGB_WEIGHT`, `RIGCAL_INTENSITY_WEIGHT`, `RIGCAL_VIEW=false` (view-independent surface colour),
-//! `RIGCAL_TRANSLATION_RATE` (camera translation rate over the rotation's), `RIGCAL_CAMERA_DECAY`
-//! (the camera pose rate's final fraction), `RIGCAL_VECTORS` (print every camera's error vector). Frozen-scene probe: with `RIGCAL_PROBE=N` the cameras start at the
-//! truth and the scene learns for N iterations (poses fixed), then the cameras jump to their
-//! start and only their poses move (the scene frozen unless `RIGCAL_JOINT` is set).
+//! `RIGCAL_RGB_WEIGHT`, `RIGCAL_INTENSITY_WEIGHT`, `RIGCAL_VIEW=false` (view-independent
+//! surface colour), `RIGCAL_TRANSLATION_RATE` (camera translation rate over the rotation's),
+//! `RIGCAL_CAMERA_DECAY` (the camera pose rate's final fraction), `RIGCAL_VECTORS` (print every
+//! camera's error vector and their mean). Frozen-scene probe: with `RIGCAL_PROBE=N` the cameras
+//! start at the truth and the scene learns for N iterations (poses fixed), then the cameras
+//! jump to their start and only their poses move (the scene frozen unless `RIGCAL_JOINT` is
+//! set).
 
 use std::path::PathBuf;
 
@@ -97,19 +99,6 @@ fn main() {
         t0.elapsed().as_secs_f64()
     );
     let every: usize = env("RIGCAL_EVERY", 25);
-    let errors = |stage: &UnicalLidarStage| {
-        let mut per = Vec::new();
-        for (name, t) in stage.calibration().extrinsics() {
-            let Some(s) = truth.sensor(&name) else {
-                continue;
-            };
-            if s.camera.is_some() {
-                let (r, m) = s.vehicle_from_sensor.difference(t);
-                per.push((name, r.to_degrees(), m * 100.0));
-            }
-        }
-        per
-    };
     let (mut colour, mut align, mut kept, mut n) = (0.0, 0.0, 0usize, 0usize);
     for it in 0..iterations {
         if probe > 0 && it == probe {
@@ -128,14 +117,20 @@ fn main() {
         kept += r.alignment_matches;
         n += 1;
         if (it + 1) % every == 0 || it + 1 == iterations {
-            let per = errors(&stage);
+            let per = camera_errors(&stage, &truth);
             let k = per.len().max(1) as f64;
-            let (rot, tr) = per
-                .iter()
-                .fold((0.0, 0.0), |(a, b), (_, r, t)| (a + r, b + t));
+            let (rot, tr) = per.iter().fold((0.0, 0.0), |(a, b), e| {
+                (a + e.rotation_deg.length(), b + e.translation_cm.length())
+            });
             let each: Vec<String> = per
                 .iter()
-                .map(|(_, r, t)| format!("{r:.2}/{t:.1}"))
+                .map(|e| {
+                    format!(
+                        "{:.2}/{:.1}",
+                        e.rotation_deg.length(),
+                        e.translation_cm.length()
+                    )
+                })
                 .collect();
             println!(
                 "{:5} {:6.1}s cameras {:.3}° {:.2} cm | colour {:.5} align {:.2} kept {:.1} | {}",
@@ -150,39 +145,53 @@ fn main() {
             );
             (colour, align, kept, n) = (0.0, 0.0, 0, 0);
             if std::env::var("RIGCAL_VECTORS").is_ok() {
-                print_error_vectors(&stage, &truth);
+                print_error_vectors(&per);
             }
         }
     }
 }
 
-/// Each camera's error as vectors in the vehicle frame (translation: estimated − true camera
-/// centre, cm; rotation: log(R_est R_true⁻¹), degrees) and their mean over the cameras: a
-/// common part is an offset every camera shares, which the learned texture can follow.
-fn print_error_vectors(stage: &UnicalLidarStage, truth: &rigcal::calib::Rig) {
-    let (mut sum_t, mut sum_r, mut k) = (glam::DVec3::ZERO, glam::DVec3::ZERO, 0.0);
-    for (name, t) in stage.calibration().extrinsics() {
-        let Some(s) = truth.sensor(&name) else {
-            continue;
-        };
-        if s.camera.is_none() {
-            continue;
-        }
-        let dt = (t.translation - s.vehicle_from_sensor.translation) * 100.0;
-        let dr =
-            rigcal::geometry::so3::log(t.rotation * s.vehicle_from_sensor.rotation.conjugate())
-                * (180.0 / std::f64::consts::PI);
+/// A camera's error as vectors in the vehicle frame: translation, estimated − true camera
+/// centre (cm); rotation, log(R_est R_true⁻¹) (degrees; its length is the rotation error).
+struct CameraError {
+    name: String,
+    translation_cm: glam::DVec3,
+    rotation_deg: glam::DVec3,
+}
+
+fn camera_errors(stage: &UnicalLidarStage, truth: &rigcal::calib::Rig) -> Vec<CameraError> {
+    stage
+        .calibration()
+        .extrinsics()
+        .into_iter()
+        .filter_map(|(name, t)| {
+            let s = truth.sensor(&name).filter(|s| s.camera.is_some())?;
+            let rotation = t.rotation * s.vehicle_from_sensor.rotation.conjugate();
+            Some(CameraError {
+                translation_cm: (t.translation - s.vehicle_from_sensor.translation) * 100.0,
+                rotation_deg: rigcal::geometry::so3::log(rotation) * (180.0 / std::f64::consts::PI),
+                name,
+            })
+        })
+        .collect()
+}
+
+/// Every camera's error vectors and their mean over the cameras: a common part is an offset
+/// every camera shares, which the learned texture can follow.
+fn print_error_vectors(errors: &[CameraError]) {
+    let line = |name: &str, t: glam::DVec3, r: glam::DVec3| {
         println!(
             "      {name:>20} dt ({:6.2} {:6.2} {:6.2}) cm  dr ({:6.3} {:6.3} {:6.3})°",
-            dt.x, dt.y, dt.z, dr.x, dr.y, dr.z
+            t.x, t.y, t.z, r.x, r.y, r.z
         );
-        sum_t += dt;
-        sum_r += dr;
-        k += 1.0;
+    };
+    for e in errors {
+        line(&e.name, e.translation_cm, e.rotation_deg);
     }
-    let (mt, mr) = (sum_t / k, sum_r / k);
-    println!(
-        "      {:>20} dt ({:6.2} {:6.2} {:6.2}) cm  dr ({:6.3} {:6.3} {:6.3})°",
-        "mean", mt.x, mt.y, mt.z, mr.x, mr.y, mr.z
+    let k = errors.len().max(1) as f64;
+    line(
+        "mean",
+        errors.iter().map(|e| e.translation_cm).sum::<glam::DVec3>() / k,
+        errors.iter().map(|e| e.rotation_deg).sum::<glam::DVec3>() / k,
     );
 }
