@@ -17,7 +17,7 @@ use glam::{DVec2, Vec3};
 use image::RgbImage;
 use rayon::prelude::*;
 
-use super::noise::{fbm2, hash64};
+use super::noise::{fbm2_in, hash64};
 use super::raster::{Candidate, OUTSIDE, Pinhole, VisibilityBuffer};
 use super::world::World;
 use crate::geometry::Rigid;
@@ -112,6 +112,25 @@ pub struct Exposure {
 }
 
 fn sky(dir: Vec3, sun: Vec3, seed: u64) -> Vec3 {
+    #[cfg(target_arch = "x86_64")]
+    if super::wide::available() {
+        // SAFETY: `available` checked at run time that the CPU has every feature `sky_avx512`
+        // is compiled with.
+        #[allow(unsafe_code)]
+        return unsafe { sky_avx512(dir, sun, seed) };
+    }
+    sky_in::<false>(dir, sun, seed)
+}
+
+/// [`sky`] compiled with AVX-512, its clouds' fBm hashing the octaves at once (`sim::wide`).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx512dq,avx512vl,avx512bw")]
+fn sky_avx512(dir: Vec3, sun: Vec3, seed: u64) -> Vec3 {
+    sky_in::<true>(dir, sun, seed)
+}
+
+#[inline(always)]
+fn sky_in<const WIDE: bool>(dir: Vec3, sun: Vec3, seed: u64) -> Vec3 {
     let up = dir.z.max(0.0);
     let horizon = Vec3::new(0.78, 0.84, 0.92);
     let zenith = Vec3::new(0.32, 0.52, 0.86);
@@ -119,7 +138,7 @@ fn sky(dir: Vec3, sun: Vec3, seed: u64) -> Vec3 {
     // Clouds: fBm on the direction projected onto a plane.
     if dir.z > 0.02 {
         let (u, v) = (dir.x / dir.z, dir.y / dir.z);
-        let cloud = ((fbm2(u, v, 0.6, 5, 0.001, seed ^ 77) - 0.5) * 3.0).clamp(0.0, 1.0);
+        let cloud = ((fbm2_in::<WIDE>(u, v, 0.6, 5, 0.001, seed ^ 77) - 0.5) * 3.0).clamp(0.0, 1.0);
         c = c + (Vec3::splat(0.95) - c) * cloud * 0.8;
     }
     let glow = dir.dot(sun).max(0.0).powf(64.0);
@@ -213,6 +232,7 @@ fn shade_hit(
 /// Approximately standard-normal noise for the three channels of a pixel: each the sum of four
 /// 10-bit uniforms from two hashes (Irwin–Hall, scaled to unit variance), far cheaper than
 /// Box–Muller's log and cosine per channel.
+#[inline(always)]
 fn gaussian3(x: u32, y: u32, seed: u64) -> [f32; 3] {
     let h1 = hash64(seed ^ (x as u64) ^ ((y as u64) << 21));
     let h2 = hash64(h1);
@@ -231,17 +251,19 @@ fn gaussian3(x: u32, y: u32, seed: u64) -> [f32; 3] {
 /// `v^(1/2.2)` on [0, 1] by a table over `sqrt(v)`, where the curve (`s^(2/2.2)`) is nearly
 /// straight and linear interpolation is exact to a hundredth of a grey level.
 struct Gamma {
-    table: Vec<f32>,
+    /// A fixed-size array, so that the lookup's index needs no bounds check and a row of
+    /// lookups vectorises (gathers).
+    table: Box<[f32; Gamma::N + 2]>,
 }
 
 impl Gamma {
     const N: usize = 1024;
     fn new() -> Self {
-        Self {
-            table: (0..=Self::N + 1)
-                .map(|i| (i as f32 / Self::N as f32).powf(2.0 / 2.2))
-                .collect(),
+        let mut table = Box::new([0.0; Self::N + 2]);
+        for (i, t) in table.iter_mut().enumerate() {
+            *t = (i as f32 / Self::N as f32).powf(2.0 / 2.2);
         }
+        Self { table }
     }
     #[cfg(test)]
     fn apply(&self, v: f32) -> f32 {
@@ -253,9 +275,10 @@ impl Gamma {
     fn argument(v: f32) -> f32 {
         v.clamp(0.0, 1.0).sqrt() * Self::N as f32
     }
-    #[inline]
+    #[inline(always)]
     fn lookup(&self, s: f32) -> f32 {
-        let i = s as usize;
+        // `s` is in [0, N] (`argument`): the bound only tells the compiler so.
+        let i = (s as usize).min(Self::N);
         let f = s - i as f32;
         self.table[i] + (self.table[i + 1] - self.table[i]) * f
     }
@@ -273,7 +296,8 @@ struct Scratch {
     sun: Vec<u8>,
 }
 
-/// Buffers of finished images; at most as many as images rendered at once.
+/// Buffers of finished images; at most as many as images rendered at once (a rig's cameras
+/// render together: buffers beyond the pool's cap would be fresh, page-faulting allocations).
 static SCRATCH_POOL: std::sync::Mutex<Vec<Scratch>> = std::sync::Mutex::new(Vec::new());
 
 impl Scratch {
@@ -287,7 +311,7 @@ impl Scratch {
 
     fn give_back(self) {
         if let Ok(mut pool) = SCRATCH_POOL.lock()
-            && pool.len() < 4
+            && pool.len() < 8
         {
             pool.push(self);
         }
@@ -495,20 +519,45 @@ pub fn render(
                 // Filmic-ish shoulder.
                 *v = Gamma::argument(*v / (1.0 + 0.15 * *v));
             }
-            for (x, (px, s)) in row
-                .chunks_exact_mut(3)
-                .zip(tone.chunks_exact(3))
-                .enumerate()
-            {
-                let noise = gaussian3(x as u32, y as u32, exposure.seed);
-                for ch in 0..3 {
-                    let v = gamma.lookup(s[ch]) * 255.0 + exposure.noise_sigma * noise[ch];
-                    px[ch] = v.clamp(0.0, 255.0) as u8;
-                }
-            }
+            finish_row(&gamma, tone, row, y as u32, &exposure);
         });
     scratch.give_back();
     img
+}
+
+/// Gamma table, sensor noise and quantisation of one row: `tone` holds the table arguments,
+/// three per pixel. Compiled a second time with AVX-512 (`sim::wide`), where a row's noise
+/// hashes and table lookups run eight pixels at once; the bytes are the same.
+fn finish_row(gamma: &Gamma, tone: &[f32], row: &mut [u8], y: u32, exposure: &Exposure) {
+    #[cfg(target_arch = "x86_64")]
+    if super::wide::available() {
+        // SAFETY: `available` checked at run time that the CPU has every feature
+        // `finish_row_avx512` is compiled with.
+        #[allow(unsafe_code)]
+        return unsafe { finish_row_avx512(gamma, tone, row, y, exposure) };
+    }
+    finish_row_in(gamma, tone, row, y, exposure);
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx512dq,avx512vl,avx512bw")]
+fn finish_row_avx512(gamma: &Gamma, tone: &[f32], row: &mut [u8], y: u32, exposure: &Exposure) {
+    finish_row_in(gamma, tone, row, y, exposure);
+}
+
+#[inline(always)]
+fn finish_row_in(gamma: &Gamma, tone: &[f32], row: &mut [u8], y: u32, exposure: &Exposure) {
+    for (x, (px, s)) in row
+        .chunks_exact_mut(3)
+        .zip(tone.chunks_exact(3))
+        .enumerate()
+    {
+        let noise = gaussian3(x as u32, y, exposure.seed);
+        for ch in 0..3 {
+            let v = gamma.lookup(s[ch]) * 255.0 + exposure.noise_sigma * noise[ch];
+            px[ch] = v.clamp(0.0, 255.0) as u8;
+        }
+    }
 }
 
 #[cfg(test)]

@@ -11,5 +11,6 @@ pub mod rigs;
 pub mod silhouettes;
 pub mod synth;
 pub mod trajectories;
+pub mod wide;
 pub mod world;
 pub mod writer;

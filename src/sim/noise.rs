@@ -1,6 +1,12 @@
 //! Seeded hash noise for procedural textures: integer hashing, value noise and fBm.
+//!
+//! fBm comes in two forms with bit-identical results: [`fbm2`] walks the octaves one at a time
+//! and skips those finer than the pixel's footprint; [`fbm2_wide`] evaluates eight octaves side
+//! by side (every lane, faded or not) so that code compiled with wide vectors hashes them all
+//! at once (`sim::wide`). [`fbm2_in`] picks one by a const flag.
 
 /// A well-mixed 64-bit hash (SplitMix64 finaliser).
+#[inline(always)]
 pub fn hash64(mut x: u64) -> u64 {
     x = x.wrapping_add(0x9E37_79B9_7F4A_7C15);
     x = (x ^ (x >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
@@ -9,20 +15,43 @@ pub fn hash64(mut x: u64) -> u64 {
 }
 
 /// Uniform in [0, 1) from integer coordinates and a seed.
+#[inline(always)]
 pub fn hash3(x: i32, y: i32, z: i32, seed: u64) -> f32 {
     let h =
         hash64(seed ^ (x as u32 as u64) ^ ((y as u32 as u64) << 21) ^ ((z as u32 as u64) << 42));
     (h >> 40) as f32 / (1u64 << 24) as f32
 }
 
-/// `x.floor()` without a libm call (the baseline x86-64 target has no rounding instruction).
-#[inline]
+/// `x as i32` (Rust's saturating cast: NaN → 0, out of range → the nearest bound) in a form
+/// that vectorises: Rust's cast compiles to a scalar conversion and compare-and-move fix-ups per
+/// value, this to one vector conversion and two selects.
+#[inline(always)]
+pub fn saturating_i32(x: f32) -> i32 {
+    // The largest float below 2^31 (the next one up converts to i32::MAX by saturation).
+    const BELOW_2_POW_31: f32 = 2_147_483_520.0;
+    let v = if x.is_nan() {
+        0.0
+    } else {
+        x.clamp(i32::MIN as f32, BELOW_2_POW_31)
+    };
+    // SAFETY: `v` is finite and within [i32::MIN, 2^31), so its truncation is an i32.
+    #[allow(unsafe_code)]
+    let r = unsafe { v.to_int_unchecked::<i32>() };
+    if x >= 2_147_483_648.0 { i32::MAX } else { r }
+}
+
+/// `x.floor()` without a libm call (the baseline x86-64 target has no rounding instruction),
+/// written as selects, without an early return, so that a loop of them vectorises.
+#[inline(always)]
 pub fn floor(x: f32) -> f32 {
+    let t = saturating_i32(x) as f32;
+    let below = if t > x { t - 1.0 } else { t };
+    // Beyond 2^23 every float is integral (and NaN stays NaN).
     if x.abs() >= 8_388_608.0 || x.is_nan() {
-        return x; // already integral (or NaN)
+        x
+    } else {
+        below
     }
-    let t = x as i32 as f32;
-    if t > x { t - 1.0 } else { t }
 }
 
 /// `x.rem_euclid(period)` for a positive period, without libm's `fmod`: in [0, period).
@@ -33,15 +62,17 @@ pub fn wrap(x: f32, period: f32) -> f32 {
     if r >= period { 0.0 } else { r }
 }
 
+#[inline(always)]
 fn smooth(t: f32) -> f32 {
     t * t * (3.0 - 2.0 * t)
 }
 
 /// 2D value noise in [0, 1).
+#[inline(always)]
 pub fn value2(x: f32, y: f32, seed: u64) -> f32 {
     let (xi, yi) = (floor(x), floor(y));
     let (fx, fy) = (smooth(x - xi), smooth(y - yi));
-    let (xi, yi) = (xi as i32, yi as i32);
+    let (xi, yi) = (saturating_i32(xi), saturating_i32(yi));
     let a = hash3(xi, yi, 0, seed);
     let b = hash3(xi + 1, yi, 0, seed);
     let c = hash3(xi, yi + 1, 0, seed);
@@ -79,6 +110,77 @@ pub fn fbm2(x: f32, y: f32, base_scale: f32, octaves: u32, footprint: f32, seed:
     sum / norm
 }
 
+/// The most octaves [`fbm2_wide`] evaluates at once.
+pub const WIDE_OCTAVES: usize = 8;
+
+/// [`fbm2`] with every octave evaluated, side by side in lanes, and faded ones then replaced
+/// by their mean exactly as [`fbm2`] does: the same result, bit for bit, for up to
+/// [`WIDE_OCTAVES`] octaves (more fall back to [`fbm2`]). Slower than [`fbm2`] one lane at a
+/// time; faster where the lanes run as one vector.
+#[inline(always)]
+pub fn fbm2_wide(x: f32, y: f32, base_scale: f32, octaves: u32, footprint: f32, seed: u64) -> f32 {
+    match octaves {
+        0..=4 => fbm2_lanes::<4>(x, y, base_scale, octaves, footprint, seed),
+        5..=8 => fbm2_lanes::<WIDE_OCTAVES>(x, y, base_scale, octaves, footprint, seed),
+        _ => fbm2(x, y, base_scale, octaves, footprint, seed),
+    }
+}
+
+/// [`fbm2_wide`] in `L` lanes, for at most `L` octaves.
+#[inline(always)]
+fn fbm2_lanes<const L: usize>(
+    x: f32,
+    y: f32,
+    base_scale: f32,
+    octaves: u32,
+    footprint: f32,
+    seed: u64,
+) -> f32 {
+    // The same per-octave scales and fades as `fbm2` (doubling and halving are exact).
+    let (mut scale, mut fade) = ([0.0f32; L], [0.0f32; L]);
+    let (mut s, mut feature) = (base_scale, 1.0 / base_scale);
+    let inv_footprint = 1.0 / (2.0 * footprint.max(1e-6));
+    for o in 0..L {
+        scale[o] = s;
+        fade[o] = (feature * inv_footprint).clamp(0.0, 1.0);
+        s *= 2.0;
+        feature *= 0.5;
+    }
+    let mut v = [0.0f32; L];
+    for o in 0..L {
+        v[o] = value2(
+            x * scale[o],
+            y * scale[o],
+            seed.wrapping_add(o as u64 * 1013),
+        );
+    }
+    let (mut sum, mut norm, mut amp) = (0.0, 0.0, 1.0);
+    for o in 0..(octaves as usize).min(L) {
+        let v = if fade[o] > 0.0 { v[o] } else { 0.5 };
+        sum += amp * (fade[o] * v + (1.0 - fade[o]) * 0.5);
+        norm += amp;
+        amp *= 0.5;
+    }
+    sum / norm
+}
+
+/// [`fbm2_wide`] when `WIDE` (code compiled with wide vectors), [`fbm2`] otherwise.
+#[inline(always)]
+pub fn fbm2_in<const WIDE: bool>(
+    x: f32,
+    y: f32,
+    base_scale: f32,
+    octaves: u32,
+    footprint: f32,
+    seed: u64,
+) -> f32 {
+    if WIDE {
+        fbm2_wide(x, y, base_scale, octaves, footprint, seed)
+    } else {
+        fbm2(x, y, base_scale, octaves, footprint, seed)
+    }
+}
+
 /// A box-filtered square wave: fraction of [x - w/2, x + w/2] inside stripes of width `duty`
 /// (in periods) repeating every 1. Anti-aliased stripes, dashes and grids.
 pub fn stripe(x: f32, duty: f32, w: f32) -> f32 {
@@ -113,6 +215,56 @@ mod tests {
         }
         assert_eq!(value2(1.3, 2.7, 5), value2(1.3, 2.7, 5));
         assert_ne!(value2(1.3, 2.7, 5), value2(1.3, 2.7, 6));
+    }
+
+    #[test]
+    fn wide_fbm_is_bit_identical_to_the_octave_walk() {
+        let mut k = 0u64;
+        for octaves in 1..=9 {
+            for footprint in [1e-4f32, 0.003, 0.02, 0.1, 0.7, 5.0] {
+                for base in [0.04f32, 0.3, 0.6, 2.0] {
+                    for _ in 0..40 {
+                        k += 1;
+                        let x = (hash3(k as i32, 1, 0, 5) - 0.5) * 400.0;
+                        let y = (hash3(k as i32, 2, 0, 5) - 0.5) * 400.0;
+                        let a = fbm2(x, y, base, octaves, footprint, k);
+                        let b = fbm2_wide(x, y, base, octaves, footprint, k);
+                        assert_eq!(
+                            a.to_bits(),
+                            b.to_bits(),
+                            "{x} {y} {base} {octaves} {footprint}"
+                        );
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn saturating_i32_matches_the_cast() {
+        let mut xs = vec![
+            f32::NAN,
+            f32::INFINITY,
+            f32::NEG_INFINITY,
+            0.0,
+            -0.0,
+            0.99,
+            -0.99,
+            2_147_483_520.0,
+            2_147_483_648.0,
+            -2_147_483_648.0,
+            -2_147_483_904.0,
+            3e9,
+            -3e9,
+            8_388_607.5,
+            -8_388_608.5,
+            f32::MAX,
+            f32::MIN,
+        ];
+        xs.extend((0..2000).map(|k| (hash3(k, 0, 0, 1) - 0.5) * 1e4 * (k % 7) as f32));
+        for x in xs {
+            assert_eq!(saturating_i32(x), x as i32, "{x}");
+        }
     }
 
     #[test]

@@ -190,28 +190,13 @@ pub fn synthesize(
     let total = n_sweeps;
     let (mut sweeps_written, mut images_written) = (0, 0);
     for (k, &stamp) in sweep_stamps.iter().enumerate() {
-        for (li, lidar) in rig.lidars.iter().enumerate() {
-            let sweep = lidar_sim::simulate_sweep(
-                &world,
-                lidar,
-                &trajectory,
-                stamp,
-                cfg.seed ^ (li as u64) << 32,
-            )?;
-            let times = sweep.time_offset_secs.clone().unwrap_or_default();
-            writer.write_pointcloud(
-                &format!("/{}/points", lidar.name),
-                stamp,
-                &lidar.name,
-                &sweep.points_in_sensor,
-                &sweep.intensity,
-                &times,
-            )?;
-            sweeps_written += 1;
-        }
-        if k % camera_every == 0 {
-            let frames: Vec<Result<(i64, Vec<u8>), SimError>> = rig
-                .cameras
+        // The frame's sweeps and (on camera frames) images are computed together, so neither
+        // waits for the other's slowest part; they are written in a fixed order.
+        let render_images = || -> Vec<Result<(i64, Vec<u8>), SimError>> {
+            if k % camera_every != 0 {
+                return Vec::new();
+            }
+            rig.cameras
                 .par_iter()
                 .zip(ray_tables.par_iter())
                 .enumerate()
@@ -234,24 +219,53 @@ pub fn synthesize(
                     );
                     Ok((trigger, encode_jpeg(&img, cfg.jpeg_quality)?))
                 })
-                .collect();
-            for (cam, frame) in rig.cameras.iter().zip(frames) {
-                let (trigger, jpeg) = frame?;
-                writer.write_compressed_image(
-                    &format!("/{}/image/compressed", cam.name),
-                    trigger,
-                    &cam.name,
-                    "jpeg",
-                    &jpeg,
-                )?;
-                writer.write_camera_info(
-                    &format!("/{}/camera_info", cam.name),
-                    trigger,
-                    &cam.name,
-                    &cam.intrinsics,
-                )?;
-                images_written += 1;
-            }
+                .collect()
+        };
+        let simulate_sweeps = || -> Vec<Result<_, _>> {
+            rig.lidars
+                .par_iter()
+                .enumerate()
+                .map(|(li, lidar)| {
+                    lidar_sim::simulate_sweep(
+                        &world,
+                        lidar,
+                        &trajectory,
+                        stamp,
+                        cfg.seed ^ (li as u64) << 32,
+                    )
+                })
+                .collect()
+        };
+        let (sweeps, frames) = rayon::join(simulate_sweeps, render_images);
+        for (lidar, sweep) in rig.lidars.iter().zip(sweeps) {
+            let sweep = sweep?;
+            let times = sweep.time_offset_secs.clone().unwrap_or_default();
+            writer.write_pointcloud(
+                &format!("/{}/points", lidar.name),
+                stamp,
+                &lidar.name,
+                &sweep.points_in_sensor,
+                &sweep.intensity,
+                &times,
+            )?;
+            sweeps_written += 1;
+        }
+        for (cam, frame) in rig.cameras.iter().zip(frames) {
+            let (trigger, jpeg) = frame?;
+            writer.write_compressed_image(
+                &format!("/{}/image/compressed", cam.name),
+                trigger,
+                &cam.name,
+                "jpeg",
+                &jpeg,
+            )?;
+            writer.write_camera_info(
+                &format!("/{}/camera_info", cam.name),
+                trigger,
+                &cam.name,
+                &cam.intrinsics,
+            )?;
+            images_written += 1;
         }
         progress(k + 1, total);
     }

@@ -15,7 +15,7 @@ use std::str::FromStr;
 use glam::{DVec3, Vec3};
 
 use super::bvh::{Bvh, Triangle};
-use super::noise::{band, fbm2, floor, hash3, hash64, stripe, value2, wrap};
+use super::noise::{band, fbm2_in, floor, hash3, hash64, stripe, value2, wrap};
 use super::raster::{Candidate, NONE};
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
@@ -652,10 +652,30 @@ impl World {
     /// Albedo and reflectivity at a hit; `footprint` is the pixel's size on the surface (m), which
     /// band-limits the procedural textures.
     pub fn surface(&self, hit: &SurfaceHit, footprint: f32) -> Surface {
+        #[cfg(target_arch = "x86_64")]
+        if super::wide::available() {
+            // SAFETY: `available` checked at run time that the CPU has every feature
+            // `surface_avx512` is compiled with.
+            #[allow(unsafe_code)]
+            return unsafe { self.surface_avx512(hit, footprint) };
+        }
+        self.surface_in::<false>(hit, footprint)
+    }
+
+    /// [`World::surface`] compiled with AVX-512, its fBm hashing eight octaves at once
+    /// (`sim::wide`; the same result bit for bit).
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx512f,avx512dq,avx512vl,avx512bw")]
+    fn surface_avx512(&self, hit: &SurfaceHit, footprint: f32) -> Surface {
+        self.surface_in::<true>(hit, footprint)
+    }
+
+    #[inline(always)]
+    fn surface_in<const WIDE: bool>(&self, hit: &SurfaceHit, footprint: f32) -> Surface {
         let p = hit.point;
         let fp = footprint.max(1e-4);
         match hit.material.and_then(|m| self.materials.get(m as usize)) {
-            None => self.ground_surface(p, fp),
+            None => self.ground_surface::<WIDE>(p, fp),
             Some(m) => {
                 // Planar texture coordinates: along the face (horizontal) and height.
                 let n = hit.normal;
@@ -665,18 +685,19 @@ impl World {
                 } else {
                     (p.dot(t), p.z)
                 };
-                material_surface(m, u, v, p, n, fp, &self.boards, self.seed)
+                material_surface::<WIDE>(m, u, v, p, n, fp, &self.boards, self.seed)
             }
         }
     }
 
-    fn ground_surface(&self, p: Vec3, fp: f32) -> Surface {
+    #[inline(always)]
+    fn ground_surface<const WIDE: bool>(&self, p: Vec3, fp: f32) -> Surface {
         let seed = self.seed;
-        let grain = fbm2(p.x, p.y, 0.6, 6, fp, seed ^ 11);
+        let grain = fbm2_in::<WIDE>(p.x, p.y, 0.6, 6, fp, seed ^ 11);
         let (d, s) = self.ground.sample(p.x, p.y);
         let ad = d.abs();
         let asphalt = Vec3::splat(0.16 + 0.10 * grain) + Vec3::new(0.0, 0.0, 0.01);
-        let patch = fbm2(p.x, p.y, 0.05, 3, fp, seed ^ 12);
+        let patch = fbm2_in::<WIDE>(p.x, p.y, 0.05, 3, fp, seed ^ 12);
         let asphalt = asphalt * (0.85 + 0.3 * patch);
         // Aggregate speckle (4 cm stones) and darker tar-sealed cracks, faded below the footprint.
         let speck_fade = ((1.0 / 25.0) / (2.0 * fp)).clamp(0.0, 1.0);
@@ -685,7 +706,7 @@ impl World {
         // Cracks only where their mask is open (most of the road has none: no noise there).
         let crack_mask = ((value2(p.x * 0.1, p.y * 0.1, seed ^ 18) - 0.55) * 5.0).clamp(0.0, 1.0);
         let crack = if crack_mask > 0.0 {
-            let crack_noise = fbm2(p.x, p.y, 0.35, 3, fp, seed ^ 17);
+            let crack_noise = fbm2_in::<WIDE>(p.x, p.y, 0.35, 3, fp, seed ^ 17);
             band(crack_noise - 0.5, 0.004, fp * 0.5) * crack_mask
         } else {
             0.0
@@ -737,8 +758,8 @@ impl World {
             };
         }
         // Off-road: grass and dirt.
-        let g = fbm2(p.x, p.y, 0.3, 6, fp, seed ^ 14);
-        let dirt = fbm2(p.x, p.y, 0.04, 3, fp, seed ^ 15);
+        let g = fbm2_in::<WIDE>(p.x, p.y, 0.3, 6, fp, seed ^ 14);
+        let dirt = fbm2_in::<WIDE>(p.x, p.y, 0.04, 3, fp, seed ^ 15);
         let grass = Vec3::new(0.18, 0.30, 0.10) * (0.7 + 0.6 * g);
         let soil = Vec3::new(0.36, 0.29, 0.20) * (0.8 + 0.4 * g);
         let mix = ((dirt - 0.45) * 6.0).clamp(0.0, 1.0);
@@ -749,7 +770,8 @@ impl World {
     }
 }
 
-fn material_surface(
+#[inline(always)]
+fn material_surface<const WIDE: bool>(
     m: &Material,
     u: f32,
     v: f32,
@@ -762,8 +784,8 @@ fn material_surface(
     let s = |k: u64| seed ^ k;
     match *m {
         Material::Facade { color, seed: fs } => {
-            let base =
-                Vec3::from_array(color) * (0.85 + 0.3 * fbm2(u, v, 0.8, 5, fp, s(21 + fs as u64)));
+            let base = Vec3::from_array(color)
+                * (0.85 + 0.3 * fbm2_in::<WIDE>(u, v, 0.8, 5, fp, s(21 + fs as u64)));
             // Bricks on some façades.
             let brick = if fs % 3 == 0 {
                 let row = floor(v / 0.075);
@@ -812,14 +834,14 @@ fn material_surface(
             }
         }
         Material::Concrete => {
-            let g = fbm2(u, v, 1.0, 5, fp, s(31));
+            let g = fbm2_in::<WIDE>(u, v, 1.0, 5, fp, s(31));
             Surface {
                 albedo: Vec3::splat(0.5 + 0.2 * g),
                 reflectivity: 0.5,
             }
         }
         Material::Sidewalk => {
-            let g = fbm2(p.x, p.y, 1.5, 5, fp, s(32));
+            let g = fbm2_in::<WIDE>(p.x, p.y, 1.5, 5, fp, s(32));
             let joints = stripe(p.x / 1.5, 0.03, fp / 1.5).max(stripe(p.y / 1.5, 0.03, fp / 1.5));
             let top = if n.z > 0.7 { 1.0 - 0.4 * joints } else { 0.9 };
             Surface {
@@ -828,7 +850,7 @@ fn material_surface(
             }
         }
         Material::Metal { color } => {
-            let g = fbm2(u, v, 2.0, 4, fp, s(33));
+            let g = fbm2_in::<WIDE>(u, v, 2.0, 4, fp, s(33));
             Surface {
                 albedo: Vec3::from_array(color) * (0.8 + 0.3 * g),
                 reflectivity: 0.6,
@@ -854,14 +876,14 @@ fn material_surface(
             reflectivity: 0.04,
         },
         Material::Bark => {
-            let g = fbm2(u * 3.0, v * 0.5, 2.0, 4, fp, s(34));
+            let g = fbm2_in::<WIDE>(u * 3.0, v * 0.5, 2.0, 4, fp, s(34));
             Surface {
                 albedo: Vec3::new(0.28, 0.20, 0.13) * (0.6 + 0.6 * g),
                 reflectivity: 0.35,
             }
         }
         Material::Foliage { color } => {
-            let g = fbm2(p.x + p.z, p.y - p.z, 3.0, 5, fp, s(35));
+            let g = fbm2_in::<WIDE>(p.x + p.z, p.y - p.z, 3.0, 5, fp, s(35));
             Surface {
                 albedo: Vec3::from_array(color) * (0.5 + 0.9 * g),
                 reflectivity: 0.5,
@@ -1379,6 +1401,35 @@ mod tests {
                 assert!(h.t > 20.0, "{kind:?}: something on the road at {}", h.t);
             }
         }
+    }
+
+    #[test]
+    fn wide_and_baseline_surfaces_are_bit_identical() {
+        // Both copies of the texture code (`sim::wide`), run here without the CPU features,
+        // agree bit for bit on rays in every direction from points along the road.
+        let w = World::build(SceneKind::Urban, &straight_path(), 2);
+        let mut checked = 0;
+        for i in 0..4000u32 {
+            let h = |k: u32| hash64(i as u64 * 8 + k as u64) as f32 / u64::MAX as f32;
+            let o = Vec3::new(-40.0 + 80.0 * h(0), 10.0 * h(1) - 5.0, 0.5 + 3.0 * h(2));
+            let d = Vec3::new(h(3) - 0.5, h(4) - 0.5, h(5) - 0.7).normalize_or_zero();
+            let Some(hit) = w.trace(o, d, 300.0) else {
+                continue;
+            };
+            let footprint = hit.t * 0.0006 * (0.5 + h(6));
+            let (a, b) = (
+                w.surface_in::<true>(&hit, footprint),
+                w.surface_in::<false>(&hit, footprint),
+            );
+            assert_eq!(
+                a.albedo.to_array().map(f32::to_bits),
+                b.albedo.to_array().map(f32::to_bits)
+            );
+            assert_eq!(a.reflectivity.to_bits(), b.reflectivity.to_bits());
+            assert_eq!(w.surface(&hit, footprint).albedo, a.albedo);
+            checked += 1;
+        }
+        assert!(checked > 2000, "{checked}");
     }
 
     #[test]
