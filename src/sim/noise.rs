@@ -55,7 +55,7 @@ pub fn floor(x: f32) -> f32 {
 }
 
 /// `x.rem_euclid(period)` for a positive period, without libm's `fmod`: in [0, period).
-#[inline]
+#[inline(always)]
 pub fn wrap(x: f32, period: f32) -> f32 {
     let r = x - floor(x / period) * period;
     // Rounding can land exactly on the period for tiny negative x.
@@ -164,6 +164,108 @@ fn fbm2_lanes<const L: usize>(
     sum / norm
 }
 
+/// Several value noises and fBm octaves gathered into `L` lanes and evaluated side by side:
+/// one pass of wide hashing for all the noise a surface needs, instead of one per call. Each
+/// lane is `value2(x, y, seed)`; an fBm takes one lane per octave and is finished by
+/// [`FbmLanes::finish`], so every result is bit for bit that of [`value2`] and [`fbm2`].
+pub struct NoiseBatch<const L: usize> {
+    xs: [f32; L],
+    ys: [f32; L],
+    seeds: [u64; L],
+    used: usize,
+}
+
+/// Where an fBm's octaves sit in a [`NoiseBatch`] and how much each is faded.
+#[derive(Clone, Copy, Debug)]
+pub struct FbmLanes {
+    first: usize,
+    octaves: usize,
+    fade: [f32; WIDE_OCTAVES],
+}
+
+impl<const L: usize> Default for NoiseBatch<L> {
+    fn default() -> Self {
+        Self {
+            xs: [0.0; L],
+            ys: [0.0; L],
+            seeds: [0; L],
+            used: 0,
+        }
+    }
+}
+
+impl<const L: usize> NoiseBatch<L> {
+    /// A lane for `value2(x, y, seed)`. Panics beyond `L` lanes (a programming error: the
+    /// batches are laid out by hand).
+    #[inline(always)]
+    pub fn value2(&mut self, x: f32, y: f32, seed: u64) -> usize {
+        let lane = self.used;
+        (self.xs[lane], self.ys[lane], self.seeds[lane]) = (x, y, seed);
+        self.used += 1;
+        lane
+    }
+
+    /// Lanes for the octaves of `fbm2(x, y, base_scale, octaves, footprint, seed)` (at most
+    /// [`WIDE_OCTAVES`]).
+    #[inline(always)]
+    pub fn fbm2(
+        &mut self,
+        x: f32,
+        y: f32,
+        base_scale: f32,
+        octaves: usize,
+        footprint: f32,
+        seed: u64,
+    ) -> FbmLanes {
+        let first = self.used;
+        let mut fade = [0.0f32; WIDE_OCTAVES];
+        // The same per-octave scales and fades as `fbm2`.
+        let (mut scale, mut feature) = (base_scale, 1.0 / base_scale);
+        let inv_footprint = 1.0 / (2.0 * footprint.max(1e-6));
+        for (o, fade) in fade.iter_mut().enumerate().take(octaves) {
+            *fade = (feature * inv_footprint).clamp(0.0, 1.0);
+            self.value2(x * scale, y * scale, seed.wrapping_add(o as u64 * 1013));
+            scale *= 2.0;
+            feature *= 0.5;
+        }
+        FbmLanes {
+            first,
+            octaves,
+            fade,
+        }
+    }
+
+    /// Every lane's value noise, computed side by side.
+    #[inline(always)]
+    pub fn eval(&self) -> [f32; L] {
+        let mut v = [0.0f32; L];
+        for i in 0..L {
+            v[i] = value2(self.xs[i], self.ys[i], self.seeds[i]);
+        }
+        v
+    }
+}
+
+impl FbmLanes {
+    /// The fBm from its octaves' values: the same sum, in the same order, as [`fbm2`].
+    #[inline(always)]
+    pub fn finish(&self, values: &[f32]) -> f32 {
+        let (mut sum, mut norm, mut amp) = (0.0, 0.0, 1.0);
+        for o in 0..self.octaves {
+            let fade = self.fade[o];
+            let v = if fade > 0.0 {
+                values[self.first + o]
+            } else {
+                0.5
+            };
+            sum += amp * (fade * v + (1.0 - fade) * 0.5);
+            norm += amp;
+            amp *= 0.5;
+        }
+        sum / norm
+    }
+}
+
 /// [`fbm2_wide`] when `WIDE` (code compiled with wide vectors), [`fbm2`] otherwise.
 #[inline(always)]
 pub fn fbm2_in<const WIDE: bool>(
@@ -183,6 +285,7 @@ pub fn fbm2_in<const WIDE: bool>(
 
 /// A box-filtered square wave: fraction of [x - w/2, x + w/2] inside stripes of width `duty`
 /// (in periods) repeating every 1. Anti-aliased stripes, dashes and grids.
+#[inline(always)]
 pub fn stripe(x: f32, duty: f32, w: f32) -> f32 {
     let integral = |t: f32| {
         let f = floor(t);
@@ -195,6 +298,7 @@ pub fn stripe(x: f32, duty: f32, w: f32) -> f32 {
 }
 
 /// Box-filtered indicator of |x| < half_width with filter width w.
+#[inline(always)]
 pub fn band(x: f32, half_width: f32, w: f32) -> f32 {
     let w = w.max(1e-6);
     // Overlap of [x - w/2, x + w/2] with [-h, h], divided by w.
@@ -237,6 +341,32 @@ mod tests {
                     }
                 }
             }
+        }
+    }
+
+    #[test]
+    fn a_noise_batch_gives_each_noise_bit_for_bit() {
+        for k in 0..500u64 {
+            let x = (hash3(k as i32, 1, 0, 9) - 0.5) * 300.0;
+            let y = (hash3(k as i32, 2, 0, 9) - 0.5) * 300.0;
+            let footprint = 0.001 + hash3(k as i32, 3, 0, 9) * 0.2;
+            let mut batch = NoiseBatch::<16>::default();
+            let a = batch.fbm2(x, y, 0.6, 6, footprint, k);
+            let b = batch.value2(x * 25.0, y * 25.0, k ^ 16);
+            let c = batch.fbm2(x, y, 0.05, 3, footprint, k ^ 12);
+            let values = batch.eval();
+            assert_eq!(
+                a.finish(&values).to_bits(),
+                fbm2(x, y, 0.6, 6, footprint, k).to_bits()
+            );
+            assert_eq!(
+                values[b].to_bits(),
+                value2(x * 25.0, y * 25.0, k ^ 16).to_bits()
+            );
+            assert_eq!(
+                c.finish(&values).to_bits(),
+                fbm2(x, y, 0.05, 3, footprint, k ^ 12).to_bits()
+            );
         }
     }
 

@@ -15,7 +15,7 @@ use std::str::FromStr;
 use glam::{DVec3, Vec3};
 
 use super::bvh::{Bvh, Triangle};
-use super::noise::{band, fbm2_in, floor, hash3, hash64, stripe, value2, wrap};
+use super::noise::{NoiseBatch, band, fbm2_in, floor, hash3, hash64, stripe, value2, wrap};
 use super::raster::{Candidate, NONE};
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
@@ -693,20 +693,50 @@ impl World {
     #[inline(always)]
     fn ground_surface<const WIDE: bool>(&self, p: Vec3, fp: f32) -> Surface {
         let seed = self.seed;
-        let grain = fbm2_in::<WIDE>(p.x, p.y, 0.6, 6, fp, seed ^ 11);
+        // Wide code evaluates all the asphalt's noise in one batch of lanes (even the cracks'
+        // and the paint's, which the one-at-a-time code computes only where they show).
+        let batch = WIDE.then(|| {
+            let mut b = NoiseBatch::<16>::default();
+            let lanes = (
+                b.fbm2(p.x, p.y, 0.6, 6, fp, seed ^ 11),
+                b.fbm2(p.x, p.y, 0.05, 3, fp, seed ^ 12),
+                b.fbm2(p.x, p.y, 0.35, 3, fp, seed ^ 17),
+                b.value2(p.x * 25.0, p.y * 25.0, seed ^ 16),
+                b.value2(p.x * 0.1, p.y * 0.1, seed ^ 18),
+                b.value2(p.x * 3.0, p.y * 3.0, seed ^ 13),
+            );
+            (b.eval(), lanes)
+        });
+        let grain = match &batch {
+            Some((v, lanes)) => lanes.0.finish(v),
+            None => fbm2_in::<WIDE>(p.x, p.y, 0.6, 6, fp, seed ^ 11),
+        };
         let (d, s) = self.ground.sample(p.x, p.y);
         let ad = d.abs();
         let asphalt = Vec3::splat(0.16 + 0.10 * grain) + Vec3::new(0.0, 0.0, 0.01);
-        let patch = fbm2_in::<WIDE>(p.x, p.y, 0.05, 3, fp, seed ^ 12);
+        let patch = match &batch {
+            Some((v, lanes)) => lanes.1.finish(v),
+            None => fbm2_in::<WIDE>(p.x, p.y, 0.05, 3, fp, seed ^ 12),
+        };
         let asphalt = asphalt * (0.85 + 0.3 * patch);
         // Aggregate speckle (4 cm stones) and darker tar-sealed cracks, faded below the footprint.
         let speck_fade = ((1.0 / 25.0) / (2.0 * fp)).clamp(0.0, 1.0);
-        let speck =
-            ((value2(p.x * 25.0, p.y * 25.0, seed ^ 16) - 0.7) * 8.0).clamp(0.0, 1.0) * speck_fade;
+        let speck_noise = match &batch {
+            Some((v, lanes)) => v[lanes.3],
+            None => value2(p.x * 25.0, p.y * 25.0, seed ^ 16),
+        };
+        let speck = ((speck_noise - 0.7) * 8.0).clamp(0.0, 1.0) * speck_fade;
         // Cracks only where their mask is open (most of the road has none: no noise there).
-        let crack_mask = ((value2(p.x * 0.1, p.y * 0.1, seed ^ 18) - 0.55) * 5.0).clamp(0.0, 1.0);
+        let mask_noise = match &batch {
+            Some((v, lanes)) => v[lanes.4],
+            None => value2(p.x * 0.1, p.y * 0.1, seed ^ 18),
+        };
+        let crack_mask = ((mask_noise - 0.55) * 5.0).clamp(0.0, 1.0);
         let crack = if crack_mask > 0.0 {
-            let crack_noise = fbm2_in::<WIDE>(p.x, p.y, 0.35, 3, fp, seed ^ 17);
+            let crack_noise = match &batch {
+                Some((v, lanes)) => lanes.2.finish(v),
+                None => fbm2_in::<WIDE>(p.x, p.y, 0.35, 3, fp, seed ^ 17),
+            };
             band(crack_noise - 0.5, 0.004, fp * 0.5) * crack_mask
         } else {
             0.0
@@ -744,8 +774,11 @@ impl World {
             let paint = paint.min(1.0);
             // Worn paint (its noise only where there is paint).
             let marking = if paint > 0.0 {
-                Vec3::new(0.85, 0.85, 0.82)
-                    * (0.75 + 0.25 * value2(p.x * 3.0, p.y * 3.0, seed ^ 13))
+                let wear = match &batch {
+                    Some((v, lanes)) => v[lanes.5],
+                    None => value2(p.x * 3.0, p.y * 3.0, seed ^ 13),
+                };
+                Vec3::new(0.85, 0.85, 0.82) * (0.75 + 0.25 * wear)
             } else {
                 Vec3::ZERO
             };
@@ -758,8 +791,20 @@ impl World {
             };
         }
         // Off-road: grass and dirt.
-        let g = fbm2_in::<WIDE>(p.x, p.y, 0.3, 6, fp, seed ^ 14);
-        let dirt = fbm2_in::<WIDE>(p.x, p.y, 0.04, 3, fp, seed ^ 15);
+        let (g, dirt) = if WIDE {
+            let mut b = NoiseBatch::<16>::default();
+            let (g, dirt) = (
+                b.fbm2(p.x, p.y, 0.3, 6, fp, seed ^ 14),
+                b.fbm2(p.x, p.y, 0.04, 3, fp, seed ^ 15),
+            );
+            let v = b.eval();
+            (g.finish(&v), dirt.finish(&v))
+        } else {
+            (
+                fbm2_in::<WIDE>(p.x, p.y, 0.3, 6, fp, seed ^ 14),
+                fbm2_in::<WIDE>(p.x, p.y, 0.04, 3, fp, seed ^ 15),
+            )
+        };
         let grass = Vec3::new(0.18, 0.30, 0.10) * (0.7 + 0.6 * g);
         let soil = Vec3::new(0.36, 0.29, 0.20) * (0.8 + 0.4 * g);
         let mix = ((dirt - 0.45) * 6.0).clamp(0.0, 1.0);
@@ -784,8 +829,20 @@ fn material_surface<const WIDE: bool>(
     let s = |k: u64| seed ^ k;
     match *m {
         Material::Facade { color, seed: fs } => {
-            let base = Vec3::from_array(color)
-                * (0.85 + 0.3 * fbm2_in::<WIDE>(u, v, 0.8, 5, fp, s(21 + fs as u64)));
+            // Wide code evaluates the façade's fBm and its windows' reflection noise together.
+            let batch = WIDE.then(|| {
+                let mut b = NoiseBatch::<8>::default();
+                let lanes = (
+                    b.fbm2(u, v, 0.8, 5, fp, s(21 + fs as u64)),
+                    b.value2(u * 0.3, v * 0.5, s(23 + fs as u64)),
+                );
+                (b.eval(), lanes)
+            });
+            let grain = match &batch {
+                Some((values, lanes)) => lanes.0.finish(values),
+                None => fbm2_in::<WIDE>(u, v, 0.8, 5, fp, s(21 + fs as u64)),
+            };
+            let base = Vec3::from_array(color) * (0.85 + 0.3 * grain);
             // Bricks on some façades.
             let brick = if fs % 3 == 0 {
                 let row = floor(v / 0.075);
@@ -819,8 +876,11 @@ fn material_surface<const WIDE: bool>(
                 * (1.0 - ground_floor);
             let window = window * (1.0 - mullion);
             let sky_reflection = if window > 0.0 {
-                Vec3::new(0.25, 0.32, 0.40)
-                    * (0.6 + 0.8 * value2(u * 0.3, v * 0.5, s(23 + fs as u64)))
+                let reflection = match &batch {
+                    Some((values, lanes)) => values[lanes.1],
+                    None => value2(u * 0.3, v * 0.5, s(23 + fs as u64)),
+                };
+                Vec3::new(0.25, 0.32, 0.40) * (0.6 + 0.8 * reflection)
             } else {
                 Vec3::ZERO
             };
