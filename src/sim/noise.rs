@@ -54,10 +54,24 @@ pub fn floor(x: f32) -> f32 {
     }
 }
 
+/// [`floor`] where `WIDE` code (compiled with AVX-512, `sim::wide`) has a rounding
+/// instruction: `x.floor() + 0.0` is one instruction and the same bits (adding +0 turns the -0
+/// that `floor` never returns into +0).
+#[inline(always)]
+pub fn floor_in<const WIDE: bool>(x: f32) -> f32 {
+    if WIDE { x.floor() + 0.0 } else { floor(x) }
+}
+
 /// `x.rem_euclid(period)` for a positive period, without libm's `fmod`: in [0, period).
 #[inline(always)]
 pub fn wrap(x: f32, period: f32) -> f32 {
-    let r = x - floor(x / period) * period;
+    wrap_in::<false>(x, period)
+}
+
+/// [`wrap`] with [`floor_in`].
+#[inline(always)]
+pub fn wrap_in<const WIDE: bool>(x: f32, period: f32) -> f32 {
+    let r = x - floor_in::<WIDE>(x / period) * period;
     // Rounding can land exactly on the period for tiny negative x.
     if r >= period { 0.0 } else { r }
 }
@@ -70,7 +84,13 @@ fn smooth(t: f32) -> f32 {
 /// 2D value noise in [0, 1).
 #[inline(always)]
 pub fn value2(x: f32, y: f32, seed: u64) -> f32 {
-    let (xi, yi) = (floor(x), floor(y));
+    value2_in::<false>(x, y, seed)
+}
+
+/// [`value2`] with [`floor_in`].
+#[inline(always)]
+pub fn value2_in<const WIDE: bool>(x: f32, y: f32, seed: u64) -> f32 {
+    let (xi, yi) = (floor_in::<WIDE>(x), floor_in::<WIDE>(y));
     let (fx, fy) = (smooth(x - xi), smooth(y - yi));
     let (xi, yi) = (saturating_i32(xi), saturating_i32(yi));
     let a = hash3(xi, yi, 0, seed);
@@ -148,7 +168,7 @@ fn fbm2_lanes<const L: usize>(
     }
     let mut v = [0.0f32; L];
     for o in 0..L {
-        v[o] = value2(
+        v[o] = value2_in::<true>(
             x * scale[o],
             y * scale[o],
             seed.wrapping_add(o as u64 * 1013),
@@ -240,7 +260,7 @@ impl<const L: usize> NoiseBatch<L> {
     pub fn eval(&self) -> [f32; L] {
         let mut v = [0.0f32; L];
         for i in 0..L {
-            v[i] = value2(self.xs[i], self.ys[i], self.seeds[i]);
+            v[i] = value2_in::<true>(self.xs[i], self.ys[i], self.seeds[i]);
         }
         v
     }
@@ -287,12 +307,22 @@ pub fn fbm2_in<const WIDE: bool>(
 /// (in periods) repeating every 1. Anti-aliased stripes, dashes and grids.
 #[inline(always)]
 pub fn stripe(x: f32, duty: f32, w: f32) -> f32 {
+    stripe_in::<false>(x, duty, w)
+}
+
+/// [`stripe`] with [`floor_in`].
+#[inline(always)]
+pub fn stripe_in<const WIDE: bool>(x: f32, duty: f32, w: f32) -> f32 {
     let integral = |t: f32| {
-        let f = floor(t);
+        let f = floor_in::<WIDE>(t);
         f * duty + (t - f).min(duty)
     };
     if w < 1e-6 {
-        return if x - floor(x) < duty { 1.0 } else { 0.0 };
+        return if x - floor_in::<WIDE>(x) < duty {
+            1.0
+        } else {
+            0.0
+        };
     }
     ((integral(x + 0.5 * w) - integral(x - 0.5 * w)) / w).clamp(0.0, 1.0)
 }
@@ -394,6 +424,34 @@ mod tests {
         xs.extend((0..2000).map(|k| (hash3(k, 0, 0, 1) - 0.5) * 1e4 * (k % 7) as f32));
         for x in xs {
             assert_eq!(saturating_i32(x), x as i32, "{x}");
+        }
+    }
+
+    #[test]
+    fn rounding_floor_is_bit_identical_to_the_fast_floor() {
+        let mut xs = vec![
+            f32::INFINITY,
+            f32::NEG_INFINITY,
+            0.0,
+            -0.0,
+            -1e-45,
+            1e-45,
+            -0.5,
+            0.5,
+        ];
+        xs.extend([
+            8_388_607.5f32,
+            -8_388_607.5,
+            8_388_608.0,
+            3e9,
+            -3e9,
+            1e30,
+            -1e30,
+        ]);
+        xs.extend((0..5000).map(|k| (hash3(k, 7, 0, 3) - 0.5) * 10f32.powi(k % 9 - 3)));
+        for x in xs {
+            assert_eq!(floor_in::<true>(x).to_bits(), floor(x).to_bits(), "{x}");
+            assert_eq!(floor_in::<false>(x).to_bits(), floor(x).to_bits(), "{x}");
         }
     }
 

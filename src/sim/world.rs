@@ -15,7 +15,10 @@ use std::str::FromStr;
 use glam::{DVec3, Vec3};
 
 use super::bvh::{Bvh, Triangle};
-use super::noise::{NoiseBatch, band, fbm2_in, floor, hash3, hash64, stripe, value2, wrap};
+use super::noise::{
+    NoiseBatch, band, fbm2_in, floor, floor_in, hash3, hash64, stripe, stripe_in, value2,
+    value2_in, wrap, wrap_in,
+};
 use super::raster::{Candidate, NONE};
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
@@ -723,13 +726,13 @@ impl World {
         let speck_fade = ((1.0 / 25.0) / (2.0 * fp)).clamp(0.0, 1.0);
         let speck_noise = match &batch {
             Some((v, lanes)) => v[lanes.3],
-            None => value2(p.x * 25.0, p.y * 25.0, seed ^ 16),
+            None => value2_in::<WIDE>(p.x * 25.0, p.y * 25.0, seed ^ 16),
         };
         let speck = ((speck_noise - 0.7) * 8.0).clamp(0.0, 1.0) * speck_fade;
         // Cracks only where their mask is open (most of the road has none: no noise there).
         let mask_noise = match &batch {
             Some((v, lanes)) => v[lanes.4],
-            None => value2(p.x * 0.1, p.y * 0.1, seed ^ 18),
+            None => value2_in::<WIDE>(p.x * 0.1, p.y * 0.1, seed ^ 18),
         };
         let crack_mask = ((mask_noise - 0.55) * 5.0).clamp(0.0, 1.0);
         let crack = if crack_mask > 0.0 {
@@ -745,9 +748,9 @@ impl World {
         if self.kind == SceneKind::ParkingLot {
             // Parking bays: lines every 2.6 m across, rows 5.5 m deep.
             let (lx, ly) = (p.x / 2.6, p.y / 11.0);
-            let bay_line =
-                stripe(lx + 0.02, 0.04, fp / 2.6) * (1.0 - stripe(ly + 0.25, 0.5, fp / 11.0));
-            let row_line = band((wrap(p.y, 11.0)) - 5.5, 0.06, fp);
+            let bay_line = stripe_in::<WIDE>(lx + 0.02, 0.04, fp / 2.6)
+                * (1.0 - stripe_in::<WIDE>(ly + 0.25, 0.5, fp / 11.0));
+            let row_line = band((wrap_in::<WIDE>(p.y, 11.0)) - 5.5, 0.06, fp);
             let paint = (bay_line + row_line).min(1.0) * if ad > 4.0 { 1.0 } else { 0.0 };
             let albedo = asphalt * (1.0 - paint) + Vec3::splat(0.80) * paint;
             return Surface {
@@ -756,7 +759,7 @@ impl World {
             };
         }
         if ad <= ROAD_HALF_WIDTH_M + 0.5 {
-            let dash = stripe(s / 9.0, 0.35, fp / 9.0);
+            let dash = stripe_in::<WIDE>(s / 9.0, 0.35, fp / 9.0);
             let mut paint = 0.0;
             let mut yellow = 0.0;
             if self.kind != SceneKind::Featureless {
@@ -764,8 +767,8 @@ impl World {
                 paint += band(ad - 1.85, 0.07, fp) * dash;
                 paint += band(ad - 5.25, 0.07, fp) * dash;
                 // Crosswalk blocks every 120 m.
-                let cw = band(wrap(s + 30.0, 120.0) - 60.0, 2.0, fp)
-                    * stripe(d / 1.2, 0.5, fp / 1.2)
+                let cw = band(wrap_in::<WIDE>(s + 30.0, 120.0) - 60.0, 2.0, fp)
+                    * stripe_in::<WIDE>(d / 1.2, 0.5, fp / 1.2)
                     * if ad < 6.5 { 1.0 } else { 0.0 };
                 paint += cw;
                 yellow = band(ad - 0.0, 0.08, fp).max(0.0) * 0.0;
@@ -776,7 +779,7 @@ impl World {
             let marking = if paint > 0.0 {
                 let wear = match &batch {
                     Some((v, lanes)) => v[lanes.5],
-                    None => value2(p.x * 3.0, p.y * 3.0, seed ^ 13),
+                    None => value2_in::<WIDE>(p.x * 3.0, p.y * 3.0, seed ^ 13),
                 };
                 Vec3::new(0.85, 0.85, 0.82) * (0.75 + 0.25 * wear)
             } else {
@@ -845,8 +848,8 @@ fn material_surface<const WIDE: bool>(
             let base = Vec3::from_array(color) * (0.85 + 0.3 * grain);
             // Bricks on some façades.
             let brick = if fs % 3 == 0 {
-                let row = floor(v / 0.075);
-                let mortar = stripe(v / 0.075, 0.15, fp / 0.075).max(stripe(
+                let row = floor_in::<WIDE>(v / 0.075);
+                let mortar = stripe_in::<WIDE>(v / 0.075, 0.15, fp / 0.075).max(stripe_in::<WIDE>(
                     u / 0.24 + 0.5 * (row as i32 % 2) as f32,
                     0.06,
                     fp / 0.24,
@@ -857,18 +860,19 @@ fn material_surface<const WIDE: bool>(
             };
             // Window grid: 3 m bays, 3.2 m floors, ground floor shop fronts.
             let (bay, floor) = (3.0 + (fs % 3) as f32 * 0.4, 3.2);
-            let wu = stripe(u / bay + 0.2, 0.55, fp / bay);
-            let wv = stripe((v - 0.9) / floor, 0.5, fp / floor);
+            let wu = stripe_in::<WIDE>(u / bay + 0.2, 0.55, fp / bay);
+            let wv = stripe_in::<WIDE>((v - 0.9) / floor, 0.5, fp / floor);
             let ground_floor = if v < 3.0 { 1.0 } else { 0.0 };
-            let shop = ground_floor * stripe(u / 7.0, 0.7, fp / 7.0) * band(v - 1.6, 1.1, fp);
+            let shop =
+                ground_floor * stripe_in::<WIDE>(u / 7.0, 0.7, fp / 7.0) * band(v - 1.6, 1.1, fp);
             let window = (wu * wv * (1.0 - ground_floor) + shop).min(1.0);
             let frame_edge = (wu * wv * (1.0 - ground_floor))
                 * (1.0
-                    - stripe(u / bay + 0.23, 0.49, fp / bay)
-                        * stripe((v - 0.82) / floor, 0.45, fp / floor));
+                    - stripe_in::<WIDE>(u / bay + 0.23, 0.49, fp / bay)
+                        * stripe_in::<WIDE>((v - 0.82) / floor, 0.45, fp / floor));
             // Mullions and transoms split each window into panes.
-            let fu = wrap(u / bay + 0.2, 1.0);
-            let fv = wrap((v - 0.9) / floor, 1.0);
+            let fu = wrap_in::<WIDE>(u / bay + 0.2, 1.0);
+            let fv = wrap_in::<WIDE>((v - 0.9) / floor, 1.0);
             let mullion = (band(fu - 0.275, 0.012, fp / bay) + band(fv - 0.33, 0.016, fp / floor))
                 .min(1.0)
                 * wu
@@ -878,7 +882,7 @@ fn material_surface<const WIDE: bool>(
             let sky_reflection = if window > 0.0 {
                 let reflection = match &batch {
                     Some((values, lanes)) => values[lanes.1],
-                    None => value2(u * 0.3, v * 0.5, s(23 + fs as u64)),
+                    None => value2_in::<WIDE>(u * 0.3, v * 0.5, s(23 + fs as u64)),
                 };
                 Vec3::new(0.25, 0.32, 0.40) * (0.6 + 0.8 * reflection)
             } else {
@@ -902,7 +906,11 @@ fn material_surface<const WIDE: bool>(
         }
         Material::Sidewalk => {
             let g = fbm2_in::<WIDE>(p.x, p.y, 1.5, 5, fp, s(32));
-            let joints = stripe(p.x / 1.5, 0.03, fp / 1.5).max(stripe(p.y / 1.5, 0.03, fp / 1.5));
+            let joints = stripe_in::<WIDE>(p.x / 1.5, 0.03, fp / 1.5).max(stripe_in::<WIDE>(
+                p.y / 1.5,
+                0.03,
+                fp / 1.5,
+            ));
             let top = if n.z > 0.7 { 1.0 - 0.4 * joints } else { 0.9 };
             Surface {
                 albedo: Vec3::splat((0.52 + 0.15 * g) * top),
@@ -920,7 +928,7 @@ fn material_surface<const WIDE: bool>(
             let shade = 0.9 + 0.1 * (n.z * 0.5 + 0.5);
             // A dark belt line and door seams.
             let belt = band(v - 0.95, 0.03, fp);
-            let seam = stripe(u / 1.3 + 0.1, 0.02, fp / 1.3) * band(v - 0.6, 0.3, fp);
+            let seam = stripe_in::<WIDE>(u / 1.3 + 0.1, 0.02, fp / 1.3) * band(v - 0.6, 0.3, fp);
             let albedo = Vec3::from_array(color) * shade * (1.0 - 0.7 * (belt + seam).min(1.0));
             Surface {
                 albedo,
@@ -963,8 +971,8 @@ fn material_surface<const WIDE: bool>(
                 if inside && front {
                     // Box-filtered checker: product of two ±1 square waves.
                     let w = fp / b.square_m;
-                    let sa = 2.0 * stripe(a * 0.5, 0.5, w * 0.5) - 1.0;
-                    let sc = 2.0 * stripe(c * 0.5, 0.5, w * 0.5) - 1.0;
+                    let sa = 2.0 * stripe_in::<WIDE>(a * 0.5, 0.5, w * 0.5) - 1.0;
+                    let sc = 2.0 * stripe_in::<WIDE>(c * 0.5, 0.5, w * 0.5) - 1.0;
                     let black = 0.5 + 0.5 * sa * sc;
                     Surface {
                         albedo: Vec3::splat(0.9 - 0.85 * black),
