@@ -111,22 +111,9 @@ pub struct Exposure {
     pub seed: u64,
 }
 
-fn sky(dir: Vec3, sun: Vec3, seed: u64) -> Vec3 {
-    #[cfg(target_arch = "x86_64")]
-    if super::wide::available() {
-        // SAFETY: `available` checked at run time that the CPU has every feature `sky_avx512`
-        // is compiled with.
-        #[allow(unsafe_code)]
-        return unsafe { sky_avx512(dir, sun, seed) };
-    }
-    sky_in::<false>(dir, sun, seed)
-}
-
-/// [`sky`] compiled with AVX-512, its clouds' fBm hashing the octaves at once (`sim::wide`).
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx512f,avx512dq,avx512vl,avx512bw")]
-fn sky_avx512(dir: Vec3, sun: Vec3, seed: u64) -> Vec3 {
-    sky_in::<true>(dir, sun, seed)
+super::wide::dispatch_wide! {
+    /// The sky's colour along `dir`, compiled for the CPU's widest vectors (`sim::wide`).
+    fn sky(dir: Vec3, sun: Vec3, seed: u64) -> Vec3 => sky_in
 }
 
 #[inline(always)]
@@ -525,23 +512,21 @@ pub fn render(
     img
 }
 
-/// Gamma table, sensor noise and quantisation of one row: `tone` holds the table arguments,
-/// three per pixel. Compiled a second time with AVX-512 (`sim::wide`), where a row's noise
-/// hashes and table lookups run eight pixels at once; the bytes are the same.
-fn finish_row(gamma: &Gamma, tone: &[f32], row: &mut [u8], y: u32, exposure: &Exposure) {
-    #[cfg(target_arch = "x86_64")]
-    if super::wide::available() {
-        // SAFETY: `available` checked at run time that the CPU has every feature
-        // `finish_row_avx512` is compiled with.
-        #[allow(unsafe_code)]
-        return unsafe { finish_row_avx512(gamma, tone, row, y, exposure) };
-    }
-    finish_row_in(gamma, tone, row, y, exposure);
+super::wide::dispatch_wide! {
+    /// Gamma table, sensor noise and quantisation of one row: `tone` holds the table arguments,
+    /// three per pixel. Compiled for the CPU's widest vectors (`sim::wide`), where a row's noise
+    /// hashes and table lookups run several pixels at once; the bytes are the same.
+    fn finish_row(gamma: &Gamma, tone: &[f32], row: &mut [u8], y: u32, exposure: &Exposure) -> () => finish_row_wide
 }
 
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx512f,avx512dq,avx512vl,avx512bw")]
-fn finish_row_avx512(gamma: &Gamma, tone: &[f32], row: &mut [u8], y: u32, exposure: &Exposure) {
+#[inline(always)]
+fn finish_row_wide<const WIDE: bool>(
+    gamma: &Gamma,
+    tone: &[f32],
+    row: &mut [u8],
+    y: u32,
+    exposure: &Exposure,
+) {
     finish_row_in(gamma, tone, row, y, exposure);
 }
 

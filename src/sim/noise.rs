@@ -40,18 +40,14 @@ pub fn saturating_i32(x: f32) -> i32 {
     if x >= 2_147_483_648.0 { i32::MAX } else { r }
 }
 
-/// `x.floor()` without a libm call (the baseline x86-64 target has no rounding instruction),
-/// written as selects, without an early return, so that a loop of them vectorises.
+/// `x.floor()` without a libm call (the baseline x86-64 target has no rounding instruction).
 #[inline(always)]
 pub fn floor(x: f32) -> f32 {
-    let t = saturating_i32(x) as f32;
-    let below = if t > x { t - 1.0 } else { t };
-    // Beyond 2^23 every float is integral (and NaN stays NaN).
     if x.abs() >= 8_388_608.0 || x.is_nan() {
-        x
-    } else {
-        below
+        return x; // already integral (or NaN)
     }
+    let t = x as i32 as f32;
+    if t > x { t - 1.0 } else { t }
 }
 
 /// [`floor`] where `WIDE` code (compiled with AVX-512, `sim::wide`) has a rounding
@@ -92,7 +88,11 @@ pub fn value2(x: f32, y: f32, seed: u64) -> f32 {
 pub fn value2_in<const WIDE: bool>(x: f32, y: f32, seed: u64) -> f32 {
     let (xi, yi) = (floor_in::<WIDE>(x), floor_in::<WIDE>(y));
     let (fx, fy) = (smooth(x - xi), smooth(y - yi));
-    let (xi, yi) = (saturating_i32(xi), saturating_i32(yi));
+    let (xi, yi) = if WIDE {
+        (saturating_i32(xi), saturating_i32(yi))
+    } else {
+        (xi as i32, yi as i32)
+    };
     let a = hash3(xi, yi, 0, seed);
     let b = hash3(xi + 1, yi, 0, seed);
     let c = hash3(xi, yi + 1, 0, seed);

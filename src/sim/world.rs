@@ -655,24 +655,10 @@ impl World {
     /// Albedo and reflectivity at a hit; `footprint` is the pixel's size on the surface (m), which
     /// band-limits the procedural textures.
     pub fn surface(&self, hit: &SurfaceHit, footprint: f32) -> Surface {
-        #[cfg(target_arch = "x86_64")]
-        if super::wide::available() {
-            // SAFETY: `available` checked at run time that the CPU has every feature
-            // `surface_avx512` is compiled with.
-            #[allow(unsafe_code)]
-            return unsafe { self.surface_avx512(hit, footprint) };
-        }
-        self.surface_in::<false>(hit, footprint)
+        surface_dispatch(self, hit, footprint)
     }
 
-    /// [`World::surface`] compiled with AVX-512, its fBm hashing eight octaves at once
-    /// (`sim::wide`; the same result bit for bit).
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx512f,avx512dq,avx512vl,avx512bw")]
-    fn surface_avx512(&self, hit: &SurfaceHit, footprint: f32) -> Surface {
-        self.surface_in::<true>(hit, footprint)
-    }
-
+    /// [`World::surface`]'s body; `WIDE` selects the forms written for vectors (`sim::wide`).
     #[inline(always)]
     fn surface_in<const WIDE: bool>(&self, hit: &SurfaceHit, footprint: f32) -> Surface {
         let p = hit.point;
@@ -698,18 +684,22 @@ impl World {
         let seed = self.seed;
         // Wide code evaluates all the asphalt's noise in one batch of lanes (even the cracks'
         // and the paint's, which the one-at-a-time code computes only where they show).
-        let batch = WIDE.then(|| {
-            let mut b = NoiseBatch::<16>::default();
-            let lanes = (
-                b.fbm2(p.x, p.y, 0.6, 6, fp, seed ^ 11),
-                b.fbm2(p.x, p.y, 0.05, 3, fp, seed ^ 12),
-                b.fbm2(p.x, p.y, 0.35, 3, fp, seed ^ 17),
-                b.value2(p.x * 25.0, p.y * 25.0, seed ^ 16),
-                b.value2(p.x * 0.1, p.y * 0.1, seed ^ 18),
-                b.value2(p.x * 3.0, p.y * 3.0, seed ^ 13),
-            );
-            (b.eval(), lanes)
-        });
+        let batch = if WIDE {
+            Some({
+                let mut b = NoiseBatch::<16>::default();
+                let lanes = (
+                    b.fbm2(p.x, p.y, 0.6, 6, fp, seed ^ 11),
+                    b.fbm2(p.x, p.y, 0.05, 3, fp, seed ^ 12),
+                    b.fbm2(p.x, p.y, 0.35, 3, fp, seed ^ 17),
+                    b.value2(p.x * 25.0, p.y * 25.0, seed ^ 16),
+                    b.value2(p.x * 0.1, p.y * 0.1, seed ^ 18),
+                    b.value2(p.x * 3.0, p.y * 3.0, seed ^ 13),
+                );
+                (b.eval(), lanes)
+            })
+        } else {
+            None
+        };
         let grain = match &batch {
             Some((v, lanes)) => lanes.0.finish(v),
             None => fbm2_in::<WIDE>(p.x, p.y, 0.6, 6, fp, seed ^ 11),
@@ -818,6 +808,16 @@ impl World {
     }
 }
 
+super::wide::dispatch_wide! {
+    /// [`World::surface`] compiled for the CPU's widest vectors (`sim::wide`).
+    fn surface_dispatch(world: &World, hit: &SurfaceHit, footprint: f32) -> Surface => surface_wide
+}
+
+#[inline(always)]
+fn surface_wide<const WIDE: bool>(world: &World, hit: &SurfaceHit, footprint: f32) -> Surface {
+    world.surface_in::<WIDE>(hit, footprint)
+}
+
 #[inline(always)]
 fn material_surface<const WIDE: bool>(
     m: &Material,
@@ -833,14 +833,18 @@ fn material_surface<const WIDE: bool>(
     match *m {
         Material::Facade { color, seed: fs } => {
             // Wide code evaluates the façade's fBm and its windows' reflection noise together.
-            let batch = WIDE.then(|| {
-                let mut b = NoiseBatch::<8>::default();
-                let lanes = (
-                    b.fbm2(u, v, 0.8, 5, fp, s(21 + fs as u64)),
-                    b.value2(u * 0.3, v * 0.5, s(23 + fs as u64)),
-                );
-                (b.eval(), lanes)
-            });
+            let batch = if WIDE {
+                Some({
+                    let mut b = NoiseBatch::<8>::default();
+                    let lanes = (
+                        b.fbm2(u, v, 0.8, 5, fp, s(21 + fs as u64)),
+                        b.value2(u * 0.3, v * 0.5, s(23 + fs as u64)),
+                    );
+                    (b.eval(), lanes)
+                })
+            } else {
+                None
+            };
             let grain = match &batch {
                 Some((values, lanes)) => lanes.0.finish(values),
                 None => fbm2_in::<WIDE>(u, v, 0.8, 5, fp, s(21 + fs as u64)),
