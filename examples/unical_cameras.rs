@@ -9,7 +9,9 @@
 //! `RIGCAL_WARMUP` (pose warm-up iterations), `RIGCAL_SCALE` (image scale, 0.125),
 //! `RIGCAL_RGB_WEIGHT`, `RIGCAL_INTENSITY_WEIGHT`, `RIGCAL_VIEW=false` (view-independent
 //! surface colour), `RIGCAL_TRANSLATION_RATE` (camera translation rate over the rotation's),
-//! `RIGCAL_CAMERA_DECAY` (the camera pose rate's final fraction), `RIGCAL_VECTORS` (print every
+//! `RIGCAL_CAMERA_DECAY` (the camera pose rate's final fraction), `RIGCAL_SILHOUETTE` (share of
+//! heat-map draws around LiDAR silhouettes), `RIGCAL_UNIFORM` (share of uniform draws once the
+//! heat maps are on), `RIGCAL_VECTORS` (print every
 //! camera's error vector and their mean). Frozen-scene probe: with `RIGCAL_PROBE=N` the cameras
 //! start at the truth and the scene learns for N iterations (poses fixed), then the cameras
 //! jump to their start and only their poses move (the scene frozen unless `RIGCAL_JOINT` is
@@ -70,6 +72,8 @@ fn main() {
         view_dependent_colour: env("RIGCAL_VIEW", defaults.view_dependent_colour),
         camera_translation_rate: env("RIGCAL_TRANSLATION_RATE", defaults.camera_translation_rate),
         camera_pose_final_fraction: env("RIGCAL_CAMERA_DECAY", defaults.camera_pose_final_fraction),
+        silhouette_share: env("RIGCAL_SILHOUETTE", defaults.silhouette_share),
+        heatmap_uniform_share: env("RIGCAL_UNIFORM", defaults.heatmap_uniform_share),
         correspondence_cache: Some(std::env::temp_dir().join("rigcal-probe-matches")),
         ..defaults
     };

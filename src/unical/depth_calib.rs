@@ -124,6 +124,12 @@ pub struct DepthCalibConfig {
     pub heatmap_sigma_px: (f64, f64),
     /// Share of camera pixels still drawn uniformly once heat maps are on.
     pub heatmap_uniform_share: f64,
+    /// Share of the heat-map draws centred on LiDAR silhouettes instead of keypoints: depth
+    /// discontinuities of the sweep nearest each frame, projected into it under the current
+    /// poses (refreshed every [`SILHOUETTE_REFRESH`] iterations). Where colour texture may
+    /// slide along a surface with a camera's translation, a silhouette cannot: it ties the
+    /// camera to the LiDARs' geometry. 0 draws around keypoints only.
+    pub silhouette_share: f64,
     /// How signed distances become opacities (method.md §3's per-sample form, or the
     /// unbiased per-section form; [`OpacityModel`]).
     pub opacity: OpacityModel,
@@ -172,6 +178,7 @@ impl Default for DepthCalibConfig {
             heatmap_start_fraction: 2000.0 / 30_000.0,
             heatmap_sigma_px: (40.0, 5.0),
             heatmap_uniform_share: 0.2,
+            silhouette_share: 0.0,
             opacity: OpacityModel::PerSample,
             // Lambertian surfaces: the paper's view-dependent decoder lets a colour that
             // changes with the direction explain two cameras' disagreement (BENCHMARKS.md:
@@ -321,7 +328,15 @@ pub struct DepthCalibration {
     camera: Option<CameraStage>,
     /// Matched pixels between camera frames (empty without cameras or correspondences).
     pub correspondences: Correspondences,
+    /// Per LiDAR and sweep: the indices of its silhouette points (computed on first use).
+    silhouette_points: Vec<Vec<Vec<u32>>>,
+    /// Per camera and frame: those points projected into it (training pixels), and the
+    /// iteration they were projected at.
+    silhouette_pixels: (Vec<Vec<Vec<(f32, f32)>>>, usize),
 }
+
+/// Iterations between re-projections of the LiDAR silhouettes into the camera frames.
+pub const SILHOUETTE_REFRESH: usize = 50;
 
 /// One LiDAR return rendered by the current scene (diagnostics).
 #[derive(Clone, Copy, Debug)]
@@ -555,6 +570,8 @@ impl DepthCalibration {
             iteration: 0,
             camera: None,
             correspondences: Correspondences::default(),
+            silhouette_points: Vec::new(),
+            silhouette_pixels: (Vec::new(), 0),
             config,
             trajectory,
             lidars,
@@ -972,6 +989,93 @@ impl DepthCalibration {
         Some(sigma_1920 * width / 1920.0)
     }
 
+    /// Project every LiDAR's silhouette points (of its sweep nearest each frame) into every
+    /// camera frame under the current poses, for [`DepthCalibConfig::silhouette_share`].
+    fn refresh_silhouettes(&mut self) {
+        let Some(stage) = &self.camera else {
+            return;
+        };
+        if self.silhouette_points.is_empty() {
+            self.silhouette_points = self
+                .lidars
+                .iter()
+                .map(|l| {
+                    l.sweeps
+                        .par_iter()
+                        .map(|s| {
+                            crate::eval::edges::depth_discontinuities(&s.points_in_sensor, 0.05)
+                                .into_iter()
+                                .map(|i| i as u32)
+                                .collect()
+                        })
+                        .collect()
+                })
+                .collect();
+        }
+        let lidar_poses: Vec<Rigid> = self.poses.iter().map(|p| p.to_rigid()).collect();
+        let (lidars, trajectory, points) =
+            (&self.lidars, &self.trajectory, &self.silhouette_points);
+        let pixels = stage
+            .cameras
+            .iter()
+            .zip(&stage.poses)
+            .map(|(cam, pose)| {
+                let vehicle_from_camera = pose.to_rigid();
+                cam.frames
+                    .par_iter()
+                    .map(|f| {
+                        let Ok(wv) = trajectory.world_from_vehicle(f.stamp_nanos) else {
+                            return Vec::new();
+                        };
+                        let camera_from_world = (wv * vehicle_from_camera).inverse();
+                        let mut out = Vec::new();
+                        for ((lidar, vehicle_from_lidar), indices) in
+                            lidars.iter().zip(&lidar_poses).zip(points)
+                        {
+                            let Some((s, idx)) = lidar
+                                .sweeps
+                                .iter()
+                                .zip(indices)
+                                .min_by_key(|(s, _)| (s.stamp_nanos - f.stamp_nanos).abs())
+                            else {
+                                continue;
+                            };
+                            for &i in idx {
+                                let [x, y, z] = s.points_in_sensor[i as usize];
+                                let offset_s = s
+                                    .time_offset_secs
+                                    .as_ref()
+                                    .and_then(|t| t.get(i as usize))
+                                    .map_or(0.0, |&t| t as f64);
+                                let stamp = s.stamp_nanos + (offset_s * 1e9) as i64;
+                                let Ok(wv_point) = trajectory.world_from_vehicle(stamp) else {
+                                    continue;
+                                };
+                                let p = DVec3::new(x as f64, y as f64, z as f64);
+                                let in_camera =
+                                    camera_from_world
+                                        .transform_point(wv_point.transform_point(
+                                            vehicle_from_lidar.transform_point(p),
+                                        ));
+                                // In front and within ~78° of the axis (no folded-over pixels).
+                                if in_camera.z < 0.2 * in_camera.length() {
+                                    continue;
+                                }
+                                if let Some(px) = cam.intrinsics.project(in_camera)
+                                    && cam.intrinsics.in_image(px)
+                                {
+                                    out.push((px.x as f32, px.y as f32));
+                                }
+                            }
+                        }
+                        out
+                    })
+                    .collect()
+            })
+            .collect();
+        self.silhouette_pixels = (pixels, self.iteration);
+    }
+
     fn draw_camera_rays(&mut self, camera: usize) -> Vec<ColourRay> {
         let Some(stage) = &self.camera else {
             return Vec::new();
@@ -987,17 +1091,39 @@ impl DepthCalibration {
         while rays.len() < self.config.rays_per_camera && attempts < 4 * self.config.rays_per_camera
         {
             attempts += 1;
-            let f = &cam.frames[(next(&mut self.rng) % cam.frames.len() as u64) as usize];
-            let from_heatmap = sigma.is_some_and(|_| {
-                !f.keypoints.is_empty() && unit(&mut self.rng) >= self.config.heatmap_uniform_share
-            });
-            let (x, y) = match sigma.filter(|_| from_heatmap) {
-                // A draw from Σ_k G_σ(u − u_k): a random keypoint plus Gaussian noise.
-                Some(sigma) => {
+            let frame = (next(&mut self.rng) % cam.frames.len() as u64) as usize;
+            let f = &cam.frames[frame];
+            let silhouettes = self
+                .silhouette_pixels
+                .0
+                .get(camera)
+                .and_then(|frames| frames.get(frame))
+                .filter(|pixels| !pixels.is_empty());
+            let from_silhouette = sigma.is_some()
+                && silhouettes.is_some()
+                && unit(&mut self.rng) < self.config.silhouette_share;
+            let from_heatmap = !from_silhouette
+                && sigma.is_some_and(|_| {
+                    !f.keypoints.is_empty()
+                        && unit(&mut self.rng) >= self.config.heatmap_uniform_share
+                });
+            let centre = match (from_silhouette, silhouettes) {
+                (true, Some(pixels)) => {
+                    Some(pixels[(next(&mut self.rng) % pixels.len() as u64) as usize])
+                }
+                _ if from_heatmap => {
                     let k = &f.keypoints[(next(&mut self.rng) % f.keypoints.len() as u64) as usize];
+                    Some((k.x, k.y))
+                }
+                _ => None,
+            };
+            let (x, y) = match sigma.zip(centre) {
+                // A draw from Σ_k G_σ(u − u_k): a random keypoint (or silhouette pixel) plus
+                // Gaussian noise.
+                Some((sigma, (kx, ky))) => {
                     let (gx, gy) = gaussian_pair(&mut self.rng);
-                    let px = (k.x as f64 + sigma * gx).round().clamp(0.0, (w - 1) as f64);
-                    let py = (k.y as f64 + sigma * gy).round().clamp(0.0, (h - 1) as f64);
+                    let px = (kx as f64 + sigma * gx).round().clamp(0.0, (w - 1) as f64);
+                    let py = (ky as f64 + sigma * gy).round().clamp(0.0, (h - 1) as f64);
                     (px as u64, py as u64)
                 }
                 None => (
@@ -1418,6 +1544,11 @@ impl DepthCalibration {
                 .map_or_else(super::mlp::MlpGrad::default, |b| b.field.geo.zero_grad());
             let rgb_weight = self.config.rgb_weight as f64;
             let opacity = self.opacity();
+            let stale = self.silhouette_pixels.0.is_empty()
+                || self.iteration >= self.silhouette_pixels.1 + SILHOUETTE_REFRESH;
+            if self.config.silhouette_share > 0.0 && self.heatmap_sigma(1920.0).is_some() && stale {
+                self.refresh_silhouettes();
+            }
             for k in 0..cameras {
                 let rays = self.draw_camera_rays(k);
                 let Some(stage) = self.camera.as_mut() else {
@@ -1709,6 +1840,86 @@ mod tests {
             let px = intrinsics.project(r.dir_in_sensor).unwrap();
             assert!(
                 (px.x - 20.0).abs() < 0.51 && (px.y - 30.0).abs() < 0.51,
+                "{px:?}"
+            );
+        }
+    }
+
+    /// Silhouette-guided sampling: a pole in front of the car is a depth discontinuity of the
+    /// sweeps; projected into the frames it is where the silhouette draws land.
+    #[test]
+    fn silhouette_draws_land_on_the_lidars_depth_edges() {
+        let (trajectory, mount, mut sweeps) = flat_drive();
+        // A ring 20° below the horizon: a pole 5 m ahead between far returns at 20 m.
+        let el = -0.35f32;
+        for s in &mut sweeps {
+            for j in -30i32..=30 {
+                let az = j as f32 * 0.01;
+                let r = if j.abs() <= 2 { 5.0 } else { 20.0 };
+                s.points_in_sensor.push([
+                    r * el.cos() * az.cos(),
+                    r * el.cos() * az.sin(),
+                    r * el.sin(),
+                ]);
+                s.intensity.push(40.0);
+            }
+        }
+        let camera = ground_camera(&trajectory);
+        let intrinsics = camera.intrinsics.clone();
+        let vehicle_from_camera = camera.initial;
+        let stamps: Vec<i64> = camera.frames.iter().map(|f| f.stamp_nanos).collect();
+        let config = DepthCalibConfig {
+            iterations: 100,
+            heatmap_start_fraction: 0.2,
+            heatmap_uniform_share: 0.0,
+            silhouette_share: 1.0,
+            ..small_config()
+        };
+        let mut c = DepthCalibration::new(
+            config,
+            trajectory.clone(),
+            vec![LidarData {
+                name: "lidar".into(),
+                initial: mount,
+                sweeps,
+            }],
+        )
+        .with_cameras(vec![camera]);
+        c.iteration = 100;
+        c.refresh_silhouettes();
+        // Each frame's silhouette pixels are the pole's two edge returns (its outermost, beside
+        // the far ones) in the sweep at the frame's own stamp, seen by the camera.
+        for f in 0..stamps.len() {
+            let pixels = &c.silhouette_pixels.0[0][f];
+            assert_eq!(pixels.len(), 2, "frame {f}: {pixels:?}");
+            let camera_from_vehicle = vehicle_from_camera.inverse();
+            for j in [-2, 2] {
+                let az = j as f64 * 0.01;
+                let p = DVec3::new(
+                    5.0 * (el as f64).cos() * az.cos(),
+                    5.0 * (el as f64).cos() * az.sin(),
+                    5.0 * (el as f64).sin(),
+                );
+                let in_camera = camera_from_vehicle.transform_point(mount.transform_point(p));
+                let px = intrinsics.project(in_camera).unwrap();
+                assert!(
+                    pixels
+                        .iter()
+                        .any(|q| (q.0 as f64 - px.x).abs() < 0.05
+                            && (q.1 as f64 - px.y).abs() < 0.05),
+                    "frame {f}: {px:?} not in {pixels:?}"
+                );
+            }
+        }
+        // σ = 5 px at 1920 wide is 0.17 px here: every draw is at a silhouette pixel.
+        let rays = c.draw_camera_rays(0);
+        assert!(!rays.is_empty());
+        let all: Vec<(f32, f32)> = c.silhouette_pixels.0[0].concat();
+        for r in &rays {
+            let px = intrinsics.project(r.dir_in_sensor).unwrap();
+            assert!(
+                all.iter().any(|q| (px.x - q.0 as f64).abs() < 1.2
+                    && (px.y - q.1 as f64).abs() < 1.2),
                 "{px:?}"
             );
         }
