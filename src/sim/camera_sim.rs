@@ -516,22 +516,18 @@ super::wide::dispatch_wide! {
     /// Gamma table, sensor noise and quantisation of one row: `tone` holds the table arguments,
     /// three per pixel. Compiled for the CPU's widest vectors (`sim::wide`), where a row's noise
     /// hashes and table lookups run several pixels at once; the bytes are the same.
-    fn finish_row(gamma: &Gamma, tone: &[f32], row: &mut [u8], y: u32, exposure: &Exposure) -> () => finish_row_wide
+    fn finish_row(gamma: &Gamma, tone: &[f32], row: &mut [u8], y: u32, exposure: &Exposure) -> () => finish_row_in
 }
 
+/// The row's body; the same code at every level (`WIDE` is only the dispatch's parameter).
 #[inline(always)]
-fn finish_row_wide<const WIDE: bool>(
+fn finish_row_in<const WIDE: bool>(
     gamma: &Gamma,
     tone: &[f32],
     row: &mut [u8],
     y: u32,
     exposure: &Exposure,
 ) {
-    finish_row_in(gamma, tone, row, y, exposure);
-}
-
-#[inline(always)]
-fn finish_row_in(gamma: &Gamma, tone: &[f32], row: &mut [u8], y: u32, exposure: &Exposure) {
     for (x, (px, s)) in row
         .chunks_exact_mut(3)
         .zip(tone.chunks_exact(3))

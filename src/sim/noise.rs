@@ -146,7 +146,8 @@ pub fn fbm2_wide(x: f32, y: f32, base_scale: f32, octaves: u32, footprint: f32, 
     }
 }
 
-/// [`fbm2_wide`] in `L` lanes, for at most `L` octaves.
+/// [`fbm2_wide`] in `L` lanes, for at most `L` octaves: a [`NoiseBatch`] holding only its
+/// octaves (the lanes past them are evaluated and unused).
 #[inline(always)]
 fn fbm2_lanes<const L: usize>(
     x: f32,
@@ -156,32 +157,9 @@ fn fbm2_lanes<const L: usize>(
     footprint: f32,
     seed: u64,
 ) -> f32 {
-    // The same per-octave scales and fades as `fbm2` (doubling and halving are exact).
-    let (mut scale, mut fade) = ([0.0f32; L], [0.0f32; L]);
-    let (mut s, mut feature) = (base_scale, 1.0 / base_scale);
-    let inv_footprint = 1.0 / (2.0 * footprint.max(1e-6));
-    for o in 0..L {
-        scale[o] = s;
-        fade[o] = (feature * inv_footprint).clamp(0.0, 1.0);
-        s *= 2.0;
-        feature *= 0.5;
-    }
-    let mut v = [0.0f32; L];
-    for o in 0..L {
-        v[o] = value2_in::<true>(
-            x * scale[o],
-            y * scale[o],
-            seed.wrapping_add(o as u64 * 1013),
-        );
-    }
-    let (mut sum, mut norm, mut amp) = (0.0, 0.0, 1.0);
-    for o in 0..(octaves as usize).min(L) {
-        let v = if fade[o] > 0.0 { v[o] } else { 0.5 };
-        sum += amp * (fade[o] * v + (1.0 - fade[o]) * 0.5);
-        norm += amp;
-        amp *= 0.5;
-    }
-    sum / norm
+    let mut batch = NoiseBatch::<L>::default();
+    let lanes = batch.fbm2(x, y, base_scale, octaves as usize, footprint, seed);
+    lanes.finish(&batch.eval())
 }
 
 /// Several value noises and fBm octaves gathered into `L` lanes and evaluated side by side:
