@@ -9,7 +9,9 @@
 //! `RIGCAL_WARMUP` (pose warm-up iterations), `RIGCAL_SCALE` (image scale, 0.125),
 //! `RIGCAL_RGB_WEIGHT`, `RIGCAL_INTENSITY_WEIGHT`, `RIGCAL_VIEW=false` (view-independent
 //! surface colour), `RIGCAL_TRANSLATION_RATE` (camera translation rate over the rotation's),
-//! `RIGCAL_CAMERA_DECAY` (the camera pose rate's final fraction), `RIGCAL_SILHOUETTE` (share of
+//! `RIGCAL_CAMERA_DECAY` (the camera pose rate's final fraction), `RIGCAL_ROUNDS` (rounds of
+//! ITERATIONS, each with a fresh scene at the cameras the last one reached; as `calibrate
+//! --rounds`), `RIGCAL_SILHOUETTE` (share of
 //! heat-map draws around LiDAR silhouettes), `RIGCAL_UNIFORM` (share of uniform draws once the
 //! heat maps are on), `RIGCAL_VECTORS` (print every
 //! camera's error vector and their mean). Frozen-scene probe: with `RIGCAL_PROBE=N` the cameras
@@ -104,7 +106,15 @@ fn main() {
     );
     let every: usize = env("RIGCAL_EVERY", 25);
     let (mut colour, mut align, mut kept, mut n) = (0.0, 0.0, 0usize, 0usize);
-    for it in 0..iterations {
+    let rounds: usize = env("RIGCAL_ROUNDS", 1);
+    for it in 0..iterations * rounds.max(1) {
+        if it > 0 && it % iterations == 0 {
+            stage.calibration_mut().restart();
+            println!(
+                "round {}: a fresh scene at the cameras reached",
+                it / iterations + 1
+            );
+        }
         if probe > 0 && it == probe {
             let calib = stage.calibration_mut();
             for cam in start.cameras() {
@@ -120,7 +130,7 @@ fn main() {
         align += r.alignment_loss;
         kept += r.alignment_matches;
         n += 1;
-        if (it + 1) % every == 0 || it + 1 == iterations {
+        if (it + 1) % every == 0 || (it + 1) % iterations == 0 {
             let per = camera_errors(&stage, &truth);
             let k = per.len().max(1) as f64;
             let (rot, tr) = per.iter().fold((0.0, 0.0), |(a, b), e| {

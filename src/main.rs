@@ -96,6 +96,14 @@ enum Command {
         /// levels and opens the rest evenly until FRACTION of the run (BARF)
         #[arg(long)]
         coarse_to_fine: Option<String>,
+        /// Perturb every sensor of the initial guess by this many degrees about a random axis
+        /// (drawn from --seed), to measure how far a method recovers
+        #[arg(long, default_value_t = 0.0)]
+        perturb_deg: f64,
+        /// Perturb every sensor of the initial guess by this many centimetres along a random
+        /// direction (drawn from --seed)
+        #[arg(long, default_value_t = 0.0)]
+        perturb_cm: f64,
         #[arg(long)]
         out: PathBuf,
     },
@@ -246,6 +254,8 @@ fn run() -> Result<()> {
             camera_lr,
             rounds,
             coarse_to_fine,
+            perturb_deg,
+            perturb_cm,
             out,
         }) => {
             let alignment = alignment.parse().map_err(anyhow::Error::msg)?;
@@ -266,6 +276,7 @@ fn run() -> Result<()> {
                 camera_lr,
                 rounds,
                 coarse_to_fine,
+                perturb: (perturb_deg, perturb_cm),
                 out: out.clone(),
             };
             let started = std::time::Instant::now();

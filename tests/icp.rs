@@ -152,3 +152,60 @@ fn the_cli_runs_icp_and_writes_the_native_file() {
         trans * 100.0
     );
 }
+
+#[test]
+fn the_cli_perturbs_the_initial_guess_and_icp_recovers_the_pair() {
+    // `--perturb-deg 1 --perturb-cm 10` moves every sensor of the start by exactly that (the
+    // cameras, which ICP leaves alone, show it in the written file); ICP brings the PandarGT
+    // back relative to the moved Pandar64.
+    let dir = std::env::temp_dir().join(format!("rigcal-perturb-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let drive = Drive::open(&pandaset().join("pandaset-002.mcap")).unwrap();
+    let truth = reference_rig(&drive);
+    let out = dir.join("icp.yaml");
+    let run = |deg: &str| {
+        Command::new(env!("CARGO_BIN_EXE_rigcal"))
+            .arg("calibrate")
+            .arg(pandaset().join("pandaset-002.mcap"))
+            .args(["--method", "icp", "--seed", "3", "--perturb-cm", "10"])
+            .arg(format!("--perturb-deg={deg}"))
+            .arg("--out")
+            .arg(&out)
+            .output()
+            .unwrap()
+    };
+    let o = run("-1");
+    assert!(!o.status.success());
+    assert!(
+        String::from_utf8_lossy(&o.stderr).contains("--perturb-deg"),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    let o = run("1");
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let got = CalibrationFile::load_rig(&out).unwrap();
+    for cam in drive.rig.cameras() {
+        let (rot, trans) = cam
+            .vehicle_from_sensor
+            .difference(got.sensor(&cam.name).unwrap().vehicle_from_sensor);
+        assert!(
+            (rot.to_degrees() - 1.0).abs() < 1e-6 && (trans - 0.10).abs() < 1e-6,
+            "{}: {:.4}° {:.2} cm",
+            cam.name,
+            rot.to_degrees(),
+            trans * 100.0
+        );
+    }
+    let lidars: Vec<&str> = truth.lidars().map(|l| l.name.as_str()).collect();
+    let relative = |rig: &Rig| {
+        rig.sensor(lidars[0]).unwrap().vehicle_from_sensor.inverse()
+            * rig.sensor(lidars[1]).unwrap().vehicle_from_sensor
+    };
+    let (rot, trans) = relative(&truth).difference(relative(&got));
+    assert!(
+        rot.to_degrees() < 0.25 && trans < 0.04,
+        "{:.3}° {:.1} cm",
+        rot.to_degrees(),
+        trans * 100.0
+    );
+}

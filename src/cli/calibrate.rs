@@ -65,6 +65,9 @@ pub struct CalibrateArgs {
     pub rounds: usize,
     /// unical: `LEVELS,FRACTION` of a coarse-to-fine hash grid.
     pub coarse_to_fine: Option<String>,
+    /// Degrees and centimetres every sensor of the initial guess is moved by (random axis and
+    /// direction drawn from `seed`; (0, 0) leaves it), to measure recovery from a known start.
+    pub perturb: (f64, f64),
     pub out: PathBuf,
 }
 
@@ -253,6 +256,15 @@ pub fn calibrate(
         rig = crate::interop::import::load_initial_guess(init, &rig)
             .map_err(|e| format!("--init: {e}"))?
             .rig;
+    }
+    let (deg, cm) = args.perturb;
+    if !(deg.is_finite() && cm.is_finite() && deg >= 0.0 && cm >= 0.0) {
+        return Err(format!(
+            "--perturb-deg / --perturb-cm must be non-negative numbers, not {deg} / {cm}"
+        ));
+    }
+    if deg > 0.0 || cm > 0.0 {
+        rig = crate::sim::synth::perturb_rig(&rig, deg, cm, args.seed);
     }
     let asked = args.sensors.iter().map(|s| ("--sensors", s));
     for (option, s) in asked.chain(args.root.iter().map(|s| ("--root", s))) {
@@ -461,6 +473,13 @@ fn document(
     if let Some(i) = &args.init {
         doc.provenance
             .insert("init".into(), v(i.display().to_string()));
+    }
+    let (deg, cm) = args.perturb;
+    if deg > 0.0 || cm > 0.0 {
+        doc.provenance.insert(
+            "init_perturbed".into(),
+            v(format!("{deg}° and {cm} cm per sensor, seed {}", args.seed)),
+        );
     }
     doc.provenance.insert(
         "version".into(),
