@@ -16,7 +16,7 @@ use rigcal::calib::{CalibrationFile, Rig};
 use rigcal::classical::icp::IcpConfig;
 use rigcal::classical::icp_calibrator::IcpCalibrator;
 use rigcal::eval::registration::pair_registration_errors;
-use rigcal::geometry::{Rigid, so3};
+use rigcal::geometry::{Rigid, rig_errors, so3};
 use rigcal::log::Drive;
 use rigcal::optim::runner::Calibrator;
 
@@ -196,12 +196,11 @@ fn the_cli_perturbs_the_initial_guess_and_icp_recovers_the_pair() {
             trans * 100.0
         );
     }
-    let lidars: Vec<&str> = truth.lidars().map(|l| l.name.as_str()).collect();
-    let relative = |rig: &Rig| {
-        rig.sensor(lidars[0]).unwrap().vehicle_from_sensor.inverse()
-            * rig.sensor(lidars[1]).unwrap().vehicle_from_sensor
-    };
-    let (rot, trans) = relative(&truth).difference(relative(&got));
+    let root = truth.lidars().next().unwrap().name.clone();
+    let other = truth.lidars().nth(1).unwrap().name.clone();
+    let errors = rig_errors(&truth.extrinsics(), &got.extrinsics(), &root).unwrap();
+    let e = errors.iter().find(|e| e.sensor == other).unwrap();
+    let (rot, trans) = (e.rotation_deg.to_radians(), e.translation_m);
     assert!(
         rot.to_degrees() < 0.25 && trans < 0.04,
         "{:.3}° {:.1} cm",

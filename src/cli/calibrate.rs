@@ -71,6 +71,20 @@ pub struct CalibrateArgs {
     pub out: PathBuf,
 }
 
+impl CalibrateArgs {
+    /// The perturbation of the initial guess, `None` when there is none; an error for
+    /// negative or non-finite values.
+    fn perturbation(&self) -> Result<Option<(f64, f64)>, String> {
+        let (deg, cm) = self.perturb;
+        if !(deg.is_finite() && cm.is_finite() && deg >= 0.0 && cm >= 0.0) {
+            return Err(format!(
+                "--perturb-deg / --perturb-cm must be non-negative numbers, not {deg} / {cm}"
+            ));
+        }
+        Ok((deg > 0.0 || cm > 0.0).then_some((deg, cm)))
+    }
+}
+
 /// Sweeps of the reference LiDAR registered to the trajectory (spread over the drive: the
 /// turns between them are what observes its extrinsic).
 const TRAJECTORY_SWEEPS: usize = 10;
@@ -250,6 +264,7 @@ pub fn calibrate(
     args: &CalibrateArgs,
     progress: &mut dyn FnMut(usize, usize),
 ) -> Result<CalibrationFile, String> {
+    let perturbation = args.perturbation()?;
     let drive = Drive::open(&args.log).map_err(|e| e.to_string())?;
     let mut rig = drive.rig.clone();
     if let Some(init) = &args.init {
@@ -257,13 +272,7 @@ pub fn calibrate(
             .map_err(|e| format!("--init: {e}"))?
             .rig;
     }
-    let (deg, cm) = args.perturb;
-    if !(deg.is_finite() && cm.is_finite() && deg >= 0.0 && cm >= 0.0) {
-        return Err(format!(
-            "--perturb-deg / --perturb-cm must be non-negative numbers, not {deg} / {cm}"
-        ));
-    }
-    if deg > 0.0 || cm > 0.0 {
+    if let Some((deg, cm)) = perturbation {
         rig = crate::sim::synth::perturb_rig(&rig, deg, cm, args.seed);
     }
     let asked = args.sensors.iter().map(|s| ("--sensors", s));
@@ -474,8 +483,7 @@ fn document(
         doc.provenance
             .insert("init".into(), v(i.display().to_string()));
     }
-    let (deg, cm) = args.perturb;
-    if deg > 0.0 || cm > 0.0 {
+    if let Ok(Some((deg, cm))) = args.perturbation() {
         doc.provenance.insert(
             "init_perturbed".into(),
             v(format!("{deg}° and {cm} cm per sensor, seed {}", args.seed)),
