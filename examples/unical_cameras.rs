@@ -6,7 +6,8 @@
 //! `cargo run --release --example unical_cameras -- LOG GROUND_TRUTH [ITERATIONS]`
 //! Environment: `RIGCAL_LR_CAMERA` (camera pose rate), `RIGCAL_FRAMES` (images per camera, 8),
 //! `RIGCAL_ALIGN=none|ray-distance|surface`, `RIGCAL_ALIGN_WEIGHT`, `RIGCAL_ALIGN_MAX_PX`,
-//! `RIGCAL_WARMUP` (pose warm-up iterations), `RIGCAL_SCALE` (image scale, 0.125),
+//! `RIGCAL_WARMUP` (pose warm-up iterations), `RIGCAL_RAMP` (the pose rates' linear ramp after it),
+//! `RIGCAL_INIT_STEPS` (geometry initialisation steps), `RIGCAL_SCALE` (image scale, 0.125),
 //! `RIGCAL_RGB_WEIGHT`, `RIGCAL_INTENSITY_WEIGHT`, `RIGCAL_VIEW=false` (view-independent
 //! surface colour), `RIGCAL_TRANSLATION_RATE` (camera translation rate over the rotation's),
 //! `RIGCAL_CAMERA_DECAY` (the camera pose rate's final fraction), `RIGCAL_ROUNDS` (rounds of
@@ -36,7 +37,8 @@ fn env<T: std::str::FromStr>(key: &str, default: T) -> T {
 fn main() {
     let args: Vec<String> = std::env::args().collect();
     let log = PathBuf::from(&args[1]);
-    let truth = CalibrationFile::load_rig(&PathBuf::from(&args[2])).unwrap();
+    // The native file or a dataset's JSON (PandaSet's `ground_truth.json`).
+    let truth = rigcal::calib::dataset_json::load_reference(&PathBuf::from(&args[2])).unwrap();
     let iterations: usize = args.get(3).and_then(|s| s.parse().ok()).unwrap_or(600);
     let drive = Drive::open(&log).unwrap();
     let mut rig = drive.rig.clone();
@@ -66,6 +68,8 @@ fn main() {
         } else {
             env("RIGCAL_WARMUP", defaults.pose_warmup)
         },
+        pose_ramp: env("RIGCAL_RAMP", defaults.pose_ramp),
+        geometry_init_steps: env("RIGCAL_INIT_STEPS", defaults.geometry_init_steps),
         alignment: env("RIGCAL_ALIGN", defaults.alignment),
         alignment_weight: env("RIGCAL_ALIGN_WEIGHT", defaults.alignment_weight),
         alignment_settings: settings,
@@ -107,6 +111,9 @@ fn main() {
     let every: usize = env("RIGCAL_EVERY", 25);
     let (mut colour, mut align, mut kept, mut n) = (0.0, 0.0, 0usize, 0usize);
     let rounds: usize = env("RIGCAL_ROUNDS", 1);
+    // How soon the extrinsics first move (issue 5: within 5 s of the optimisation starting).
+    let initial_extrinsics = stage.calibration().extrinsics();
+    let (mut optimisation_start, mut first_change) = (None::<std::time::Instant>, None::<f64>);
     for it in 0..iterations * rounds.max(1) {
         if it > 0 && it % iterations == 0 {
             stage.calibration_mut().restart();
@@ -125,7 +132,18 @@ fn main() {
             }
             println!("probe: cameras back at their start");
         }
+        let started = *optimisation_start.get_or_insert_with(std::time::Instant::now);
         let r = stage.calibration_mut().step();
+        if first_change.is_none() {
+            if stage.calibration().extrinsics() != initial_extrinsics {
+                let secs = started.elapsed().as_secs_f64();
+                first_change = Some(secs);
+                println!(
+                    "first extrinsic change: iteration {}, {secs:.2} s into the optimisation",
+                    it + 1
+                );
+            }
+        }
         colour += r.colour_loss;
         align += r.alignment_loss;
         kept += r.alignment_matches;

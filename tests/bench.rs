@@ -38,6 +38,7 @@ fn tiny_suite() -> Suite {
         geometry_init_steps: 2,
         geometry_init_rays: 256,
         pose_warmup: 3,
+        pose_ramp: 0,
         rays_per_sensor: 64,
         rays_per_camera: 8,
         sweeps_per_lidar: 1,

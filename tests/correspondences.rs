@@ -193,6 +193,7 @@ fn the_alignment_term_alone_moves_the_cameras() {
             iterations: 2,
             geometry_init_steps: 0,
             pose_warmup: 0,
+            pose_ramp: 0,
             rays_per_sensor: 64,
             rays_per_camera: 16,
             rgb_weight: 0.0,

@@ -22,6 +22,7 @@ fn the_lidar_stage_runs_as_a_calibrator_on_the_real_drive_with_a_frozen_root() {
         rays_per_sensor: 256,
         iterations: 3,
         pose_warmup: 0,
+        pose_ramp: 0,
         geometry_init_steps: 0,
         frozen_sensor: Some(root.clone()),
         ..DepthCalibConfig::default()
@@ -78,6 +79,7 @@ fn cameras_join_the_stage_through_the_colour_term() {
         rays_per_camera: 64,
         iterations: 2,
         pose_warmup: 0,
+        pose_ramp: 0,
         geometry_init_steps: 0,
         ..DepthCalibConfig::default()
     };

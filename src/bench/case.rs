@@ -290,6 +290,7 @@ fn unical_stage(
         geometry_init_steps: if lidar { s.geometry_init_steps } else { 0 },
         geometry_init_rays: s.geometry_init_rays,
         pose_warmup: s.pose_warmup,
+        pose_ramp: s.pose_ramp,
         rays_per_sensor: if lidar { s.rays_per_sensor } else { 0 },
         rays_per_camera: s.rays_per_camera,
         lidar_pose_update: if s.newton_lidar_poses {
