@@ -113,7 +113,7 @@ fn main() {
     let rounds: usize = env("RIGCAL_ROUNDS", 1);
     // How soon the extrinsics first move (issue 5: within 5 s of the optimisation starting).
     let initial_extrinsics = stage.calibration().extrinsics();
-    let (mut optimisation_start, mut first_change) = (None::<std::time::Instant>, None::<f64>);
+    let (mut optimisation_start, mut moved) = (None::<std::time::Instant>, false);
     for it in 0..iterations * rounds.max(1) {
         if it > 0 && it % iterations == 0 {
             stage.calibration_mut().restart();
@@ -134,15 +134,13 @@ fn main() {
         }
         let started = *optimisation_start.get_or_insert_with(std::time::Instant::now);
         let r = stage.calibration_mut().step();
-        if first_change.is_none() {
-            if stage.calibration().extrinsics() != initial_extrinsics {
-                let secs = started.elapsed().as_secs_f64();
-                first_change = Some(secs);
-                println!(
-                    "first extrinsic change: iteration {}, {secs:.2} s into the optimisation",
-                    it + 1
-                );
-            }
+        if !moved && stage.calibration().extrinsics() != initial_extrinsics {
+            moved = true;
+            println!(
+                "first extrinsic change: iteration {}, {:.2} s into the optimisation",
+                it + 1,
+                started.elapsed().as_secs_f64()
+            );
         }
         colour += r.colour_loss;
         align += r.alignment_loss;
