@@ -76,7 +76,8 @@ pub struct DepthCalibConfig {
     /// After the warm-up the pose rates rise linearly from 0 to their value over this many
     /// iterations (Adam's first steps are full-size whatever the gradient's noise, so a pose
     /// released at its full rate jumps by about its rate per parameter before Adam has
-    /// measured how noisy its gradient is; BENCHMARKS.md). 0: the full rate at once.
+    /// measured how noisy its gradient is; BENCHMARKS.md). At most a quarter of the iterations
+    /// in which poses move, so that a short run still reaches its rate. 0: the full rate at once.
     pub pose_ramp: usize,
     pub iterations: usize,
     pub seed: u64,
@@ -161,11 +162,11 @@ impl Default for DepthCalibConfig {
             camera_pose_final_fraction: 0.01,
             geometry_init_steps: 150,
             geometry_init_rays: 8192,
-            // Poses wait for 50 rendering steps (released a few seconds into a run, after 25
-            // initialisation steps, the cameras move from 3.7 s but one of seed 2's runs off
-            // by 4°), then their rates ramp up: released at full rate, a camera on the real
-            // PandaSet drive jumped 4-6° off its reference even against a frozen scene
-            // (BENCHMARKS.md, "Pose rates that ramp up").
+            // Poses wait for 50 rendering steps, then their rates ramp up. Released at full
+            // rate, cameras on the real PandaSet drive jumped 4-6° off their reference even
+            // against a frozen scene; released after 25 initialisation steps (moving 3.7 s into
+            // a run), one of seed 2's cameras ran 4° off (BENCHMARKS.md, "Pose rates that ramp
+            // up").
             pose_warmup: 200,
             pose_ramp: 150,
             iterations: 2000,
@@ -253,11 +254,11 @@ impl DepthCalibConfig {
         let Some(since) = iteration.checked_sub(self.pose_warmup) else {
             return 0.0;
         };
-        let ramp = match self.pose_ramp {
+        let moving = self.iterations.saturating_sub(self.pose_warmup).max(1);
+        let ramp = match self.pose_ramp.min(moving / 4) {
             0 => 1.0,
             n => ((since + 1) as f32 / n as f32).min(1.0),
         };
-        let moving = self.iterations.saturating_sub(self.pose_warmup).max(1);
         ramp * decayed_lr(rate, final_fraction, since, moving)
     }
 
@@ -1441,15 +1442,14 @@ impl DepthCalibration {
         }
         let total = self.config.iterations;
         let lr_field = decayed_lr(self.config.lr_field, 0.1, self.iteration, total);
-        let pose_rate = |rate: f32, final_fraction: f32| {
-            self.config.pose_rate(rate, final_fraction, self.iteration)
-        };
         let ray_share = (self.config.rays_per_camera as f32 / CAMERA_RATE_RAYS as f32).min(1.0);
         let (lr_pose, lr_camera_pose) = (
-            pose_rate(self.config.lr_pose, 0.01),
-            pose_rate(
+            self.config
+                .pose_rate(self.config.lr_pose, 0.01, self.iteration),
+            self.config.pose_rate(
                 self.config.lr_camera_pose * ray_share,
                 self.config.camera_pose_final_fraction,
+                self.iteration,
             ),
         );
         let mut geo = self.field.geo.zero_grad();
@@ -1775,6 +1775,15 @@ mod tests {
             ..config.clone()
         };
         assert_eq!(at_once.pose_rate(1.0, 0.01, 10), 1.0);
+        // A run too short for the ramp ramps over a quarter of its moving iterations.
+        let short = DepthCalibConfig {
+            pose_ramp: 150,
+            iterations: 50,
+            ..config.clone()
+        };
+        let expected = 0.01f32.powf(9.0 / 40.0);
+        assert!((short.pose_rate(1.0, 0.01, 19) - expected).abs() < 1e-6);
+        assert!((short.pose_rate(1.0, 0.01, 14) - 0.5 * 0.01f32.powf(4.0 / 40.0)).abs() < 1e-6);
     }
 
     fn small_config() -> DepthCalibConfig {
