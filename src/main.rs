@@ -97,7 +97,8 @@ enum Command {
         #[arg(long)]
         coarse_to_fine: Option<String>,
         /// Perturb every sensor of the initial guess by this many degrees about a random axis
-        /// (drawn from --seed), to measure how far a method recovers
+        /// (drawn from --seed), to measure how far a method recovers; a sensor whose frame is
+        /// the vehicle frame (the trajectory's own, as PandaSet's Pandar64) is left alone
         #[arg(long, default_value_t = 0.0)]
         perturb_deg: f64,
         /// Perturb every sensor of the initial guess by this many centimetres along a random

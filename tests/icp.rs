@@ -156,8 +156,9 @@ fn the_cli_runs_icp_and_writes_the_native_file() {
 #[test]
 fn the_cli_perturbs_the_initial_guess_and_icp_recovers_the_pair() {
     // `--perturb-deg 1 --perturb-cm 10` moves every sensor of the start by exactly that (the
-    // cameras, which ICP leaves alone, show it in the written file); ICP brings the PandarGT
-    // back relative to the moved Pandar64.
+    // cameras, which ICP leaves alone, show it in the written file) but the Pandar64, whose
+    // frame is the vehicle frame (the trajectory is its own pose); ICP brings the PandarGT
+    // back relative to it.
     let dir = std::env::temp_dir().join(format!("rigcal-perturb-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let drive = Drive::open(&pandaset().join("pandaset-002.mcap")).unwrap();
@@ -197,6 +198,12 @@ fn the_cli_perturbs_the_initial_guess_and_icp_recovers_the_pair() {
         );
     }
     let root = truth.lidars().next().unwrap().name.clone();
+    assert_eq!(drive.rig.vehicle_frame, root);
+    assert_eq!(
+        got.sensor(&root).unwrap().vehicle_from_sensor,
+        drive.rig.sensor(&root).unwrap().vehicle_from_sensor,
+        "the vehicle frame's own sensor is not perturbed"
+    );
     let other = truth.lidars().nth(1).unwrap().name.clone();
     let errors = rig_errors(&truth.extrinsics(), &got.extrinsics(), &root).unwrap();
     let e = errors.iter().find(|e| e.sensor == other).unwrap();

@@ -87,9 +87,20 @@ pub struct SynthOutput {
 }
 
 /// Perturb every sensor by exactly `deg` about a random axis and `cm` along a random direction.
+///
+/// A sensor whose frame *is* the rig's vehicle frame is left alone: its extrinsic is the
+/// identity by definition (PandaSet's trajectory is the Pandar64's own pose), so moving it
+/// would not make a worse initial guess but a log whose trajectory and extrinsics disagree, by
+/// up to the perturbation's angle times the drive's length between sweeps (BENCHMARKS.md, "Real
+/// PandaSet end to end"). The other sensors' perturbations do not depend on whether it is
+/// skipped.
 pub fn perturb_rig(rig: &Rig, deg: f64, cm: f64, seed: u64) -> Rig {
     let mut out = rig.clone();
+    let vehicle_frame = out.vehicle_frame.clone();
     for (k, s) in out.sensors.iter_mut().enumerate() {
+        if !vehicle_frame.is_empty() && s.frame_id == vehicle_frame {
+            continue;
+        }
         let u =
             |j: u64| super::noise::hash3(k as i32, j as i32, 0, seed ^ 0x7E57) as f64 * 2.0 - 1.0;
         let axis = DVec3::new(u(0), u(1), u(2))
@@ -312,4 +323,47 @@ pub fn encode_jpeg(img: &image::RgbImage, quality: u8) -> Result<Vec<u8>, SimErr
         .encode(img.as_raw(), w, h, jpeg_encoder::ColorType::Rgb)
         .map_err(|e| SimError::Image(e.to_string()))?;
     Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::calib::{Sensor, SensorKind};
+
+    fn sensor(name: &str, at: Rigid) -> Sensor {
+        Sensor {
+            name: name.into(),
+            kind: SensorKind::Lidar,
+            frame_id: name.into(),
+            topics: Vec::new(),
+            vehicle_from_sensor: at,
+            camera: None,
+        }
+    }
+
+    #[test]
+    fn perturbation_is_exact_and_skips_the_vehicle_frames_own_sensor() {
+        let offset = Rigid::new(
+            so3::exp(DVec3::new(0.1, -0.2, 0.3)),
+            DVec3::new(1.0, 0.5, 2.0),
+        );
+        let mut rig = Rig {
+            vehicle_frame: "base_link".into(),
+            sensors: vec![
+                sensor("lidar_top", Rigid::IDENTITY),
+                sensor("lidar_front", offset),
+            ],
+        };
+        let moved = perturb_rig(&rig, 2.0, 20.0, 7);
+        for (a, b) in rig.sensors.iter().zip(&moved.sensors) {
+            let (rot, trans) = a.vehicle_from_sensor.difference(b.vehicle_from_sensor);
+            assert!((rot.to_degrees() - 2.0).abs() < 1e-9, "{rot}");
+            assert!((trans - 0.2).abs() < 1e-12, "{trans}");
+        }
+        // The trajectory is the top LiDAR's own pose: it stays, the other moves as before.
+        rig.vehicle_frame = "lidar_top".into();
+        let kept = perturb_rig(&rig, 2.0, 20.0, 7);
+        assert_eq!(kept.sensors[0], rig.sensors[0]);
+        assert_eq!(kept.sensors[1], moved.sensors[1]);
+    }
 }
