@@ -14,7 +14,7 @@
 //! ITERATIONS, each with a fresh scene at the cameras the last one reached; as `calibrate
 //! --rounds`), `RIGCAL_SILHOUETTE` (share of
 //! heat-map draws around LiDAR silhouettes), `RIGCAL_UNIFORM` (share of uniform draws once the
-//! heat maps are on), `RIGCAL_C2F=LEVELS,FRACTION` (coarse-to-fine hash grid), `RIGCAL_VECTORS` (print every
+//! heat maps are on), `RIGCAL_C2F=LEVELS,FRACTION|off` (coarse-to-fine hash grid; the preset's by default), `RIGCAL_VECTORS` (print every
 //! camera's error vector and their mean). Frozen-scene probe: with `RIGCAL_PROBE=N` the cameras
 //! start at the truth and the scene learns for N iterations (poses fixed), then the cameras
 //! jump to their start and only their poses move (the scene frozen unless `RIGCAL_JOINT` is
@@ -79,14 +79,16 @@ fn main() {
         camera_translation_rate: env("RIGCAL_TRANSLATION_RATE", defaults.camera_translation_rate),
         camera_pose_final_fraction: env("RIGCAL_CAMERA_DECAY", defaults.camera_pose_final_fraction),
         silhouette_share: env("RIGCAL_SILHOUETTE", defaults.silhouette_share),
-        // `LEVELS,FRACTION` as `calibrate --coarse-to-fine`.
-        coarse_to_fine: std::env::var("RIGCAL_C2F").ok().and_then(|v| {
-            let (a, b) = v.split_once(',')?;
-            Some(rigcal::unical::depth_calib::CoarseToFine {
-                start_levels: a.trim().parse().ok()?,
-                end_fraction: b.trim().parse().ok()?,
-            })
-        }),
+        // `LEVELS,FRACTION` or `off`, as `calibrate --coarse-to-fine`.
+        coarse_to_fine: match std::env::var("RIGCAL_C2F") {
+            Ok(v) => v.split_once(',').and_then(|(a, b)| {
+                Some(rigcal::unical::depth_calib::CoarseToFine {
+                    start_levels: a.trim().parse().ok()?,
+                    end_fraction: b.trim().parse().ok()?,
+                })
+            }),
+            Err(_) => defaults.coarse_to_fine,
+        },
         heatmap_uniform_share: env("RIGCAL_UNIFORM", defaults.heatmap_uniform_share),
         correspondence_cache: Some(std::env::temp_dir().join("rigcal-probe-matches")),
         ..defaults

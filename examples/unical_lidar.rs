@@ -67,13 +67,16 @@ fn main() {
             .ok()
             .and_then(|v| v.parse().ok())
             .unwrap_or(defaults.registration_steps),
-        coarse_to_fine: std::env::var("RIGCAL_C2F").ok().and_then(|v| {
-            let (a, b) = v.split_once(',')?;
-            Some(rigcal::unical::depth_calib::CoarseToFine {
-                start_levels: a.parse().ok()?,
-                end_fraction: b.parse().ok()?,
-            })
-        }),
+        // `LEVELS,FRACTION` or `off`; unset: the preset's.
+        coarse_to_fine: match std::env::var("RIGCAL_C2F") {
+            Ok(v) => v.split_once(',').and_then(|(a, b)| {
+                Some(rigcal::unical::depth_calib::CoarseToFine {
+                    start_levels: a.parse().ok()?,
+                    end_fraction: b.parse().ok()?,
+                })
+            }),
+            Err(_) => defaults.coarse_to_fine,
+        },
         lidar_pose_update: if std::env::var("RIGCAL_NEWTON").is_ok() {
             rigcal::unical::pose_newton::PoseUpdate::Newton(Default::default())
         } else {

@@ -93,7 +93,8 @@ enum Command {
         #[arg(long, default_value_t = 1)]
         rounds: usize,
         /// unical: coarse-to-fine hash grid, LEVELS,FRACTION: the scene starts with LEVELS open
-        /// levels and opens the rest evenly until FRACTION of the run (BARF)
+        /// levels and opens the rest evenly until FRACTION of the run (BARF); default 4,0.6 (the
+        /// CPU preset), `off` opens every level from the start
         #[arg(long)]
         coarse_to_fine: Option<String>,
         /// Perturb every sensor of the initial guess by this many degrees about a random axis

@@ -63,7 +63,8 @@ pub struct CalibrateArgs {
     /// unical: rounds of `iterations` each, every one with a fresh scene formed at the
     /// extrinsics the previous round reached (1: one run).
     pub rounds: usize,
-    /// unical: `LEVELS,FRACTION` of a coarse-to-fine hash grid.
+    /// unical: `LEVELS,FRACTION` of a coarse-to-fine hash grid, or `off` (`None`: the CPU
+    /// preset's).
     pub coarse_to_fine: Option<String>,
     /// Degrees and centimetres every sensor of the initial guess is moved by (random axis and
     /// direction drawn from `seed`; (0, 0) leaves it), to measure recovery from a known start.
@@ -224,19 +225,23 @@ fn selected_cameras(args: &CalibrateArgs, rig: &Rig) -> Vec<String> {
 }
 
 /// Parse `--coarse-to-fine LEVELS,FRACTION` (levels open at the start ≥ 1, the fraction of the
-/// run by which all are open in (0, 1]).
-fn parse_coarse_to_fine(s: &str) -> Result<CoarseToFine, String> {
-    let bad = || format!("--coarse-to-fine: expected LEVELS,FRACTION (e.g. 4,0.6), got '{s}'");
+/// run by which all are open in (0, 1]) or `off` (every level from the start).
+fn parse_coarse_to_fine(s: &str) -> Result<Option<CoarseToFine>, String> {
+    if s.trim() == "off" {
+        return Ok(None);
+    }
+    let bad =
+        || format!("--coarse-to-fine: expected LEVELS,FRACTION (e.g. 4,0.6) or off, got '{s}'");
     let (a, b) = s.split_once(',').ok_or_else(bad)?;
     let start_levels: f32 = a.trim().parse().map_err(|_| bad())?;
     let end_fraction: f32 = b.trim().parse().map_err(|_| bad())?;
     if !(start_levels >= 1.0 && end_fraction > 0.0 && end_fraction <= 1.0) {
         return Err(bad());
     }
-    Ok(CoarseToFine {
+    Ok(Some(CoarseToFine {
         start_levels,
         end_fraction,
-    })
+    }))
 }
 
 /// Parse `START..END` (seconds from `t0`) into nanoseconds.
@@ -324,11 +329,10 @@ pub fn calibrate(
                 held_sensors: held_sensors(args, &rig),
                 rays_per_camera: args.camera_rays.max(1),
                 lr_camera_pose,
-                coarse_to_fine: args
-                    .coarse_to_fine
-                    .as_deref()
-                    .map(parse_coarse_to_fine)
-                    .transpose()?,
+                coarse_to_fine: match args.coarse_to_fine.as_deref() {
+                    Some(s) => parse_coarse_to_fine(s)?,
+                    None => DepthCalibConfig::default().coarse_to_fine,
+                },
                 alignment: args.alignment,
                 correspondence_cache: Some(crate::session::state_dir().join("matches")),
                 ..DepthCalibConfig::default()
@@ -520,11 +524,12 @@ mod tests {
     fn coarse_to_fine_parses_levels_and_fraction() {
         assert_eq!(
             parse_coarse_to_fine("4,0.6"),
-            Ok(CoarseToFine {
+            Ok(Some(CoarseToFine {
                 start_levels: 4.0,
                 end_fraction: 0.6
-            })
+            }))
         );
+        assert_eq!(parse_coarse_to_fine("off"), Ok(None));
         for bad in ["4", "0,0.5", "4,0", "4,1.5", "a,0.5"] {
             assert!(parse_coarse_to_fine(bad).is_err(), "{bad}");
         }

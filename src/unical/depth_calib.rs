@@ -178,7 +178,14 @@ impl Default for DepthCalibConfig {
             regulariser_weight: 0.01,
             lidar_pose_update: PoseUpdate::Adam,
             registration_steps: 0,
-            coarse_to_fine: None,
+            // Four of the hash grid's levels open at the start, all by 60 % of the run (BARF):
+            // the same accuracy on the simulator's drives as every level from the start, and
+            // the early steps are cheaper, so a run takes a fifth less time and its cameras
+            // first move twice as soon (BENCHMARKS.md, "Issue 5 end to end").
+            coarse_to_fine: Some(CoarseToFine {
+                start_levels: 4.0,
+                end_fraction: 0.6,
+            }),
             camera_far_m: 120.0,
             background: Some(BackgroundConfig::default()),
             frozen_sensor: None,
@@ -239,8 +246,9 @@ impl DepthCalibConfig {
             pose_warmup: 0,
             pose_ramp: 0,
             iterations: 30_000,
-            // The paper draws its heat maps around keypoints only.
+            // The paper draws its heat maps around keypoints only, and opens every level.
             silhouette_share: 0.0,
+            coarse_to_fine: None,
             ..Self::default()
         }
     }
