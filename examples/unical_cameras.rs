@@ -80,15 +80,11 @@ fn main() {
         camera_pose_final_fraction: env("RIGCAL_CAMERA_DECAY", defaults.camera_pose_final_fraction),
         silhouette_share: env("RIGCAL_SILHOUETTE", defaults.silhouette_share),
         // `LEVELS,FRACTION` or `off`, as `calibrate --coarse-to-fine`.
-        coarse_to_fine: match std::env::var("RIGCAL_C2F") {
-            Ok(v) => v.split_once(',').and_then(|(a, b)| {
-                Some(rigcal::unical::depth_calib::CoarseToFine {
-                    start_levels: a.trim().parse().ok()?,
-                    end_fraction: b.trim().parse().ok()?,
-                })
-            }),
-            Err(_) => defaults.coarse_to_fine,
-        },
+        coarse_to_fine: std::env::var("RIGCAL_C2F")
+            .map_or(Ok(defaults.coarse_to_fine), |v| {
+                rigcal::unical::depth_calib::CoarseToFine::parse_setting(&v)
+            })
+            .expect("RIGCAL_C2F"),
         heatmap_uniform_share: env("RIGCAL_UNIFORM", defaults.heatmap_uniform_share),
         correspondence_cache: Some(std::env::temp_dir().join("rigcal-probe-matches")),
         ..defaults

@@ -3,7 +3,7 @@
 //! extrinsics from depth, print the error against the ground truth as it goes.
 //! `cargo run --release --example unical_lidar -- [ITERATIONS] [SECONDS] [PERTURBATION_SCALE] [BETA_INIT] [REGULARISER_WEIGHT]`
 //! Environment: `RIGCAL_ROOT` (first LiDAR frozen at the truth), `RIGCAL_NEWTON` (preconditioned
-//! pose steps), `RIGCAL_REGISTRATION=N`, `RIGCAL_C2F=LEVELS,FRACTION`, `RIGCAL_LR_POSE=RATE`,
+//! pose steps), `RIGCAL_REGISTRATION=N`, `RIGCAL_C2F=LEVELS,FRACTION|off`, `RIGCAL_LR_POSE=RATE`,
 //! `RIGCAL_OPACITY=interval|per-sample`.
 
 mod common;
@@ -68,15 +68,11 @@ fn main() {
             .and_then(|v| v.parse().ok())
             .unwrap_or(defaults.registration_steps),
         // `LEVELS,FRACTION` or `off`; unset: the preset's.
-        coarse_to_fine: match std::env::var("RIGCAL_C2F") {
-            Ok(v) => v.split_once(',').and_then(|(a, b)| {
-                Some(rigcal::unical::depth_calib::CoarseToFine {
-                    start_levels: a.parse().ok()?,
-                    end_fraction: b.parse().ok()?,
-                })
-            }),
-            Err(_) => defaults.coarse_to_fine,
-        },
+        coarse_to_fine: std::env::var("RIGCAL_C2F")
+            .map_or(Ok(defaults.coarse_to_fine), |v| {
+                rigcal::unical::depth_calib::CoarseToFine::parse_setting(&v)
+            })
+            .expect("RIGCAL_C2F"),
         lidar_pose_update: if std::env::var("RIGCAL_NEWTON").is_ok() {
             rigcal::unical::pose_newton::PoseUpdate::Newton(Default::default())
         } else {

@@ -224,24 +224,9 @@ fn selected_cameras(args: &CalibrateArgs, rig: &Rig) -> Vec<String> {
         .collect()
 }
 
-/// Parse `--coarse-to-fine LEVELS,FRACTION` (levels open at the start ≥ 1, the fraction of the
-/// run by which all are open in (0, 1]) or `off` (every level from the start).
+/// Parse `--coarse-to-fine LEVELS,FRACTION` or `off` ([`CoarseToFine::parse_setting`]).
 fn parse_coarse_to_fine(s: &str) -> Result<Option<CoarseToFine>, String> {
-    if s.trim() == "off" {
-        return Ok(None);
-    }
-    let bad =
-        || format!("--coarse-to-fine: expected LEVELS,FRACTION (e.g. 4,0.6) or off, got '{s}'");
-    let (a, b) = s.split_once(',').ok_or_else(bad)?;
-    let start_levels: f32 = a.trim().parse().map_err(|_| bad())?;
-    let end_fraction: f32 = b.trim().parse().map_err(|_| bad())?;
-    if !(start_levels >= 1.0 && end_fraction > 0.0 && end_fraction <= 1.0) {
-        return Err(bad());
-    }
-    Ok(Some(CoarseToFine {
-        start_levels,
-        end_fraction,
-    }))
+    CoarseToFine::parse_setting(s).map_err(|e| format!("--coarse-to-fine: {e}"))
 }
 
 /// Parse `START..END` (seconds from `t0`) into nanoseconds.

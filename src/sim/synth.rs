@@ -96,9 +96,8 @@ pub struct SynthOutput {
 /// skipped.
 pub fn perturb_rig(rig: &Rig, deg: f64, cm: f64, seed: u64) -> Rig {
     let mut out = rig.clone();
-    let vehicle_frame = out.vehicle_frame.clone();
     for (k, s) in out.sensors.iter_mut().enumerate() {
-        if !vehicle_frame.is_empty() && s.frame_id == vehicle_frame {
+        if !rig.vehicle_frame.is_empty() && s.frame_id == rig.vehicle_frame {
             continue;
         }
         let u =

@@ -218,6 +218,27 @@ pub struct CoarseToFine {
     pub end_fraction: f32,
 }
 
+impl CoarseToFine {
+    /// `LEVELS,FRACTION` (levels open at the start ≥ 1, the fraction of the run by which all
+    /// are open in (0, 1]) or `off` (`None`: every level from the start).
+    pub fn parse_setting(text: &str) -> Result<Option<Self>, String> {
+        if text.trim() == "off" {
+            return Ok(None);
+        }
+        let bad = || format!("expected LEVELS,FRACTION (e.g. 4,0.6) or off, got '{text}'");
+        let (a, b) = text.split_once(',').ok_or_else(bad)?;
+        let start_levels: f32 = a.trim().parse().map_err(|_| bad())?;
+        let end_fraction: f32 = b.trim().parse().map_err(|_| bad())?;
+        if !(start_levels >= 1.0 && end_fraction > 0.0 && end_fraction <= 1.0) {
+            return Err(bad());
+        }
+        Ok(Some(Self {
+            start_levels,
+            end_fraction,
+        }))
+    }
+}
+
 impl DepthCalibConfig {
     /// The paper's values (method.md §2, §7, §12; supplementary A2): hash table 2^21 per level,
     /// 16 levels from 16 to 4096, 2^19 samples per step (≈ 5000 rays at 10 cm steps, split
