@@ -10,7 +10,8 @@
 //! `RIGCAL_INIT_STEPS` (geometry initialisation steps), `RIGCAL_SCALE` (image scale, 0.125),
 //! `RIGCAL_RGB_WEIGHT`, `RIGCAL_INTENSITY_WEIGHT`, `RIGCAL_VIEW=false` (view-independent
 //! surface colour), `RIGCAL_TRANSLATION_RATE` (camera translation rate over the rotation's),
-//! `RIGCAL_CAMERA_DECAY` (the camera pose rate's final fraction), `RIGCAL_ROUNDS` (rounds of
+//! `RIGCAL_CAMERA_DECAY` (the camera pose rate's final fraction), `RIGCAL_OPACITY=interval|per-sample`
+//! (the opacity model), `RIGCAL_BETA` (β's initial value), `RIGCAL_ROUNDS` (rounds of
 //! ITERATIONS, each with a fresh scene at the cameras the last one reached; as `calibrate
 //! --rounds`), `RIGCAL_SILHOUETTE` (share of
 //! heat-map draws around LiDAR silhouettes), `RIGCAL_UNIFORM` (share of uniform draws once the
@@ -21,6 +22,9 @@
 //! set).
 
 use std::path::PathBuf;
+
+#[allow(dead_code)] // only the opacity setting is read here
+mod common;
 
 use rigcal::calib::file::CalibrationFile;
 use rigcal::log::Drive;
@@ -86,6 +90,8 @@ fn main() {
             })
             .expect("RIGCAL_C2F"),
         heatmap_uniform_share: env("RIGCAL_UNIFORM", defaults.heatmap_uniform_share),
+        opacity: common::opacity_from_env(defaults.opacity),
+        beta_init: env("RIGCAL_BETA", defaults.beta_init),
         correspondence_cache: Some(std::env::temp_dir().join("rigcal-probe-matches")),
         ..defaults
     };
@@ -169,7 +175,7 @@ fn main() {
                 })
                 .collect();
             println!(
-                "{:5} {:6.1}s cameras {:.3}° {:.2} cm | colour {:.5} align {:.2} kept {:.1} | {}",
+                "{:5} {:6.1}s cameras {:.3}° {:.2} cm | colour {:.5} align {:.2} kept {:.1} β {:.0} | {}",
                 it + 1,
                 t0.elapsed().as_secs_f64(),
                 rot / k,
@@ -177,6 +183,7 @@ fn main() {
                 colour / n as f64,
                 align / n as f64,
                 kept as f64 / n as f64,
+                stage.calibration().beta(),
                 each.join(" ")
             );
             (colour, align, kept, n) = (0.0, 0.0, 0, 0);
