@@ -6,7 +6,9 @@
 //! `cargo run --release --example unical_cameras -- LOG GROUND_TRUTH [ITERATIONS]`
 //! Environment: `RIGCAL_LR_CAMERA` (camera pose rate), `RIGCAL_FRAMES` (images per camera, 8),
 //! `RIGCAL_ALIGN=none|ray-distance|surface`, `RIGCAL_ALIGN_WEIGHT`, `RIGCAL_ALIGN_MAX_PX`,
-//! `RIGCAL_WARMUP` (pose warm-up iterations), `RIGCAL_RAMP` (the pose rates' linear ramp after it),
+//! `RIGCAL_WARMUP` (pose warm-up iterations), `RIGCAL_ALIGN_RELEASE` (the iteration from which
+//! cameras follow the correspondence term alone, before the warm-up ends),
+//! `RIGCAL_ALIGN_RELEASE_RATE` (their rate until then, as a fraction of the camera rate), `RIGCAL_RAMP` (the pose rates' linear ramp after it),
 //! `RIGCAL_INIT_STEPS` (geometry initialisation steps), `RIGCAL_SCALE` (image scale, 0.125),
 //! `RIGCAL_RGB_WEIGHT`, `RIGCAL_INTENSITY_WEIGHT`, `RIGCAL_VIEW=false` (view-independent
 //! surface colour), `RIGCAL_TRANSLATION_RATE` (camera translation rate over the rotation's),
@@ -73,6 +75,11 @@ fn main() {
             env("RIGCAL_WARMUP", defaults.pose_warmup)
         },
         pose_ramp: env("RIGCAL_RAMP", defaults.pose_ramp),
+        alignment_release: std::env::var("RIGCAL_ALIGN_RELEASE")
+            .ok()
+            .and_then(|v| v.parse().ok())
+            .or(defaults.alignment_release),
+        alignment_release_rate: env("RIGCAL_ALIGN_RELEASE_RATE", defaults.alignment_release_rate),
         geometry_init_steps: env("RIGCAL_INIT_STEPS", defaults.geometry_init_steps),
         alignment: env("RIGCAL_ALIGN", defaults.alignment),
         alignment_weight: env("RIGCAL_ALIGN_WEIGHT", defaults.alignment_weight),

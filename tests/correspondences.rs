@@ -234,3 +234,61 @@ fn the_alignment_term_alone_moves_the_cameras() {
     let (off, _) = moved(AlignmentLoss::None);
     assert_eq!(off, 0, "nothing else moves the cameras");
 }
+
+/// With an alignment release the cameras move during the geometry initialisation, on the
+/// correspondence term alone, while the LiDARs wait for the warm-up; without one nothing moves
+/// before it.
+#[test]
+fn an_alignment_release_moves_only_the_cameras_during_the_geometry_initialisation() {
+    let drive = Drive::open(&pandaset().join("pandaset-002.mcap")).unwrap();
+    let rig = reference_rig(&drive);
+    let moved = |alignment_release| {
+        let config = DepthCalibConfig {
+            iterations: 40,
+            geometry_init_steps: 3,
+            geometry_init_rays: 512,
+            pose_warmup: 10,
+            pose_ramp: 0,
+            alignment_release,
+            rays_per_sensor: 64,
+            rays_per_camera: 16,
+            alignment_settings: AlignSettings {
+                max_error_px: f64::INFINITY,
+                min_accumulation: 0.0,
+            },
+            ..DepthCalibConfig::default()
+        };
+        let mut s = stage(&drive, &rig, config);
+        let mut alignment = 0.0;
+        for _ in 0..3 {
+            let losses = s.step().losses;
+            assert!(
+                losses.iter().any(|(n, _)| n.contains("init")),
+                "still initialising: {losses:?}"
+            );
+            alignment += losses
+                .iter()
+                .find(|(n, _)| n == "alignment px")
+                .map_or(0.0, |l| l.1);
+        }
+        let now = s.current();
+        let count = |lidar: bool| {
+            rig.sensors
+                .iter()
+                .filter(|c| (c.kind == rigcal::calib::SensorKind::Lidar) == lidar)
+                .filter(|c| {
+                    let (r, t) = c
+                        .vehicle_from_sensor
+                        .difference(now.sensor(&c.name).unwrap().vehicle_from_sensor);
+                    r + t > 1e-9
+                })
+                .count()
+        };
+        (count(false), count(true), alignment)
+    };
+    let (cameras, lidars, alignment) = moved(Some(1));
+    assert!(cameras >= 2, "{cameras} cameras moved");
+    assert_eq!(lidars, 0);
+    assert!(alignment > 0.0);
+    assert_eq!(moved(None), (0, 0, 0.0));
+}

@@ -210,10 +210,12 @@ impl Calibrator for UnicalLidarStage {
         let done =
             self.calib.iteration >= self.calib.config.iterations && self.round + 1 >= self.rounds;
         if let Some(loss) = r.geometry_init_loss {
-            return StepReport {
-                losses: vec![("geometry init loss".into(), loss)],
-                done,
-            };
+            let mut losses = vec![("geometry init loss".into(), loss)];
+            // Cameras released early follow the correspondence term during the initialisation.
+            if r.alignment_matches > 0 {
+                losses.push(("alignment px".into(), r.alignment_loss));
+            }
+            return StepReport { losses, done };
         }
         let mut losses = vec![
             ("depth loss".into(), r.loss),

@@ -79,6 +79,18 @@ pub struct DepthCalibConfig {
     /// measured how noisy its gradient is; BENCHMARKS.md). At most a quarter of the iterations
     /// in which poses move, so that a short run still reaches its rate. 0: the full rate at once.
     pub pose_ramp: usize,
+    /// Cameras may start to move before `pose_warmup`, at this iteration, following the
+    /// correspondence term alone (§9: a matched ray's rendered surface point needs the
+    /// geometry the LiDARs fitted, not a painted colour field, which a camera released early
+    /// would wander in), their rate ramping up over `pose_ramp`. At `pose_warmup` the colour
+    /// term joins and the cameras' schedule starts again as without this (Adam's state reset:
+    /// the colour gradient is far larger than the correspondence term's, and Adam's memory of
+    /// the small one would turn it into steps many times the rate). `None`: cameras wait for
+    /// `pose_warmup`.
+    pub alignment_release: Option<usize>,
+    /// The cameras' rate before the warm-up's end, as a fraction of their rate (after an
+    /// [`Self::alignment_release`]).
+    pub alignment_release_rate: f32,
     pub iterations: usize,
     pub seed: u64,
     /// Camera rays per camera and step (the budget is split evenly across sensors, §7).
@@ -169,6 +181,8 @@ impl Default for DepthCalibConfig {
             // up").
             pose_warmup: 200,
             pose_ramp: 150,
+            alignment_release: None,
+            alignment_release_rate: 1.0,
             iterations: 2000,
             seed: 1,
             rays_per_camera: 512,
@@ -289,6 +303,29 @@ impl DepthCalibConfig {
             n => ((since + 1) as f32 / n as f32).min(1.0),
         };
         ramp * decayed_lr(rate, final_fraction, since, moving)
+    }
+
+    /// A camera's pose rate: from [`Self::camera_release`] to the warm-up's end ramped up as
+    /// after the warm-up, then [`Self::pose_rate`].
+    pub fn camera_pose_rate(&self, rate: f32, final_fraction: f32, iteration: usize) -> f32 {
+        let release = self.camera_release();
+        if iteration >= self.pose_warmup {
+            return self.pose_rate(rate, final_fraction, iteration);
+        }
+        match (iteration.checked_sub(release), self.pose_ramp) {
+            (None, _) => 0.0,
+            (Some(_), 0) => rate * self.alignment_release_rate,
+            (Some(since), n) => {
+                rate * self.alignment_release_rate * ((since + 1) as f32 / n as f32).min(1.0)
+            }
+        }
+    }
+
+    /// The iteration from which camera poses move: [`Self::alignment_release`] if it comes
+    /// before the warm-up's end, else `pose_warmup`.
+    pub fn camera_release(&self) -> usize {
+        self.alignment_release
+            .map_or(self.pose_warmup, |r| r.min(self.pose_warmup))
     }
 
     fn lidar_weights(&self) -> LidarWeights {
@@ -811,6 +848,16 @@ impl DepthCalibration {
     }
 
     /// Whether `name`'s extrinsic stays fixed: the root or a held sensor.
+    /// Per camera, whether its extrinsic stays fixed.
+    fn frozen_cameras(&self) -> Vec<bool> {
+        self.camera.as_ref().map_or_else(Vec::new, |c| {
+            c.cameras
+                .iter()
+                .map(|cam| self.is_frozen(&cam.name))
+                .collect()
+        })
+    }
+
     fn is_frozen(&self, name: &str) -> bool {
         self.config.frozen_sensor.as_deref() == Some(name)
             || self.config.held_sensors.iter().any(|h| h == name)
@@ -1295,6 +1342,7 @@ impl DepthCalibration {
     /// One iteration of the geometry initialisation: the SDF fitted to LiDAR returns under the
     /// current (initial) extrinsics, in parallel chunks, Adam on the grid and geometry MLP.
     fn geometry_init_step(&mut self) -> DepthReport {
+        let (alignment_loss, alignment_matches) = self.alignment_pose_step();
         let lidars = self.lidars.len().max(1);
         let per_sensor = self.config.geometry_init_rays.div_ceil(lidars);
         let mut rays = Vec::with_capacity(per_sensor * lidars);
@@ -1367,9 +1415,44 @@ impl DepthCalibration {
             intensity_loss: 0.0,
             regulariser_loss: 0.0,
             geometry_init_loss: Some(loss),
-            alignment_loss: 0.0,
-            alignment_matches: 0,
+            alignment_loss,
+            alignment_matches,
         }
+    }
+
+    /// During the geometry initialisation, from [`DepthCalibConfig::alignment_release`]: the
+    /// cameras step on the correspondence term alone, rendered through the SDF as it is being
+    /// fitted (whose parameters take no gradient from it). Returns the term and its kept
+    /// matches.
+    fn alignment_pose_step(&mut self) -> (f64, usize) {
+        if self.iteration < self.config.camera_release() || self.camera.is_none() {
+            return (0.0, 0);
+        }
+        let ray_share = (self.config.rays_per_camera as f32 / CAMERA_RATE_RAYS as f32).min(1.0);
+        let lr = self.config.camera_pose_rate(
+            self.config.lr_camera_pose * ray_share,
+            self.config.camera_pose_final_fraction,
+            self.iteration,
+        );
+        let align = self.alignment_gradients();
+        // Its hash-grid gradients went to the accumulators: the SDF fit must not see them.
+        drop(GradAccumulator::drain_all(&mut self.grid_accs));
+        let frozen = self.frozen_cameras();
+        let translation_rate = self.config.camera_translation_rate as f64;
+        if let Some(stage) = self.camera.as_mut() {
+            for (k, grad) in align.pose.iter().enumerate() {
+                if !frozen.get(k).copied().unwrap_or(true) {
+                    pose_step(
+                        &mut stage.pose_opt[k],
+                        &mut stage.poses[k],
+                        grad,
+                        lr,
+                        translation_rate,
+                    );
+                }
+            }
+        }
+        (align.loss, align.kept)
     }
 
     /// Diagnostics: `(true range, rendered − true range, elevation of the ray in the world,
@@ -1475,12 +1558,23 @@ impl DepthCalibration {
         let (lr_pose, lr_camera_pose) = (
             self.config
                 .pose_rate(self.config.lr_pose, 0.01, self.iteration),
-            self.config.pose_rate(
+            self.config.camera_pose_rate(
                 self.config.lr_camera_pose * ray_share,
                 self.config.camera_pose_final_fraction,
                 self.iteration,
             ),
         );
+        // Before the warm-up's end only the correspondence term moves cameras; at its end their
+        // schedule starts again (DepthCalibConfig::alignment_release).
+        let colour_moves_poses = self.iteration >= self.config.pose_warmup;
+        if self.iteration == self.config.pose_warmup
+            && self.config.camera_release() < self.config.pose_warmup
+            && let Some(stage) = self.camera.as_mut()
+        {
+            for opt in &mut stage.pose_opt {
+                *opt = DenseAdam::new(9, AdamConfig::STANDARD);
+            }
+        }
         let mut geo = self.field.geo.zero_grad();
         let mut beta_grad = 0.0;
         let (mut loss, mut mae, mut colour_loss) = (0.0, 0.0, 0.0);
@@ -1577,12 +1671,7 @@ impl DepthCalibration {
             mlp_set(&mut self.decoder.mlp, &self.decoder_params);
         }
         let cameras = self.camera.as_ref().map_or(0, |c| c.cameras.len());
-        let frozen: Vec<bool> = self.camera.as_ref().map_or_else(Vec::new, |c| {
-            c.cameras
-                .iter()
-                .map(|cam| self.is_frozen(&cam.name))
-                .collect()
-        });
+        let frozen = self.frozen_cameras();
         let align = self.alignment_gradients();
         add_scaled(&mut geo, &align.geo, 1.0);
         beta_grad += align.beta_grad;
@@ -1649,8 +1738,10 @@ impl DepthCalibration {
                     add_scaled(&mut colour, &part.colour, w as f32);
                     add_scaled(&mut sky, &part.sky, w as f32);
                     add_scaled(&mut background_mlp, &part.background_mlp, w as f32);
-                    let g = pose_grad_flat(&part.pose, w);
-                    pose_grad.iter_mut().zip(g).for_each(|(a, b)| *a += b);
+                    if colour_moves_poses {
+                        let g = pose_grad_flat(&part.pose, w);
+                        pose_grad.iter_mut().zip(g).for_each(|(a, b)| *a += b);
+                    }
                     for (a, b) in exposure_grad.iter_mut().zip(part.exposure) {
                         *a += (b * w) as f32;
                     }
@@ -1813,6 +1904,44 @@ mod tests {
         let expected = 0.01f32.powf(9.0 / 40.0);
         assert!((short.pose_rate(1.0, 0.01, 19) - expected).abs() < 1e-6);
         assert!((short.pose_rate(1.0, 0.01, 14) - 0.5 * 0.01f32.powf(4.0 / 40.0)).abs() < 1e-6);
+    }
+
+    /// Cameras released early by the correspondence term ramp up from their release and start
+    /// the usual schedule again at the warm-up's end; LiDARs still wait for it; a release after
+    /// the warm-up changes nothing.
+    #[test]
+    fn an_alignment_release_starts_only_the_cameras_early() {
+        let config = DepthCalibConfig {
+            pose_warmup: 10,
+            pose_ramp: 4,
+            iterations: 110,
+            alignment_release: Some(4),
+            ..DepthCalibConfig::default()
+        };
+        assert_eq!(config.camera_release(), 4);
+        assert_eq!(config.camera_pose_rate(1.0, 0.01, 3), 0.0);
+        let first = 0.25;
+        assert!((config.camera_pose_rate(1.0, 0.01, 4) - first).abs() < 1e-6);
+        assert_eq!(config.camera_pose_rate(1.0, 0.01, 7), 1.0, "ramped up by 7");
+        assert_eq!(config.pose_rate(1.0, 0.01, 9), 0.0, "LiDARs wait");
+        // From the warm-up's end the cameras' schedule is the LiDARs' (ramped again).
+        for it in [10, 11, 30, 109] {
+            assert_eq!(
+                config.camera_pose_rate(1.0, 0.01, it),
+                config.pose_rate(1.0, 0.01, it)
+            );
+        }
+        let late = DepthCalibConfig {
+            alignment_release: Some(50),
+            ..config.clone()
+        };
+        assert_eq!(late.camera_release(), 10);
+        for it in [0, 9, 10, 30, 109] {
+            assert_eq!(
+                late.camera_pose_rate(1.0, 0.01, it),
+                late.pose_rate(1.0, 0.01, it)
+            );
+        }
     }
 
     fn small_config() -> DepthCalibConfig {
