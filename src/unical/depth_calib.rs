@@ -853,7 +853,6 @@ impl DepthCalibration {
             || self.config.lidar_pose_update == PoseUpdate::Adam
     }
 
-    /// Whether `name`'s extrinsic stays fixed: the root or a held sensor.
     /// Per camera, whether its extrinsic stays fixed.
     fn frozen_cameras(&self) -> Vec<bool> {
         self.camera.as_ref().map_or_else(Vec::new, |c| {
@@ -864,6 +863,7 @@ impl DepthCalibration {
         })
     }
 
+    /// Whether `name`'s extrinsic stays fixed: the root or a held sensor.
     fn is_frozen(&self, name: &str) -> bool {
         self.config.frozen_sensor.as_deref() == Some(name)
             || self.config.held_sensors.iter().any(|h| h == name)
