@@ -54,15 +54,15 @@ fn main() {
     println!("prepared in {:.1} s", prepared.elapsed().as_secs_f64());
     let started = Instant::now();
     let run = Run::spawn(Box::new(stage));
-    let mut first_packet = None;
+    let mut first_packet = true;
     loop {
         let Ok(packet) = run.packets.recv_timeout(Duration::from_secs(120)) else {
             println!("no change within 120 s");
             break;
         };
         let at = started.elapsed().as_secs_f64();
-        if first_packet.is_none() {
-            first_packet = Some(at);
+        if first_packet {
+            first_packet = false;
             println!(
                 "first packet: step {}, {at:.2} s after the spawn",
                 packet.step

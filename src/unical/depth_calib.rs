@@ -853,6 +853,17 @@ impl DepthCalibration {
             || self.config.lidar_pose_update == PoseUpdate::Adam
     }
 
+    /// The cameras' pose rate at this iteration, scaled by their ray budget against
+    /// [`CAMERA_RATE_RAYS`] ([`DepthCalibConfig::lr_camera_pose`]).
+    fn camera_rate_now(&self) -> f32 {
+        let ray_share = (self.config.rays_per_camera as f32 / CAMERA_RATE_RAYS as f32).min(1.0);
+        self.config.camera_pose_rate(
+            self.config.lr_camera_pose * ray_share,
+            self.config.camera_pose_final_fraction,
+            self.iteration,
+        )
+    }
+
     /// Per camera, whether its extrinsic stays fixed.
     fn frozen_cameras(&self) -> Vec<bool> {
         self.camera.as_ref().map_or_else(Vec::new, |c| {
@@ -1434,12 +1445,7 @@ impl DepthCalibration {
         if self.iteration < self.config.camera_release() || self.camera.is_none() {
             return (0.0, 0);
         }
-        let ray_share = (self.config.rays_per_camera as f32 / CAMERA_RATE_RAYS as f32).min(1.0);
-        let lr = self.config.camera_pose_rate(
-            self.config.lr_camera_pose * ray_share,
-            self.config.camera_pose_final_fraction,
-            self.iteration,
-        );
+        let lr = self.camera_rate_now();
         let align = self.alignment_gradients();
         // Its hash-grid gradients went to the accumulators: the SDF fit must not see them.
         drop(GradAccumulator::drain_all(&mut self.grid_accs));
@@ -1560,16 +1566,10 @@ impl DepthCalibration {
         }
         let total = self.config.iterations;
         let lr_field = decayed_lr(self.config.lr_field, 0.1, self.iteration, total);
-        let ray_share = (self.config.rays_per_camera as f32 / CAMERA_RATE_RAYS as f32).min(1.0);
-        let (lr_pose, lr_camera_pose) = (
-            self.config
-                .pose_rate(self.config.lr_pose, 0.01, self.iteration),
-            self.config.camera_pose_rate(
-                self.config.lr_camera_pose * ray_share,
-                self.config.camera_pose_final_fraction,
-                self.iteration,
-            ),
-        );
+        let lr_pose = self
+            .config
+            .pose_rate(self.config.lr_pose, 0.01, self.iteration);
+        let lr_camera_pose = self.camera_rate_now();
         // Before the warm-up's end only the correspondence term moves cameras; at its end their
         // schedule starts again (DepthCalibConfig::alignment_release).
         let colour_moves_poses = self.iteration >= self.config.pose_warmup;
