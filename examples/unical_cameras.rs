@@ -11,7 +11,7 @@
 //! `RIGCAL_ALIGN_RELEASE_RATE` (their rate until then, as a fraction of the camera rate), `RIGCAL_RAMP` (the pose rates' linear ramp after it),
 //! `RIGCAL_INIT_STEPS` (geometry initialisation steps), `RIGCAL_SCALE` (image scale, 0.125),
 //! `RIGCAL_RGB_WEIGHT`, `RIGCAL_INTENSITY_WEIGHT`, `RIGCAL_VIEW=false` (view-independent
-//! surface colour), `RIGCAL_TRANSLATION_RATE` (camera translation rate over the rotation's),
+//! surface colour), `RIGCAL_TRANSLATION_RATE` (camera translation rate over the rotation's), `RIGCAL_SHARED_TRANSLATION=true` (a translation the cameras share, `calibrate --shared-camera-translation`),
 //! `RIGCAL_CAMERA_DECAY` (the camera pose rate's final fraction), `RIGCAL_OPACITY=interval|per-sample`
 //! (the opacity model), `RIGCAL_BETA` (β's initial value), `RIGCAL_ROUNDS` (rounds of
 //! ITERATIONS, each with a fresh scene at the cameras the last one reached; as `calibrate
@@ -88,6 +88,10 @@ fn main() {
         intensity_weight: env("RIGCAL_INTENSITY_WEIGHT", defaults.intensity_weight),
         view_dependent_colour: env("RIGCAL_VIEW", defaults.view_dependent_colour),
         camera_translation_rate: env("RIGCAL_TRANSLATION_RATE", defaults.camera_translation_rate),
+        shared_camera_translation: env(
+            "RIGCAL_SHARED_TRANSLATION",
+            defaults.shared_camera_translation,
+        ),
         camera_pose_final_fraction: env("RIGCAL_CAMERA_DECAY", defaults.camera_pose_final_fraction),
         silhouette_share: env("RIGCAL_SILHOUETTE", defaults.silhouette_share),
         // `LEVELS,FRACTION` or `off`, as `calibrate --coarse-to-fine`.

@@ -97,6 +97,12 @@ enum Command {
         /// CPU preset), `off` opens every level from the start
         #[arg(long)]
         coarse_to_fine: Option<String>,
+        /// unical with cameras: also step one translation shared by every camera (the camera
+        /// rig's offset from the LiDARs) on the sum of their gradients: on the simulator it
+        /// follows a height a level drive leaves the LiDARs at, on the real PandaSet drive it
+        /// lets the cameras drift together (BENCHMARKS.md)
+        #[arg(long)]
+        shared_camera_translation: bool,
         /// Perturb every sensor of the initial guess by this many degrees about a random axis
         /// (drawn from --seed), to measure how far a method recovers; a sensor whose frame is
         /// the vehicle frame (the trajectory's own, as PandaSet's Pandar64) is left alone
@@ -256,6 +262,7 @@ fn run() -> Result<()> {
             camera_lr,
             rounds,
             coarse_to_fine,
+            shared_camera_translation,
             perturb_deg,
             perturb_cm,
             out,
@@ -278,6 +285,7 @@ fn run() -> Result<()> {
                 camera_lr,
                 rounds,
                 coarse_to_fine,
+                shared_camera_translation,
                 perturb: (perturb_deg, perturb_cm),
                 out: out.clone(),
             };

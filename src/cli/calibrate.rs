@@ -66,6 +66,9 @@ pub struct CalibrateArgs {
     /// unical: `LEVELS,FRACTION` of a coarse-to-fine hash grid, or `off` (`None`: the CPU
     /// preset's).
     pub coarse_to_fine: Option<String>,
+    /// unical with cameras: one translation shared by every camera besides their own
+    /// ([`DepthCalibConfig::shared_camera_translation`]).
+    pub shared_camera_translation: bool,
     /// Degrees and centimetres every sensor of the initial guess is moved by (random axis and
     /// direction drawn from `seed`; (0, 0) leaves it), to measure recovery from a known start.
     pub perturb: (f64, f64),
@@ -319,6 +322,7 @@ pub fn calibrate(
                     None => DepthCalibConfig::default().coarse_to_fine,
                 },
                 alignment: args.alignment,
+                shared_camera_translation: args.shared_camera_translation,
                 correspondence_cache: Some(crate::session::state_dir().join("matches")),
                 ..DepthCalibConfig::default()
             };
