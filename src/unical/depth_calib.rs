@@ -593,15 +593,16 @@ fn pose_step(
 
 impl CameraStage {
     /// One step of every free camera's pose on its gradient (`grads[k]`, rotation then
-    /// translation), and with `shared` of the translation they share on the sum of theirs.
+    /// translation), and with [`DepthCalibConfig::shared_camera_translation`] of the
+    /// translation they share on the sum of theirs.
     fn step_poses(
         &mut self,
         grads: &[[f32; 9]],
         frozen: &[bool],
         lr: f32,
-        translation_scale: f64,
-        shared: bool,
+        config: &DepthCalibConfig,
     ) {
+        let translation_scale = config.camera_translation_rate as f64;
         let free: Vec<usize> = (0..self.poses.len().min(grads.len()))
             .filter(|&k| !frozen.get(k).copied().unwrap_or(true))
             .collect();
@@ -614,7 +615,7 @@ impl CameraStage {
                 translation_scale,
             );
         }
-        if !shared || free.len() < 2 || lr == 0.0 {
+        if !config.shared_camera_translation || free.len() < 2 || lr == 0.0 {
             return;
         }
         let shift = shared_translation_step(&mut self.shared_translation_opt, grads, &free, lr);
@@ -1524,12 +1525,8 @@ impl DepthCalibration {
         // Its hash-grid gradients went to the accumulators: the SDF fit must not see them.
         drop(GradAccumulator::drain_all(&mut self.grid_accs));
         let frozen = self.frozen_cameras();
-        let (translation_rate, shared) = (
-            self.config.camera_translation_rate as f64,
-            self.config.shared_camera_translation,
-        );
         if let Some(stage) = self.camera.as_mut() {
-            stage.step_poses(&align.pose, &frozen, lr, translation_rate, shared);
+            stage.step_poses(&align.pose, &frozen, lr, &self.config);
         }
         (align.loss, align.kept)
     }
@@ -1830,13 +1827,7 @@ impl DepthCalibration {
                 e.offset.copy_from_slice(&flat[3..]);
             }
             if let Some(stage) = self.camera.as_mut() {
-                stage.step_poses(
-                    &pose_grads,
-                    &held,
-                    lr_camera_pose,
-                    self.config.camera_translation_rate as f64,
-                    self.config.shared_camera_translation,
-                );
+                stage.step_poses(&pose_grads, &held, lr_camera_pose, &self.config);
                 stage
                     .colour_opt
                     .step(&mut stage.colour_params, &grad_flat(&colour), lr_field);
