@@ -103,6 +103,16 @@ enum Command {
         /// lets the cameras drift together (BENCHMARKS.md)
         #[arg(long)]
         shared_camera_translation: bool,
+        /// unical with cameras: each camera's translation coordinates share Adam's step scale,
+        /// so a direction the drive hardly sees moves by its share of the gradient instead of
+        /// the full rate (BENCHMARKS.md)
+        #[arg(long)]
+        grouped_camera_translation: bool,
+        /// unical: drop LiDAR returns that other sweeps saw through (moving traffic), and mask
+        /// the pixels near them and the vehicle's own body in the images (BENCHMARKS.md,
+        /// "Moving traffic")
+        #[arg(long)]
+        drop_moving: bool,
         /// Perturb every sensor of the initial guess by this many degrees about a random axis
         /// (drawn from --seed), to measure how far a method recovers; a sensor whose frame is
         /// the vehicle frame (the trajectory's own, as PandaSet's Pandar64) is left alone
@@ -263,6 +273,8 @@ fn run() -> Result<()> {
             rounds,
             coarse_to_fine,
             shared_camera_translation,
+            grouped_camera_translation,
+            drop_moving,
             perturb_deg,
             perturb_cm,
             out,
@@ -286,6 +298,8 @@ fn run() -> Result<()> {
                 rounds,
                 coarse_to_fine,
                 shared_camera_translation,
+                grouped_camera_translation,
+                drop_moving,
                 perturb: (perturb_deg, perturb_cm),
                 out: out.clone(),
             };

@@ -69,6 +69,12 @@ pub struct CalibrateArgs {
     /// unical with cameras: one translation shared by every camera besides their own
     /// ([`DepthCalibConfig::shared_camera_translation`]).
     pub shared_camera_translation: bool,
+    /// unical with cameras: a camera's translation coordinates share Adam's step scale
+    /// ([`DepthCalibConfig::grouped_camera_translation`]).
+    pub grouped_camera_translation: bool,
+    /// unical: drop moving traffic and mask the vehicle's own body
+    /// ([`DepthCalibConfig::transient_returns`], [`DepthCalibConfig::mask_own_vehicle`]).
+    pub drop_moving: bool,
     /// Degrees and centimetres every sensor of the initial guess is moved by (random axis and
     /// direction drawn from `seed`; (0, 0) leaves it), to measure recovery from a known start.
     pub perturb: (f64, f64),
@@ -323,6 +329,11 @@ pub fn calibrate(
                 },
                 alignment: args.alignment,
                 shared_camera_translation: args.shared_camera_translation,
+                grouped_camera_translation: args.grouped_camera_translation,
+                transient_returns: args
+                    .drop_moving
+                    .then(crate::unical::transient::TransientSettings::default),
+                mask_own_vehicle: args.drop_moving,
                 correspondence_cache: Some(crate::session::state_dir().join("matches")),
                 ..DepthCalibConfig::default()
             };
@@ -336,6 +347,14 @@ pub fn calibrate(
                     &|phase, done, total| bars.report(phase, done, total),
                 )?;
             bars.finish();
+            if let Some(stats) = stage.transient_stats() {
+                eprintln!(
+                    "moving traffic: {} of {} LiDAR returns seen through by other sweeps, dropped ({:.1} %)",
+                    stats.dropped(),
+                    stats.examined(),
+                    100.0 * stats.dropped() as f64 / stats.examined().max(1) as f64
+                );
+            }
             Box::new(stage.in_rounds(args.rounds))
         }
         "icp" => {

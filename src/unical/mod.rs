@@ -43,3 +43,4 @@ pub mod pose_newton;
 pub mod regulariser;
 pub mod sdf_init;
 pub mod surface_align;
+pub mod transient;
