@@ -180,6 +180,9 @@ impl UnicalLidarStage {
         };
         let camera_from_world = (world_from_vehicle * vehicle_from_camera).inverse();
         let (w, h) = (camera.width as usize, camera.height as usize);
+        if w == 0 || h == 0 {
+            return Ok(Vec::new());
+        }
         let radius = (MASK_RADIUS_FRACTION * w as f64).max(1.0);
         let mut mask = Vec::new();
         for (k, (name, vehicle_from_lidar)) in sources.iter().enumerate() {
