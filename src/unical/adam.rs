@@ -52,20 +52,9 @@ impl DenseAdam {
 
     /// One update `params -= lr · m̂ / (√v̂ + ε)`.
     pub fn step(&mut self, params: &mut [f32], grads: &[f32], lr: f32) {
-        self.step += 1;
-        let c = self.config;
-        let bc1 = 1.0 - c.beta1.powi(self.step);
-        let bc2 = 1.0 - c.beta2.powi(self.step);
-        for i in 0..params.len().min(grads.len()) {
-            let g = grads[i];
-            self.m[i] = c.beta1 * self.m[i] + (1.0 - c.beta1) * g;
-            self.v[i] = c.beta2 * self.v[i] + (1.0 - c.beta2) * g * g;
-            params[i] -= lr * (self.m[i] / bc1) / ((self.v[i] / bc2).sqrt() + c.epsilon);
-        }
+        self.step_grouped(params, grads, lr, &[]);
     }
-}
 
-impl DenseAdam {
     /// One update in which the coordinates of each `groups` range share a denominator, the
     /// root of their largest second moment: a coordinate whose gradient is small beside its
     /// group's steps proportionally less, instead of by `lr` like every other (Adam's

@@ -172,7 +172,7 @@ pub struct DepthCalibConfig {
     /// return and pixel.
     pub transient_returns: Option<TransientSettings>,
     /// Mask the part of each camera's view that the vehicle itself fills (pixels still over
-    /// the camera's frames, joined to the bottom row; `super::calibrator::ego_mask`).
+    /// the camera's frames, joined to the bottom row; `super::masks::ego_mask`).
     pub mask_own_vehicle: bool,
 }
 
@@ -396,7 +396,7 @@ pub struct CameraFrame {
     /// Keypoints for the correspondences and heat maps, in training pixels (empty when the
     /// optimisation uses no correspondences).
     pub keypoints: Vec<Keypoint>,
-    /// Pixels no ray is drawn from (moving traffic; `super::calibrator::is_masked`), row-major;
+    /// Pixels no ray is drawn from (moving traffic, the vehicle itself; `super::masks`), row-major;
     /// empty when none is.
     pub masked: Vec<bool>,
 }

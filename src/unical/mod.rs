@@ -36,6 +36,7 @@ pub mod field;
 pub mod hash_grid;
 pub mod intensity;
 pub mod lidar_terms;
+pub mod masks;
 pub mod mlp;
 pub mod occupancy;
 pub mod pose;

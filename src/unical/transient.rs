@@ -18,6 +18,7 @@ use glam::DVec3;
 use rayon::prelude::*;
 
 use super::depth_calib::LidarData;
+use crate::geometry::projection::world_points;
 use crate::geometry::{Rigid, Trajectory};
 use crate::log::pointcloud::LidarSweep;
 
@@ -66,8 +67,8 @@ impl TransientStats {
 /// One sweep as a range image: the nearest return per bin, and the mean firing time per
 /// azimuth column (0 for a deskewed sweep).
 struct RangeImage {
-    world_from_lidar: Rigid,
-    /// Per column, the sweep's pose at that column's firing time (None: the sweep's own pose).
+    lidar_from_world: Rigid,
+    /// Per column, `lidar_from_world` at that column's firing time (None: the sweep's own).
     column_pose: Vec<Option<Rigid>>,
     nearest_m: Vec<f32>,
     cols: usize,
@@ -99,7 +100,7 @@ impl RangeImage {
         let cols = (360.0 / settings.azimuth_bin_deg).ceil() as usize;
         let rows = (180.0 / settings.elevation_bin_deg).ceil() as usize;
         let mut image = Self {
-            world_from_lidar,
+            lidar_from_world: world_from_lidar.inverse(),
             column_pose: vec![None; cols],
             nearest_m: vec![f32::INFINITY; cols * rows],
             cols,
@@ -125,7 +126,7 @@ impl RangeImage {
                 image.column_pose[c] = trajectory
                     .world_from_vehicle(stamp)
                     .ok()
-                    .map(|wv| wv * lidar.initial);
+                    .map(|wv| (wv * lidar.initial).inverse());
             }
         }
         Some(image)
@@ -133,15 +134,13 @@ impl RangeImage {
 
     /// Whether this sweep saw through `p_world`.
     fn sees_through(&self, p_world: DVec3) -> bool {
-        let mut pose = self.world_from_lidar;
-        let mut p = pose.inverse().transform_point(p_world);
+        let mut p = self.lidar_from_world.transform_point(p_world);
         let Some((c, _, _)) = self.bin(p) else {
             return false;
         };
         // Where the sweep has firing times, look again from where it was at that column.
-        if let Some(at_column) = self.column_pose[c] {
-            pose = at_column;
-            p = pose.inverse().transform_point(p_world);
+        if let Some(lidar_from_world) = self.column_pose[c] {
+            p = lidar_from_world.transform_point(p_world);
         }
         let Some((c, r, range)) = self.bin(p) else {
             return false;
@@ -223,8 +222,8 @@ impl Witnesses {
             .collect()
     }
 
-    /// Each return of `sweep` in the world, and whether it is transient (returns at stamps
-    /// outside the trajectory are kept and not placed: `DVec3::NAN`).
+    /// Each return of `sweep` in the world, and whether it is transient (a sweep that reaches
+    /// outside the trajectory is kept whole and not placed: `DVec3::NAN`).
     fn flags(
         &self,
         sweep: &LidarSweep,
@@ -232,28 +231,12 @@ impl Witnesses {
         vehicle_from_lidar: Rigid,
         trajectory: &Trajectory,
     ) -> Vec<(DVec3, bool)> {
-        let Ok(world_from_vehicle) = trajectory.world_from_vehicle(sweep.stamp_nanos) else {
+        let Ok(points) = world_points(&sweep.view(), trajectory, vehicle_from_lidar, 1) else {
             return vec![(DVec3::NAN, false); sweep.len()];
         };
-        let times = sweep.time_offset_secs.as_deref();
-        sweep
-            .points_in_sensor
-            .par_iter()
-            .enumerate()
-            .map(|(n, p)| {
-                let world_from_lidar = match times.and_then(|t| t.get(n)) {
-                    Some(t) => trajectory
-                        .world_from_vehicle(sweep.stamp_nanos + (*t as f64 * 1e9) as i64)
-                        .unwrap_or(world_from_vehicle),
-                    None => world_from_vehicle,
-                } * vehicle_from_lidar;
-                let q = world_from_lidar.transform_point(DVec3::new(
-                    p[0] as f64,
-                    p[1] as f64,
-                    p[2] as f64,
-                ));
-                (q, self.is_transient(q, lidar, sweep.stamp_nanos))
-            })
+        points
+            .into_par_iter()
+            .map(|q| (q, self.is_transient(q, lidar, sweep.stamp_nanos)))
             .collect()
     }
 }
