@@ -113,6 +113,10 @@ enum Command {
         /// "Moving traffic")
         #[arg(long)]
         drop_moving: bool,
+        /// Add this many milliseconds to every camera image's stamp: a known delay between the
+        /// cameras and the trajectory (negative: the images were taken before their stamps)
+        #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+        camera_time_offset_ms: f64,
         /// Perturb every sensor of the initial guess by this many degrees about a random axis
         /// (drawn from --seed), to measure how far a method recovers; a sensor whose frame is
         /// the vehicle frame (the trajectory's own, as PandaSet's Pandar64) is left alone
@@ -275,6 +279,7 @@ fn run() -> Result<()> {
             shared_camera_translation,
             grouped_camera_translation,
             drop_moving,
+            camera_time_offset_ms,
             perturb_deg,
             perturb_cm,
             out,
@@ -300,6 +305,7 @@ fn run() -> Result<()> {
                 shared_camera_translation,
                 grouped_camera_translation,
                 drop_moving,
+                camera_time_offset_ms,
                 perturb: (perturb_deg, perturb_cm),
                 out: out.clone(),
             };

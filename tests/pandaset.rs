@@ -126,3 +126,33 @@ fn sweeps_and_images_decode() {
     assert!(drive.load_image("front_camera", 99).is_err());
     assert!(drive.load_sweep("nope", 0).is_err());
 }
+
+#[test]
+fn a_camera_time_offset_moves_the_image_stamps_only() {
+    let plain = open();
+    let options = rigcal::log::DriveOptions {
+        camera_time_offset_nanos: -20_000_000,
+        ..rigcal::log::DriveOptions::default()
+    };
+    let shifted = Drive::open_with(&data_dir().join("pandaset-002.mcap"), &options).unwrap();
+    let mut cameras = 0;
+    for stream in &plain.streams {
+        let other = shifted.stream(&stream.sensor).unwrap();
+        let delta = if stream.kind == SensorKind::Camera {
+            cameras += 1;
+            -20_000_000
+        } else {
+            0
+        };
+        assert_eq!(stream.frames.len(), other.frames.len());
+        for (a, b) in stream.frames.iter().zip(&other.frames) {
+            assert_eq!(b.stamp_nanos - a.stamp_nanos, delta, "{}", stream.sensor);
+        }
+    }
+    assert_eq!(cameras, 6);
+    let t = plain.time_range_nanos().unwrap().0 + 1_000_000_000;
+    assert_eq!(
+        plain.trajectory.world_from_vehicle(t).unwrap(),
+        shifted.trajectory.world_from_vehicle(t).unwrap()
+    );
+}

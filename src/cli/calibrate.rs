@@ -75,6 +75,8 @@ pub struct CalibrateArgs {
     /// unical: drop moving traffic and mask the vehicle's own body
     /// ([`DepthCalibConfig::transient_returns`], [`DepthCalibConfig::mask_own_vehicle`]).
     pub drop_moving: bool,
+    /// Added to every camera image's stamp (ms; [`crate::log::DriveOptions::camera_time_offset_nanos`]).
+    pub camera_time_offset_ms: f64,
     /// Degrees and centimetres every sensor of the initial guess is moved by (random axis and
     /// direction drawn from `seed`; (0, 0) leaves it), to measure recovery from a known start.
     pub perturb: (f64, f64),
@@ -264,7 +266,17 @@ pub fn calibrate(
     progress: &mut dyn FnMut(usize, usize),
 ) -> Result<CalibrationFile, String> {
     let perturbation = args.perturbation()?;
-    let drive = Drive::open(&args.log).map_err(|e| e.to_string())?;
+    if !args.camera_time_offset_ms.is_finite() || args.camera_time_offset_ms.abs() > 1000.0 {
+        return Err(format!(
+            "--camera-time-offset-ms must be a number of milliseconds within ±1000, not {}",
+            args.camera_time_offset_ms
+        ));
+    }
+    let options = crate::log::DriveOptions {
+        camera_time_offset_nanos: (args.camera_time_offset_ms * 1e6).round() as i64,
+        ..crate::log::DriveOptions::default()
+    };
+    let drive = Drive::open_with(&args.log, &options).map_err(|e| e.to_string())?;
     let mut rig = drive.rig.clone();
     if let Some(init) = &args.init {
         rig = crate::interop::import::load_initial_guess(init, &rig)

@@ -33,6 +33,9 @@ pub struct DriveOptions {
     pub max_extrapolation_secs: f64,
     /// Decoded images kept in memory.
     pub image_cache_len: usize,
+    /// Added to every camera image's stamp: a known delay between the cameras' clock (or
+    /// trigger) and the trajectory's (negative: the images were taken before their stamps).
+    pub camera_time_offset_nanos: i64,
 }
 
 impl Default for DriveOptions {
@@ -42,6 +45,7 @@ impl Default for DriveOptions {
             vehicle_frame: None,
             max_extrapolation_secs: 0.1,
             image_cache_len: 24,
+            camera_time_offset_nanos: 0,
         }
     }
 }
@@ -336,6 +340,11 @@ impl Drive {
             } else {
                 StampSource::Header
             };
+            if kind == SensorKind::Camera {
+                for f in frames.iter_mut() {
+                    f.stamp_nanos += options.camera_time_offset_nanos;
+                }
+            }
             frames.sort_by_key(|f| f.stamp_nanos);
             let mut name = if frame_id.is_empty() {
                 ch.topic.trim_matches('/').replace('/', "_")

@@ -354,20 +354,28 @@ pub struct CompassSearch {
     /// Edges constrain pan and tilt sharply but roll about the optical axis only weakly, and a
     /// textured scene has distant spurious minima; this refiner is a local polish.
     pub max_rotation_rad: f64,
+    /// Trust region for the translation (with `translate`).
+    pub max_translation_m: f64,
     start: Rigid,
 }
 
 impl CompassSearch {
     pub fn new(problem: &EdgeAlignment, start: Rigid) -> Self {
+        Self::from_cost(start, problem.cost(start))
+    }
+
+    /// A search from `start`, whose cost is `start_cost`, for any cost of the extrinsic.
+    pub fn from_cost(start: Rigid, start_cost: f64) -> Self {
         Self {
             best: start,
-            best_cost: problem.cost(start),
+            best_cost: start_cost,
             step_rad: 0.5f64.to_radians(),
             step_m: 0.05,
             min_step_rad: 0.005f64.to_radians(),
             min_step_m: 0.0005,
             translate: false,
             max_rotation_rad: 2f64.to_radians(),
+            max_translation_m: f64::INFINITY,
             start,
         }
     }
@@ -378,6 +386,11 @@ impl CompassSearch {
 
     /// One round of probes (±step on each searched axis); returns whether the pose improved.
     pub fn step(&mut self, problem: &EdgeAlignment) -> bool {
+        self.step_with(|pose| problem.cost(pose))
+    }
+
+    /// [`Self::step`] for any cost of the extrinsic.
+    pub fn step_with(&mut self, cost: impl Fn(Rigid) -> f64) -> bool {
         let mut best = None;
         let axes = if self.translate { 6 } else { 3 };
         for axis in 0..axes {
@@ -390,10 +403,11 @@ impl CompassSearch {
                     v[axis - 3] = sign * self.step_m;
                 }
                 let candidate = self.best.perturbed_right(omega, v);
-                if self.start.difference(candidate).0 > self.max_rotation_rad {
+                let (rotation, translation) = self.start.difference(candidate);
+                if rotation > self.max_rotation_rad || translation > self.max_translation_m {
                     continue;
                 }
-                let c = problem.cost(candidate);
+                let c = cost(candidate);
                 if c < best.map_or(self.best_cost, |(bc, _)| bc) {
                     best = Some((c, candidate));
                 }

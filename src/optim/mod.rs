@@ -5,7 +5,10 @@
 //! - [`edge_align`]: the target-free edge-alignment cost (LiDAR depth discontinuities against
 //!   image edges) and a compass search over one camera's extrinsic.
 //! - [`edge_refine`]: that search as a calibrator over several cameras.
+//! - [`photo_consistency`]: the images of one camera agreeing about the colour of the LiDAR
+//!   points, and a compass search over its extrinsic.
 
 pub mod edge_align;
 pub mod edge_refine;
+pub mod photo_consistency;
 pub mod runner;

@@ -1,0 +1,560 @@
+//! Photometric consistency of one camera's images over the LiDARs' geometry: a texture-free
+//! check and refinement of a camera extrinsic.
+//!
+//! How it works. The LiDAR sweeps (every LiDAR of the rig, at their calibrated extrinsics) are
+//! placed in the world through the trajectory at each return's firing time and thinned to one
+//! point per voxel. A few images of the camera are loaded at a working width, turned grey,
+//! blurred and normalised to zero mean and unit variance each (which absorbs a change of
+//! exposure between frames). Which image sees which point is decided once, at the starting
+//! extrinsic, by a coarse depth buffer per image: a point is seen when it is within a margin of
+//! the nearest point projected into its cell. For a candidate `vehicle_from_camera` every
+//! point seen by at least `min_views` images is projected into each of them, its grey values
+//! read bilinearly, and the cost is the mean over the points of their (truncated) squared
+//! deviations from the point's mean grey.
+//!
+//! Why it helps. A neural scene learns its colours together with the cameras, so a camera that
+//! is off can paint its own texture and hold itself there. Here nothing is painted: the only
+//! geometry is the LiDARs', and the images must agree with each other about the colour of each
+//! LiDAR point. A wrong rotation samples each point at an offset that grows with its distance
+//! from the camera, and that distance changes from frame to frame as the vehicle drives, so the
+//! samples disagree. A translation parallel to a flat surface (along a street whose ground and
+//! façades are parallel to the drive) shifts every frame's sample alike and is not observed;
+//! [`search`] then keeps the translation where it started unless the cost improves.
+
+use glam::{DVec2, DVec3};
+use rayon::prelude::*;
+
+use crate::calib::Rig;
+use crate::classical::mutual_info::gaussian_blur;
+use crate::geometry::Rigid;
+use crate::geometry::camera::CameraIntrinsics;
+use crate::geometry::projection::{SweepView, world_points};
+use crate::log::Drive;
+use crate::optim::edge_align::{AlignError, CompassSearch};
+
+/// Settings of the problem and its search.
+#[derive(Clone, Debug)]
+pub struct PhotoConfig {
+    /// Images of the camera, evenly spread over the drive.
+    pub images: usize,
+    /// Sweeps per LiDAR, evenly spread over the drive.
+    pub sweeps_per_lidar: usize,
+    /// Width (px) the images are resized to.
+    pub working_width_px: u32,
+    /// Gaussian blur at the working width (px).
+    pub blur_sigma_px: f64,
+    /// One point per voxel of this size.
+    pub voxel_m: f64,
+    /// Points nearer or further than this from the camera are not used.
+    pub min_range_m: f64,
+    pub max_range_m: f64,
+    /// Depth-buffer cell (px at the working width).
+    pub cell_px: u32,
+    /// A point is seen when its depth is within `nearest · (1 + margin) + 0.1 m` of its cell.
+    pub depth_margin: f64,
+    /// Points seen by fewer images are not used.
+    pub min_views: usize,
+    /// Squared deviations are truncated here (units of the normalised grey).
+    pub truncation: f32,
+}
+
+impl Default for PhotoConfig {
+    fn default() -> Self {
+        Self {
+            images: 16,
+            sweeps_per_lidar: 16,
+            working_width_px: 480,
+            blur_sigma_px: 1.0,
+            voxel_m: 0.1,
+            min_range_m: 2.0,
+            max_range_m: 60.0,
+            cell_px: 4,
+            depth_margin: 0.03,
+            min_views: 3,
+            truncation: 1.0,
+        }
+    }
+}
+
+/// One grey image and the vehicle pose it was taken at.
+#[derive(Clone, Debug)]
+pub struct PhotoImage {
+    pub width: usize,
+    pub height: usize,
+    /// Blurred grey, zero mean and unit variance over the image.
+    pub grey: Vec<f32>,
+    pub vehicle_from_world: Rigid,
+    pub stamp_nanos: i64,
+}
+
+impl PhotoImage {
+    /// Bilinear grey at `pixel`; `None` outside the image.
+    fn sample(&self, pixel: DVec2) -> Option<f32> {
+        let (x, y) = (pixel.x, pixel.y);
+        if !(x >= 0.0 && y >= 0.0 && x < (self.width - 1) as f64 && y < (self.height - 1) as f64) {
+            return None;
+        }
+        let (x0, y0) = (x as usize, y as usize);
+        let (fx, fy) = ((x - x0 as f64) as f32, (y - y0 as f64) as f32);
+        let i = y0 * self.width + x0;
+        let g = &self.grey;
+        let top = g[i] + (g[i + 1] - g[i]) * fx;
+        let bottom = g[i + self.width] + (g[i + self.width + 1] - g[i + self.width]) * fx;
+        Some(top + (bottom - top) * fy)
+    }
+}
+
+/// The photo-consistency problem of one camera.
+#[derive(Clone, Debug)]
+pub struct PhotoProblem {
+    pub camera: String,
+    /// Intrinsics at the working width.
+    pub intrinsics: CameraIntrinsics,
+    pub images: Vec<PhotoImage>,
+    pub points_in_world: Vec<DVec3>,
+    /// Views of point `p`: `view_images[view_offsets[p]..view_offsets[p + 1]]`.
+    pub view_offsets: Vec<u32>,
+    pub view_images: Vec<u16>,
+    pub truncation: f32,
+}
+
+/// Grey of an RGB image resized to `width` (Rec. 601 luma, 0–1).
+fn grey_at_width(image: &image::RgbImage, width: u32) -> (usize, usize, Vec<f32>) {
+    let height =
+        ((image.height() as f64 * width as f64 / image.width() as f64).round() as u32).max(2);
+    let resized = if image.width() == width {
+        image.clone()
+    } else {
+        image::imageops::resize(image, width, height, image::imageops::FilterType::Triangle)
+    };
+    let grey = resized
+        .pixels()
+        .map(|p| (0.299 * p[0] as f32 + 0.587 * p[1] as f32 + 0.114 * p[2] as f32) / 255.0)
+        .collect();
+    (resized.width() as usize, resized.height() as usize, grey)
+}
+
+/// Zero mean, unit variance (a flat image stays flat).
+fn normalise(values: &mut [f32]) {
+    let n = values.len().max(1) as f64;
+    let mean = values.iter().map(|&v| v as f64).sum::<f64>() / n;
+    let var = values
+        .iter()
+        .map(|&v| (v as f64 - mean).powi(2))
+        .sum::<f64>()
+        / n;
+    let inv_std = if var > 1e-12 { 1.0 / var.sqrt() } else { 0.0 };
+    for v in values {
+        *v = ((*v as f64 - mean) * inv_std) as f32;
+    }
+}
+
+/// Thin points to one per voxel (the first one met).
+pub fn voxel_thin(points: &[DVec3], voxel_m: f64) -> Vec<DVec3> {
+    let mut seen = std::collections::HashSet::new();
+    points
+        .iter()
+        .copied()
+        .filter(|p| {
+            let key = (
+                (p.x / voxel_m).floor() as i64,
+                (p.y / voxel_m).floor() as i64,
+                (p.z / voxel_m).floor() as i64,
+            );
+            seen.insert(key)
+        })
+        .collect()
+}
+
+/// Which points each image sees (indices into `points`), by a depth buffer of `cell_px` cells.
+fn visible_per_image(
+    points: &[DVec3],
+    images: &[PhotoImage],
+    intrinsics: &CameraIntrinsics,
+    vehicle_from_camera: Rigid,
+    config: &PhotoConfig,
+) -> Vec<Vec<u32>> {
+    let cell = config.cell_px.max(1) as usize;
+    images
+        .par_iter()
+        .map(|image| {
+            let camera_from_world = vehicle_from_camera.inverse() * image.vehicle_from_world;
+            let (cw, ch) = (image.width.div_ceil(cell), image.height.div_ceil(cell));
+            let mut nearest = vec![f64::INFINITY; cw * ch];
+            let mut projected = Vec::new();
+            for (i, &p) in points.iter().enumerate() {
+                let q = camera_from_world.transform_point(p);
+                let range = q.length();
+                if range < config.min_range_m || range > config.max_range_m {
+                    continue;
+                }
+                let Some(px) = intrinsics.project(q) else {
+                    continue;
+                };
+                if !(px.x >= 0.0
+                    && px.y >= 0.0
+                    && px.x < (image.width - 1) as f64
+                    && px.y < (image.height - 1) as f64)
+                {
+                    continue;
+                }
+                let c = (px.y as usize / cell) * cw + px.x as usize / cell;
+                nearest[c] = nearest[c].min(q.z);
+                projected.push((i as u32, c, q.z));
+            }
+            projected
+                .into_iter()
+                .filter(|&(_, c, z)| z <= nearest[c] * (1.0 + config.depth_margin) + 0.1)
+                .map(|(i, _, _)| i)
+                .collect()
+        })
+        .collect()
+}
+
+impl PhotoProblem {
+    /// Build the problem of `camera` from a drive, with every LiDAR of `rig` at its extrinsic and
+    /// the visibility decided at the camera's extrinsic in `rig`.
+    pub fn from_drive(
+        drive: &Drive,
+        rig: &Rig,
+        camera: &str,
+        config: &PhotoConfig,
+    ) -> Result<Self, AlignError> {
+        let setup = |what: String| AlignError::Setup(what);
+        let sensor = rig
+            .sensor(camera)
+            .ok_or_else(|| setup(format!("no sensor '{camera}' in the rig")))?;
+        let full = sensor
+            .camera
+            .clone()
+            .ok_or_else(|| setup(format!("'{camera}' is not a camera with intrinsics")))?;
+        let stream = drive
+            .stream(camera)
+            .ok_or_else(|| setup(format!("no images for '{camera}' in the log")))?;
+        let usable = drive.frames_within(camera, &[]);
+        if usable.len() < 2 {
+            return Err(setup(format!(
+                "'{camera}' has fewer than two images inside the trajectory"
+            )));
+        }
+        let mut images = Vec::new();
+        for index in crate::log::spread_evenly(&usable, config.images.max(2)) {
+            let stamp_nanos = stream.frames[index].stamp_nanos;
+            let vehicle_from_world = drive.trajectory.world_from_vehicle(stamp_nanos)?.inverse();
+            let image = drive.load_image(camera, index)?;
+            let (width, height, grey) = grey_at_width(&image, config.working_width_px);
+            let mut grey = gaussian_blur(&grey, width, height, config.blur_sigma_px);
+            normalise(&mut grey);
+            images.push(PhotoImage {
+                width,
+                height,
+                grey,
+                vehicle_from_world,
+                stamp_nanos,
+            });
+        }
+        let factor = images[0].width as f64 / full.width as f64;
+        let intrinsics = full.scaled(factor);
+
+        let mut world = Vec::new();
+        for lidar in rig.lidars() {
+            let usable = drive.frames_within(&lidar.name, &[]);
+            for index in crate::log::spread_evenly(&usable, config.sweeps_per_lidar) {
+                let sweep = drive.load_sweep(&lidar.name, index)?;
+                let view = SweepView {
+                    points_in_lidar: &sweep.points_in_sensor,
+                    intensity: &sweep.intensity,
+                    time_offset_secs: sweep.time_offset_secs.as_deref(),
+                    stamp_nanos: sweep.stamp_nanos,
+                };
+                world.extend(world_points(
+                    &view,
+                    &drive.trajectory,
+                    lidar.vehicle_from_sensor,
+                    1,
+                )?);
+            }
+        }
+        if world.is_empty() {
+            return Err(setup("no LiDAR sweep inside the trajectory".into()));
+        }
+        let points = voxel_thin(&world, config.voxel_m);
+        Ok(Self::new(
+            camera,
+            intrinsics,
+            images,
+            points,
+            sensor.vehicle_from_sensor,
+            config,
+        ))
+    }
+
+    /// A problem from prepared images and points; visibility at `vehicle_from_camera`.
+    pub fn new(
+        camera: &str,
+        intrinsics: CameraIntrinsics,
+        images: Vec<PhotoImage>,
+        points_in_world: Vec<DVec3>,
+        vehicle_from_camera: Rigid,
+        config: &PhotoConfig,
+    ) -> Self {
+        let visible = visible_per_image(
+            &points_in_world,
+            &images,
+            &intrinsics,
+            vehicle_from_camera,
+            config,
+        );
+        let mut views: Vec<Vec<u16>> = vec![Vec::new(); points_in_world.len()];
+        for (image, seen) in visible.iter().enumerate() {
+            for &p in seen {
+                views[p as usize].push(image as u16);
+            }
+        }
+        let mut kept_points = Vec::new();
+        let mut view_offsets = vec![0u32];
+        let mut view_images = Vec::new();
+        for (p, v) in views.into_iter().enumerate() {
+            if v.len() >= config.min_views.max(2) {
+                kept_points.push(points_in_world[p]);
+                view_images.extend(v);
+                view_offsets.push(view_images.len() as u32);
+            }
+        }
+        Self {
+            camera: camera.to_string(),
+            intrinsics,
+            images,
+            points_in_world: kept_points,
+            view_offsets,
+            view_images,
+            truncation: config.truncation,
+        }
+    }
+
+    /// Points used (seen by enough images).
+    pub fn point_count(&self) -> usize {
+        self.points_in_world.len()
+    }
+
+    /// Views used, over all points.
+    pub fn view_count(&self) -> usize {
+        self.view_images.len()
+    }
+
+    /// Mean truncated squared deviation of each point's grey values from their mean, over the
+    /// points still seen twice at `vehicle_from_camera`.
+    pub fn cost(&self, vehicle_from_camera: Rigid) -> f64 {
+        let camera_from_world: Vec<Rigid> = self
+            .images
+            .iter()
+            .map(|im| vehicle_from_camera.inverse() * im.vehicle_from_world)
+            .collect();
+        let (sum, count) = (0..self.points_in_world.len())
+            .into_par_iter()
+            .with_min_len(4096)
+            .map(|p| {
+                let range = self.view_offsets[p] as usize..self.view_offsets[p + 1] as usize;
+                let mut values = [0f32; 64];
+                let mut n = 0;
+                for &image in &self.view_images[range] {
+                    let image = image as usize;
+                    let q = camera_from_world[image].transform_point(self.points_in_world[p]);
+                    let Some(px) = self.intrinsics.project(q) else {
+                        continue;
+                    };
+                    if let Some(v) = self.images[image].sample(px)
+                        && n < values.len()
+                    {
+                        values[n] = v;
+                        n += 1;
+                    }
+                }
+                if n < 2 {
+                    return (0.0, 0usize);
+                }
+                let values = &values[..n];
+                let mean = values.iter().sum::<f32>() / n as f32;
+                let dev: f32 = values
+                    .iter()
+                    .map(|v| ((v - mean) * (v - mean)).min(self.truncation))
+                    .sum();
+                ((dev / n as f32) as f64, 1usize)
+            })
+            .reduce(|| (0.0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
+        if count == 0 {
+            f64::INFINITY
+        } else {
+            sum / count as f64
+        }
+    }
+}
+
+/// A compass search ([`CompassSearch`]) over one camera's extrinsic for this cost: rotation
+/// and translation, from 0.1° / 2 cm steps down to 0.005° / 1 mm, within 1° / 20 cm of `start`.
+pub fn search(problem: &PhotoProblem, start: Rigid) -> CompassSearch {
+    let mut search = CompassSearch::from_cost(start, problem.cost(start));
+    search.step_rad = 0.1f64.to_radians();
+    search.step_m = 0.02;
+    search.min_step_m = 0.001;
+    search.translate = true;
+    search.max_rotation_rad = 1f64.to_radians();
+    search.max_translation_m = 0.2;
+    search
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::so3;
+    use glam::{DMat3, DQuat};
+
+    /// A street side: a textured wall at y = 8 m and textured ground 1.5 m below the vehicle.
+    fn albedo(p: DVec3) -> f32 {
+        let v = if p.y > 7.99 {
+            (1.3 * p.x).sin() * (1.7 * p.z).sin() + 0.5 * (5.1 * p.x + 2.3 * p.z).sin()
+        } else {
+            (2.1 * p.x + 0.7 * p.y).sin() * (1.1 * p.y).cos() + 0.4 * (4.3 * p.y - 3.7 * p.x).sin()
+        };
+        v as f32
+    }
+
+    fn hit(origin: DVec3, dir: DVec3) -> Option<DVec3> {
+        let mut best: Option<f64> = None;
+        if dir.y > 1e-9 {
+            best = Some((8.0 - origin.y) / dir.y);
+        }
+        if dir.z < -1e-9 {
+            let t = (-1.5 - origin.z) / dir.z;
+            if best.is_none_or(|b| t < b) {
+                best = Some(t);
+            }
+        }
+        best.filter(|t| *t > 0.0).map(|t| origin + dir * t)
+    }
+
+    /// A camera looking left (+y) from the vehicle's origin: x right = +x, y down = −z.
+    fn vehicle_from_camera() -> Rigid {
+        let m = DMat3::from_cols(DVec3::X, DVec3::NEG_Z, DVec3::Y);
+        Rigid::new(DQuat::from_mat3(&m), DVec3::ZERO)
+    }
+
+    fn scene() -> (CameraIntrinsics, Vec<PhotoImage>, Vec<DVec3>) {
+        let intrinsics = CameraIntrinsics::pinhole(160, 120, 100.0, 100.0, 79.5, 59.5);
+        let truth = vehicle_from_camera();
+        let images = (0..8)
+            .map(|i| {
+                let world_from_vehicle = Rigid::from_translation(DVec3::new(i as f64, 0.0, 0.0));
+                let world_from_camera = world_from_vehicle * truth;
+                let mut grey = Vec::with_capacity(160 * 120);
+                for y in 0..120 {
+                    for x in 0..160 {
+                        let ray = intrinsics
+                            .unproject(DVec2::new(x as f64, y as f64))
+                            .unwrap_or(DVec3::Z);
+                        let dir = world_from_camera.transform_vector(ray);
+                        grey.push(hit(world_from_camera.translation, dir).map_or(0.0, albedo));
+                    }
+                }
+                PhotoImage {
+                    width: 160,
+                    height: 120,
+                    grey,
+                    vehicle_from_world: world_from_vehicle.inverse(),
+                    stamp_nanos: i * 100_000_000,
+                }
+            })
+            .collect();
+        let mut points = Vec::new();
+        for i in 0..120 {
+            let x = -5.0 + i as f64 * 0.15;
+            for k in 0..35 {
+                points.push(DVec3::new(x, 8.0, -1.5 + k as f64 * 0.15));
+            }
+            for k in 0..45 {
+                points.push(DVec3::new(x, 1.5 + k as f64 * 0.15, -1.5));
+            }
+        }
+        (intrinsics, images, points)
+    }
+
+    fn problem() -> PhotoProblem {
+        let (intrinsics, images, points) = scene();
+        let config = PhotoConfig {
+            min_range_m: 1.0,
+            ..PhotoConfig::default()
+        };
+        PhotoProblem::new(
+            "left",
+            intrinsics,
+            images,
+            points,
+            vehicle_from_camera(),
+            &config,
+        )
+    }
+
+    #[test]
+    fn thinning_keeps_one_point_per_voxel() {
+        let points = [
+            DVec3::new(0.01, 0.02, 0.03),
+            DVec3::new(0.05, 0.06, 0.07),
+            DVec3::new(0.15, 0.02, 0.03),
+            DVec3::new(-0.01, 0.02, 0.03),
+        ];
+        let kept = voxel_thin(&points, 0.1);
+        assert_eq!(kept, vec![points[0], points[2], points[3]]);
+    }
+
+    #[test]
+    fn the_images_agree_best_at_the_true_extrinsic() {
+        let problem = problem();
+        assert!(problem.point_count() > 1000, "{}", problem.point_count());
+        let truth = vehicle_from_camera();
+        let at_truth = problem.cost(truth);
+        for axis in 0..3 {
+            for sign in [-1.0, 1.0] {
+                let mut omega = DVec3::ZERO;
+                omega[axis] = sign * 0.3f64.to_radians();
+                let turned = Rigid::new(so3::exp(omega) * truth.rotation, truth.translation);
+                assert!(
+                    problem.cost(turned) > at_truth * 1.05,
+                    "axis {axis} sign {sign}: {} vs {at_truth}",
+                    problem.cost(turned)
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn the_search_returns_to_the_true_rotation_from_either_side() {
+        let problem = problem();
+        let truth = vehicle_from_camera();
+        for omega_deg in [
+            DVec3::new(0.6, 0.0, 0.0),
+            DVec3::new(-0.6, 0.0, 0.0),
+            DVec3::new(0.3, -0.4, 0.3),
+            DVec3::new(-0.2, 0.4, -0.5),
+        ] {
+            let start = Rigid::new(
+                so3::exp(omega_deg * std::f64::consts::PI / 180.0) * truth.rotation,
+                truth.translation,
+            );
+            let mut search = search(&problem, start);
+            search.translate = false;
+            search.step_rad = 0.2f64.to_radians();
+            for _ in 0..300 {
+                if search.converged() {
+                    break;
+                }
+                search.step_with(|pose| problem.cost(pose));
+            }
+            let (rot, _) = truth.difference(search.best);
+            assert!(
+                rot.to_degrees() < 0.05,
+                "from {omega_deg:?}°: {:.3}° left",
+                rot.to_degrees()
+            );
+        }
+    }
+}
