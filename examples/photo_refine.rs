@@ -49,6 +49,7 @@ fn main() {
         depth_margin: env("RIGCAL_PHOTO_MARGIN", 0.03),
         min_views: env("RIGCAL_PHOTO_MIN_VIEWS", 3),
         truncation: env("RIGCAL_PHOTO_TRUNCATION", 1.0),
+        vignetting_k: env("RIGCAL_PHOTO_DEVIGNETTE", 0.0),
         ..PhotoConfig::default()
     };
     let rotate_only = std::env::var("RIGCAL_PHOTO_ROTATE_ONLY").is_ok();
