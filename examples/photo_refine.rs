@@ -70,16 +70,12 @@ fn main() {
             (aligned.translation.z - truth.translation.z) * 100.0,
         )
     };
-    // The problem with every image taken `ms` later than stamped.
+    // The problem with every image taken `ms` later than stamped (as stamped where that
+    // leaves the trajectory).
     let shifted = |problem: &PhotoProblem, ms: i64| {
-        let mut shifted = problem.clone();
-        for im in shifted.images.iter_mut() {
-            im.vehicle_from_world = drive
-                .trajectory
-                .world_from_vehicle(im.stamp_nanos + ms * 1_000_000)
-                .map_or(im.vehicle_from_world, |t| t.inverse());
-        }
-        shifted
+        problem
+            .delayed(&drive.trajectory, ms * 1_000_000)
+            .unwrap_or_else(|| problem.clone())
     };
     let run = |problem: &PhotoProblem, start: Rigid| -> (CompassSearch, usize) {
         let mut s = search(problem, start);

@@ -130,7 +130,7 @@ enum Command {
         out: PathBuf,
     },
     /// Measure a calibration against a reference: pose errors after root alignment, and with a
-    /// log the LiDAR–LiDAR, edge-alignment (and checkerboard) metrics on the data.
+    /// log the LiDAR–LiDAR, edge-alignment (and checkerboard, photometric) metrics on the data.
     Eval {
         /// The reference: a native calibration file or a dataset's ground_truth.json.
         #[arg(long)]
@@ -149,6 +149,10 @@ enum Command {
         /// Also measure the checkerboard corner re-projection error (logs with boards).
         #[arg(long)]
         checkerboard: bool,
+        /// Also measure every camera's photometric consistency over the LiDAR map (texture-free)
+        /// and the image delay at which it is best
+        #[arg(long)]
+        photometric: bool,
         /// Also write the report as JSON.
         #[arg(long)]
         json: Option<PathBuf>,
@@ -329,6 +333,7 @@ fn run() -> Result<()> {
             root,
             frames,
             checkerboard,
+            photometric,
             json,
         }) => {
             let args = rigcal::cli::eval::EvalArgs {
@@ -338,6 +343,7 @@ fn run() -> Result<()> {
                 root,
                 frames,
                 checkerboard,
+                photometric,
             };
             let mut bar = rigcal::cli::progress::Progress::new("eval", 1);
             let report =

@@ -163,6 +163,46 @@ fn the_pandaset_ground_truth_json_is_accepted_and_misalignment_shows_in_the_data
     assert!(truth < 5.0, "{m:?}");
     assert!(calibrated > truth + 1.0, "{m:?}");
     assert_eq!(report.edge_px.len(), 12);
+    assert!(report.photo_inconsistency.is_empty());
+}
+
+#[test]
+fn a_turned_camera_agrees_less_with_the_lidar_map_photometrically() {
+    // The front camera turned by 1° about its vertical axis: its images agree less over the
+    // LiDAR map than at the reference; the other cameras are the reference on both sides.
+    let json = pandaset_dir().join("ground_truth.json");
+    let mut turned = load_reference(&json).unwrap();
+    let s = turned.sensor_mut("front_camera").unwrap();
+    s.vehicle_from_sensor = s
+        .vehicle_from_sensor
+        .perturbed_right(DVec3::new(0.0, 1f64.to_radians(), 0.0), DVec3::ZERO);
+    let dir = temp_dir("photo");
+    let path = dir.join("turned.yaml");
+    save(&turned, &path);
+    let args = EvalArgs {
+        ground_truth: json,
+        calibration: path,
+        log: Some(pandaset_dir().join("pandaset-002.mcap")),
+        frames: 1,
+        photometric: true,
+        ..Default::default()
+    };
+    let report = evaluate(&args, &mut |_, _| {}).unwrap();
+    assert_eq!(report.photo_inconsistency.len(), 6);
+    assert_eq!(report.photo_delay_ms.len(), 6);
+    for m in &report.photo_inconsistency {
+        let (c, r) = (m.calibration.unwrap(), m.reference.unwrap());
+        if m.a == "front_camera" {
+            assert!(c > r * 1.1, "{m:?}");
+        } else {
+            assert!((c - r).abs() < 1e-9 * r.max(1.0), "{m:?}");
+        }
+    }
+    for m in &report.photo_delay_ms {
+        let d = m.reference.unwrap();
+        assert!((-60.0..=60.0).contains(&d) && d % 10.0 == 0.0, "{m:?}");
+    }
+    assert!(report.to_markdown().contains("photometric inconsistency"));
 }
 
 #[test]

@@ -7,7 +7,13 @@
 //! ([`crate::eval::registration`], cm, 30 cm inliers), the target-free edge-alignment score of
 //! every camera–LiDAR pair ([`crate::optim::edge_align`], px), and with `--checkerboard` the
 //! checkerboard corner re-projection error ([`crate::eval::checkerboard`], px, scaled to a
-//! 1920-pixel-wide image as the paper reports it).
+//! 1920-pixel-wide image as the paper reports it). With `--photometric`, for every camera also the texture-free
+//! photometric consistency of its images over the LiDAR map
+//! ([`crate::optim::photo_consistency`]: the mean variance of each LiDAR point's normalised grey
+//! over the images that see it, ×1000) and the delay of the images (ms, −60 to +60 in 10 ms
+//! steps) at which that consistency is best: a delay far from 0 says the images are stamped
+//! late or early, or (the same thing while the vehicle drives at one speed) that the camera
+//! sits off along the drive.
 
 use std::path::PathBuf;
 
@@ -20,6 +26,7 @@ use crate::eval::registration::{RegistrationError, pair_registration_errors};
 use crate::geometry::{RigError, rig_errors};
 use crate::log::Drive;
 use crate::optim::edge_align::EdgeAlignment;
+use crate::optim::photo_consistency::{PhotoConfig, PhotoProblem};
 
 /// What `rigcal eval` was asked to do.
 #[derive(Clone, Debug, Default)]
@@ -32,6 +39,8 @@ pub struct EvalArgs {
     /// Frames per pair for the data metrics.
     pub frames: usize,
     pub checkerboard: bool,
+    /// Also the photometric consistency of every camera over the LiDAR map, and its best delay.
+    pub photometric: bool,
 }
 
 /// One metric of one sensor pair, for the calibration and for the reference.
@@ -60,6 +69,10 @@ pub struct EvalReport {
     pub edge_px: Vec<PairMetric>,
     /// Camera–LiDAR checkerboard corner error (px at 1920 wide).
     pub corners_px: Vec<PairMetric>,
+    /// Camera × LiDAR map: photometric inconsistency (×1000, lower is better).
+    pub photo_inconsistency: Vec<PairMetric>,
+    /// Camera × LiDAR map: the image delay (ms) at which the images agree best.
+    pub photo_delay_ms: Vec<PairMetric>,
 }
 
 /// Run the evaluation; `progress(done, total)` after each data metric.
@@ -109,6 +122,8 @@ pub fn evaluate(
         registration_cm: Vec::new(),
         edge_px: Vec::new(),
         corners_px: Vec::new(),
+        photo_inconsistency: Vec::new(),
+        photo_delay_ms: Vec::new(),
     };
     if let Some(log) = &args.log {
         let drive = Drive::open(log).map_err(|e| e.to_string())?;
@@ -158,7 +173,7 @@ fn measure_on_data(
         .iter()
         .flat_map(|c| lidars.iter().map(move |l| (c.clone(), l.clone())))
         .collect();
-    let per_camera = 1 + args.checkerboard as usize;
+    let per_camera = 1 + args.checkerboard as usize + args.photometric as usize;
     let total = lidar_pairs.len() + camera_pairs.len() * per_camera;
     let mut done = 0;
     let frames = args.frames.max(1);
@@ -191,6 +206,21 @@ fn measure_on_data(
         done += 1;
         progress(done, total);
     }
+    for cam in cameras.iter().filter(|_| args.photometric) {
+        let run = |rig: &Rig| photo_metrics(drive, rig, cam, frames);
+        let (c, r) = (run(calibration), run(&reference_rig));
+        let part = |v: &Result<(f64, f64), String>, i: usize| {
+            v.clone().map(|v| Some(if i == 0 { v.0 } else { v.1 }))
+        };
+        report
+            .photo_inconsistency
+            .push(metric(cam, "LiDAR map", part(&c, 0), part(&r, 0), ""));
+        report
+            .photo_delay_ms
+            .push(metric(cam, "LiDAR map", part(&c, 1), part(&r, 1), ""));
+        done += 1;
+        progress(done, total);
+    }
     if args.checkerboard {
         let spec = BoardSpec::default();
         for (cam, lidar) in &camera_pairs {
@@ -214,6 +244,44 @@ fn measure_on_data(
             progress(done, total);
         }
     }
+}
+
+/// Delays tried for [`photo_metrics`] (ms).
+const PHOTO_DELAYS_MS: [i64; 13] = [-60, -50, -40, -30, -20, -10, 0, 10, 20, 30, 40, 50, 60];
+
+/// The photometric inconsistency (×1000) of `camera`'s images over the LiDAR map of `rig`, and
+/// the image delay (ms) that minimises it.
+fn photo_metrics(
+    drive: &Drive,
+    rig: &Rig,
+    camera: &str,
+    frames: usize,
+) -> Result<(f64, f64), String> {
+    let config = PhotoConfig {
+        images: frames.max(8),
+        sweeps_per_lidar: frames.max(8),
+        ..PhotoConfig::default()
+    };
+    let problem =
+        PhotoProblem::from_drive(drive, rig, camera, &config).map_err(|e| e.to_string())?;
+    let Some(vehicle_from_camera) = rig.sensor(camera).map(|s| s.vehicle_from_sensor) else {
+        return Err(format!("no sensor '{camera}' in the rig"));
+    };
+    if problem.point_count() == 0 {
+        return Err("no LiDAR point seen by three images".into());
+    }
+    let at = problem.cost(vehicle_from_camera);
+    let mut best = (at, 0.0);
+    for delay_ms in PHOTO_DELAYS_MS {
+        let Some(delayed) = problem.delayed(&drive.trajectory, delay_ms * 1_000_000) else {
+            continue;
+        };
+        let cost = delayed.cost(vehicle_from_camera);
+        if cost < best.0 {
+            best = (cost, delay_ms as f64);
+        }
+    }
+    Ok((at * 1000.0, best.1))
 }
 
 fn metric(
@@ -283,6 +351,16 @@ impl EvalReport {
                 "Camera–LiDAR checkerboard corner error (at 1920 px wide)",
                 "px",
                 &self.corners_px,
+            ),
+            (
+                "Camera photometric inconsistency over the LiDAR map (×1000, texture-free; lower agrees better)",
+                "×1000",
+                &self.photo_inconsistency,
+            ),
+            (
+                "Camera image delay at which the images agree best over the LiDAR map (or the camera sits off along the drive)",
+                "ms",
+                &self.photo_delay_ms,
             ),
         ] {
             if rows.is_empty() {

@@ -350,6 +350,23 @@ impl PhotoProblem {
         }
     }
 
+    /// The same problem with every image taken `delay_nanos` after its stamp (the vehicle pose
+    /// read from `trajectory` there); `None` if a delayed stamp leaves the trajectory.
+    pub fn delayed(
+        &self,
+        trajectory: &crate::geometry::Trajectory,
+        delay_nanos: i64,
+    ) -> Option<Self> {
+        let mut out = self.clone();
+        for image in out.images.iter_mut() {
+            image.vehicle_from_world = trajectory
+                .world_from_vehicle(image.stamp_nanos + delay_nanos)
+                .ok()?
+                .inverse();
+        }
+        Some(out)
+    }
+
     /// Points used (seen by enough images).
     pub fn point_count(&self) -> usize {
         self.points_in_world.len()
