@@ -32,10 +32,13 @@ use crate::geometry::projection::{SweepView, world_points};
 use crate::log::Drive;
 use crate::optim::edge_align::{AlignError, CompassSearch};
 
+/// At most this many images per camera (a point's grey values are kept on the stack).
+pub const MAX_IMAGES: usize = 64;
+
 /// Settings of the problem and its search.
 #[derive(Clone, Debug)]
 pub struct PhotoConfig {
-    /// Images of the camera, evenly spread over the drive.
+    /// Images of the camera, evenly spread over the drive (2 to [`MAX_IMAGES`]).
     pub images: usize,
     /// Sweeps per LiDAR, evenly spread over the drive.
     pub sweeps_per_lidar: usize,
@@ -253,11 +256,11 @@ impl PhotoProblem {
             )));
         }
         let mut images = Vec::new();
-        for index in crate::log::spread_evenly(&usable, config.images.max(2)) {
+        for index in crate::log::spread_evenly(&usable, config.images.clamp(2, MAX_IMAGES)) {
             let stamp_nanos = stream.frames[index].stamp_nanos;
             let vehicle_from_world = drive.trajectory.world_from_vehicle(stamp_nanos)?.inverse();
             let image = drive.load_image(camera, index)?;
-            let (width, height, mut grey) = grey_at_width(&image, config.working_width_px);
+            let (width, height, mut grey) = grey_at_width(&image, config.working_width_px.max(2));
             if config.vignetting_k != 0.0 {
                 devignette(&mut grey, width, height, config.vignetting_k);
             }
@@ -307,7 +310,8 @@ impl PhotoProblem {
         ))
     }
 
-    /// A problem from prepared images and points; visibility at `vehicle_from_camera`.
+    /// A problem from prepared images (at most [`MAX_IMAGES`] count for a point) and points;
+    /// visibility at `vehicle_from_camera`.
     pub fn new(
         camera: &str,
         intrinsics: CameraIntrinsics,
@@ -390,7 +394,7 @@ impl PhotoProblem {
             .with_min_len(4096)
             .map(|p| {
                 let range = self.view_offsets[p] as usize..self.view_offsets[p + 1] as usize;
-                let mut values = [0f32; 64];
+                let mut values = [0f32; MAX_IMAGES];
                 let mut n = 0;
                 for &image in &self.view_images[range] {
                     let image = image as usize;
