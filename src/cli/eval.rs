@@ -173,8 +173,10 @@ fn measure_on_data(
         .iter()
         .flat_map(|c| lidars.iter().map(move |l| (c.clone(), l.clone())))
         .collect();
-    let per_camera = 1 + args.checkerboard as usize + args.photometric as usize;
-    let total = lidar_pairs.len() + camera_pairs.len() * per_camera;
+    let per_pair = 1 + args.checkerboard as usize;
+    let total = lidar_pairs.len()
+        + camera_pairs.len() * per_pair
+        + cameras.len() * args.photometric as usize;
     let mut done = 0;
     let frames = args.frames.max(1);
     for (a, b) in lidar_pairs {
@@ -209,15 +211,24 @@ fn measure_on_data(
     for cam in cameras.iter().filter(|_| args.photometric) {
         let run = |rig: &Rig| photo_metrics(drive, rig, cam, frames);
         let (c, r) = (run(calibration), run(&reference_rig));
-        let part = |v: &Result<(f64, f64), String>, i: usize| {
-            v.clone().map(|v| Some(if i == 0 { v.0 } else { v.1 }))
+        let pick = |v: &Result<(f64, f64), String>, value: fn((f64, f64)) -> f64| {
+            v.clone().map(|v| Some(value(v)))
         };
-        report
-            .photo_inconsistency
-            .push(metric(cam, "LiDAR map", part(&c, 0), part(&r, 0), ""));
-        report
-            .photo_delay_ms
-            .push(metric(cam, "LiDAR map", part(&c, 1), part(&r, 1), ""));
+        let (cost, delay): (fn((f64, f64)) -> f64, fn((f64, f64)) -> f64) = (|v| v.0, |v| v.1);
+        report.photo_inconsistency.push(metric(
+            cam,
+            "LiDAR map",
+            pick(&c, cost),
+            pick(&r, cost),
+            "",
+        ));
+        report.photo_delay_ms.push(metric(
+            cam,
+            "LiDAR map",
+            pick(&c, delay),
+            pick(&r, delay),
+            "",
+        ));
         done += 1;
         progress(done, total);
     }
