@@ -12,7 +12,7 @@ use rigcal::calib::dataset_json::load_reference;
 use rigcal::geometry::Rigid;
 use rigcal::log::Drive;
 use rigcal::optim::edge_align::CompassSearch;
-use rigcal::optim::photo_consistency::{PhotoConfig, PhotoProblem, search};
+use rigcal::optim::photo_consistency::{PhotoConfig, PhotoProblem, lidar_map, search};
 
 fn env<T: std::str::FromStr>(name: &str, default: T) -> T {
     std::env::var(name)
@@ -87,6 +87,7 @@ fn main() {
         }
         (s, rounds)
     };
+    let map = lidar_map(&drive, &rig, &config).unwrap();
     let cameras: Vec<String> = rig.cameras().map(|c| c.name.clone()).collect();
     let mut out = rig.clone();
     let only: Option<String> = std::env::var("RIGCAL_PHOTO_CAMERAS").ok();
@@ -103,7 +104,8 @@ fn main() {
             problem_rig.sensor_mut(camera).unwrap().vehicle_from_sensor =
                 alignment * reference.sensor(camera).unwrap().vehicle_from_sensor;
         }
-        let problem = PhotoProblem::from_drive(&drive, &problem_rig, camera, &config).unwrap();
+        let problem =
+            PhotoProblem::from_drive(&drive, &problem_rig, camera, &map, &config).unwrap();
         let truth = reference.sensor(camera).unwrap().vehicle_from_sensor;
         let truth_here = alignment * truth;
         let start = if std::env::var("RIGCAL_PHOTO_FROM_REFERENCE").is_ok() {

@@ -76,7 +76,7 @@ pub struct MiProblem {
 }
 
 /// Grey (Rec. 601 luma) of an RGB image in [0, 1].
-fn grey(image: &image::RgbImage) -> Vec<f32> {
+pub(crate) fn grey(image: &image::RgbImage) -> Vec<f32> {
     image
         .pixels()
         .map(|p| (0.299 * p[0] as f32 + 0.587 * p[1] as f32 + 0.114 * p[2] as f32) / 255.0)

@@ -26,7 +26,7 @@ use crate::eval::registration::{RegistrationError, pair_registration_errors};
 use crate::geometry::{RigError, rig_errors};
 use crate::log::Drive;
 use crate::optim::edge_align::EdgeAlignment;
-use crate::optim::photo_consistency::{PhotoConfig, PhotoProblem};
+use crate::optim::photo_consistency::{PhotoConfig, PhotoProblem, lidar_map};
 
 /// What `rigcal eval` was asked to do.
 #[derive(Clone, Debug, Default)]
@@ -208,29 +208,34 @@ fn measure_on_data(
         done += 1;
         progress(done, total);
     }
-    for cam in cameras.iter().filter(|_| args.photometric) {
-        let run = |rig: &Rig| photo_metrics(drive, rig, cam, frames);
-        let (c, r) = (run(calibration), run(&reference_rig));
-        let pick = |v: &Result<(f64, f64), String>, value: fn((f64, f64)) -> f64| {
-            v.clone().map(|v| Some(value(v)))
+    if args.photometric {
+        let config = PhotoConfig {
+            images: frames.max(8),
+            sweeps_per_lidar: frames.max(8),
+            ..PhotoConfig::default()
         };
-        let (cost, delay): (fn((f64, f64)) -> f64, fn((f64, f64)) -> f64) = (|v| v.0, |v| v.1);
-        report.photo_inconsistency.push(metric(
-            cam,
-            "LiDAR map",
-            pick(&c, cost),
-            pick(&r, cost),
-            "",
-        ));
-        report.photo_delay_ms.push(metric(
-            cam,
-            "LiDAR map",
-            pick(&c, delay),
-            pick(&r, delay),
-            "",
-        ));
-        done += 1;
-        progress(done, total);
+        // Each rig's LiDAR map once, for all its cameras.
+        let rigs = [calibration, &reference_rig];
+        let maps = rigs.map(|rig| lidar_map(drive, rig, &config).map_err(|e| e.to_string()));
+        for cam in &cameras {
+            let measure = |i: usize| match &maps[i] {
+                Ok(map) => photo_metrics(drive, rigs[i], cam, map, &config),
+                Err(e) => Err(e.clone()),
+            };
+            let (c, r) = (measure(0), measure(1));
+            let split = |v: &Result<(f64, f64), String>| {
+                (v.clone().map(|v| Some(v.0)), v.clone().map(|v| Some(v.1)))
+            };
+            let ((c_cost, c_delay), (r_cost, r_delay)) = (split(&c), split(&r));
+            report
+                .photo_inconsistency
+                .push(metric(cam, "LiDAR map", c_cost, r_cost, ""));
+            report
+                .photo_delay_ms
+                .push(metric(cam, "LiDAR map", c_delay, r_delay, ""));
+            done += 1;
+            progress(done, total);
+        }
     }
     if args.checkerboard {
         let spec = BoardSpec::default();
@@ -260,21 +265,17 @@ fn measure_on_data(
 /// Delays tried for [`photo_metrics`] (ms).
 const PHOTO_DELAYS_MS: [i64; 13] = [-60, -50, -40, -30, -20, -10, 0, 10, 20, 30, 40, 50, 60];
 
-/// The photometric inconsistency (×1000) of `camera`'s images over the LiDAR map of `rig`, and
+/// The photometric inconsistency (×1000) of `camera`'s images over `map` (the LiDAR map of `rig`), and
 /// the image delay (ms) that minimises it.
 fn photo_metrics(
     drive: &Drive,
     rig: &Rig,
     camera: &str,
-    frames: usize,
+    map: &[glam::DVec3],
+    config: &PhotoConfig,
 ) -> Result<(f64, f64), String> {
-    let config = PhotoConfig {
-        images: frames.max(8),
-        sweeps_per_lidar: frames.max(8),
-        ..PhotoConfig::default()
-    };
     let problem =
-        PhotoProblem::from_drive(drive, rig, camera, &config).map_err(|e| e.to_string())?;
+        PhotoProblem::from_drive(drive, rig, camera, map, config).map_err(|e| e.to_string())?;
     let Some(vehicle_from_camera) = rig.sensor(camera).map(|s| s.vehicle_from_sensor) else {
         return Err(format!("no sensor '{camera}' in the rig"));
     };

@@ -25,7 +25,8 @@ use glam::{DVec2, DVec3};
 use rayon::prelude::*;
 
 use crate::calib::Rig;
-use crate::classical::mutual_info::gaussian_blur;
+use crate::classical::icp::voxel_thin;
+use crate::classical::mutual_info::{gaussian_blur, grey};
 use crate::geometry::Rigid;
 use crate::geometry::camera::CameraIntrinsics;
 use crate::geometry::projection::{SweepView, world_points};
@@ -134,11 +135,11 @@ fn grey_at_width(image: &image::RgbImage, width: u32) -> (usize, usize, Vec<f32>
     } else {
         image::imageops::resize(image, width, height, image::imageops::FilterType::Triangle)
     };
-    let grey = resized
-        .pixels()
-        .map(|p| (0.299 * p[0] as f32 + 0.587 * p[1] as f32 + 0.114 * p[2] as f32) / 255.0)
-        .collect();
-    (resized.width() as usize, resized.height() as usize, grey)
+    (
+        resized.width() as usize,
+        resized.height() as usize,
+        grey(&resized),
+    )
 }
 
 /// Divide out a gain `1 − k·r²` applied before a 2.2 gamma.
@@ -165,23 +166,6 @@ fn normalise(values: &mut [f32]) {
     for v in values {
         *v = ((*v as f64 - mean) * inv_std) as f32;
     }
-}
-
-/// Thin points to one per voxel (the first one met).
-pub fn voxel_thin(points: &[DVec3], voxel_m: f64) -> Vec<DVec3> {
-    let mut seen = std::collections::HashSet::new();
-    points
-        .iter()
-        .copied()
-        .filter(|p| {
-            let key = (
-                (p.x / voxel_m).floor() as i64,
-                (p.y / voxel_m).floor() as i64,
-                (p.z / voxel_m).floor() as i64,
-            );
-            seen.insert(key)
-        })
-        .collect()
 }
 
 /// Which points each image sees (indices into `points`), by a depth buffer of `cell_px` cells.
@@ -229,13 +213,45 @@ fn visible_per_image(
         .collect()
 }
 
+/// Every LiDAR's sweeps (`config.sweeps_per_lidar` each, spread over the drive) placed in the
+/// world at `rig`'s extrinsics and thinned to one point per `config.voxel_m` voxel: the
+/// geometry every camera of that rig is checked against.
+pub fn lidar_map(drive: &Drive, rig: &Rig, config: &PhotoConfig) -> Result<Vec<DVec3>, AlignError> {
+    let mut world = Vec::new();
+    for lidar in rig.lidars() {
+        let usable = drive.frames_within(&lidar.name, &[]);
+        for index in crate::log::spread_evenly(&usable, config.sweeps_per_lidar) {
+            let sweep = drive.load_sweep(&lidar.name, index)?;
+            let view = SweepView {
+                points_in_lidar: &sweep.points_in_sensor,
+                intensity: &sweep.intensity,
+                time_offset_secs: sweep.time_offset_secs.as_deref(),
+                stamp_nanos: sweep.stamp_nanos,
+            };
+            world.extend(world_points(
+                &view,
+                &drive.trajectory,
+                lidar.vehicle_from_sensor,
+                1,
+            )?);
+        }
+    }
+    if world.is_empty() {
+        return Err(AlignError::Setup(
+            "no LiDAR sweep inside the trajectory".into(),
+        ));
+    }
+    Ok(voxel_thin(&world, config.voxel_m, |p| *p))
+}
+
 impl PhotoProblem {
-    /// Build the problem of `camera` from a drive, with every LiDAR of `rig` at its extrinsic and
-    /// the visibility decided at the camera's extrinsic in `rig`.
+    /// Build the problem of `camera` from a drive over `map` ([`lidar_map`] of the same rig),
+    /// with the visibility decided at the camera's extrinsic in `rig`.
     pub fn from_drive(
         drive: &Drive,
         rig: &Rig,
         camera: &str,
+        map: &[DVec3],
         config: &PhotoConfig,
     ) -> Result<Self, AlignError> {
         let setup = |what: String| AlignError::Setup(what);
@@ -277,34 +293,11 @@ impl PhotoProblem {
         let factor = images[0].width as f64 / full.width as f64;
         let intrinsics = full.scaled(factor);
 
-        let mut world = Vec::new();
-        for lidar in rig.lidars() {
-            let usable = drive.frames_within(&lidar.name, &[]);
-            for index in crate::log::spread_evenly(&usable, config.sweeps_per_lidar) {
-                let sweep = drive.load_sweep(&lidar.name, index)?;
-                let view = SweepView {
-                    points_in_lidar: &sweep.points_in_sensor,
-                    intensity: &sweep.intensity,
-                    time_offset_secs: sweep.time_offset_secs.as_deref(),
-                    stamp_nanos: sweep.stamp_nanos,
-                };
-                world.extend(world_points(
-                    &view,
-                    &drive.trajectory,
-                    lidar.vehicle_from_sensor,
-                    1,
-                )?);
-            }
-        }
-        if world.is_empty() {
-            return Err(setup("no LiDAR sweep inside the trajectory".into()));
-        }
-        let points = voxel_thin(&world, config.voxel_m);
         Ok(Self::new(
             camera,
             intrinsics,
             images,
-            points,
+            map.to_vec(),
             sensor.vehicle_from_sensor,
             config,
         ))
@@ -541,7 +534,7 @@ mod tests {
             DVec3::new(0.15, 0.02, 0.03),
             DVec3::new(-0.01, 0.02, 0.03),
         ];
-        let kept = voxel_thin(&points, 0.1);
+        let kept = voxel_thin(&points, 0.1, |p| *p);
         assert_eq!(kept, vec![points[0], points[2], points[3]]);
     }
 
