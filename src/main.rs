@@ -76,6 +76,12 @@ enum Command {
         /// point-to-plane ICP first, then hold the LiDARs while UniCal calibrates the cameras
         #[arg(long)]
         lidar_icp: bool,
+        /// unical with cameras: fit each camera to its own motion first (hand-eye against the
+        /// trajectory, from keypoints matched between its images a few metres apart): for
+        /// starts too far off for the scene (10°, a metre); directions the drive does not
+        /// observe (the height on a level drive) are kept
+        #[arg(long)]
+        camera_hand_eye: bool,
         /// unical with cameras: the scale images are used at (0.125: 1920×1080 → 240×135)
         #[arg(long, default_value_t = 0.125)]
         camera_scale: f64,
@@ -275,6 +281,7 @@ fn run() -> Result<()> {
             root,
             alignment,
             lidar_icp,
+            camera_hand_eye,
             camera_scale,
             camera_rays,
             camera_lr,
@@ -301,6 +308,7 @@ fn run() -> Result<()> {
                 root,
                 alignment,
                 lidar_icp,
+                camera_hand_eye,
                 camera_scale,
                 camera_rays,
                 camera_lr,

@@ -10,6 +10,8 @@
 //! `pose_graph_calibrator` (every LiDAR pair by ICP, every camera–LiDAR pair by checkerboards
 //! or mutual information, unified by the graph).
 
+pub mod camera_motion;
+pub mod hand_eye;
 pub mod icp;
 pub mod icp_calibrator;
 pub mod mi_calibrator;

@@ -15,6 +15,7 @@
 use std::path::PathBuf;
 
 use crate::calib::{CalibrationFile, Rig, SensorKind};
+use crate::classical::camera_motion::{self, fit_camera};
 use crate::classical::icp::IcpConfig;
 use crate::classical::icp_calibrator::IcpCalibrator;
 use crate::classical::mi_calibrator::MiCalibrator;
@@ -54,6 +55,10 @@ pub struct CalibrateArgs {
     /// ICP, first; then hold the LiDARs (UniCal's joint objective moves a registered LiDAR
     /// pair centimetres off the truth; BENCHMARKS.md) while the cameras are calibrated.
     pub lidar_icp: bool,
+    /// unical with cameras: fit each camera's extrinsic to its own motion first (hand-eye
+    /// against the trajectory: the rotation, and the translation the drive's turns observe),
+    /// for starts too far off for the scene (10°, a metre).
+    pub camera_hand_eye: bool,
     /// unical with cameras: the scale images are used at, in (0, 1].
     pub camera_scale: f64,
     /// unical with cameras: rays per camera and step.
@@ -226,6 +231,61 @@ fn register_lidars(
     Ok(out)
 }
 
+/// `rig` with every selected camera fitted to its own motion ([`fit_camera`]); a camera the
+/// drive cannot fit is kept where it is, and the output says why.
+fn register_cameras(
+    drive: &Drive,
+    rig: &Rig,
+    args: &CalibrateArgs,
+    segments: &[(i64, i64)],
+) -> Rig {
+    let bars = super::progress::PhasedProgress::default();
+    let mut out = rig.clone();
+    for name in selected_cameras(args, rig) {
+        let fit = fit_camera(
+            drive,
+            rig,
+            &name,
+            camera_motion::DEFAULT_FRAMES,
+            segments,
+            &|phase, done, total| bars.report(&format!("{name}: {phase}"), done, total),
+        );
+        let Some(sensor) = out.sensor_mut(&name) else {
+            continue;
+        };
+        match fit {
+            Ok(fit) => {
+                let (rot, trans) = sensor
+                    .vehicle_from_sensor
+                    .difference(fit.vehicle_from_camera);
+                let kept = if fit.unobserved.is_empty() {
+                    String::new()
+                } else {
+                    format!(
+                        " ({} not observed by the drive: kept)",
+                        fit.unobserved.join(", ")
+                    )
+                };
+                eprintln!(
+                    "camera hand-eye: {name} moved {:.3}° / {:.1} cm to fit its motion{kept}; \
+                     {} of {} image pairs, median residuals {:.2}° (rotation) and {:.2}° \
+                     (direction)",
+                    rot.to_degrees(),
+                    trans * 100.0,
+                    fit.pairs_used,
+                    fit.pairs_given,
+                    fit.rotation_residual_deg,
+                    fit.direction_residual_deg,
+                );
+                sensor.vehicle_from_sensor = fit.vehicle_from_camera;
+            }
+            Err(e) => eprintln!("camera hand-eye: {name} kept: {e}"),
+        }
+    }
+    bars.finish();
+    out
+}
+
 /// The cameras with intrinsics that `--sensors` selects (all when empty).
 fn selected_cameras(args: &CalibrateArgs, rig: &Rig) -> Vec<String> {
     rig.cameras()
@@ -326,6 +386,9 @@ pub fn calibrate(
             };
             if args.lidar_icp {
                 rig = register_lidars(&drive, &rig, args, &segments)?;
+            }
+            if args.camera_hand_eye {
+                rig = register_cameras(&drive, &rig, args, &segments);
             }
             let config = DepthCalibConfig {
                 iterations: args.iterations.unwrap_or(300),
