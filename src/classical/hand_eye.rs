@@ -25,8 +25,9 @@
 //! on the simulator it takes the cameras from 0.1–6° after the closed form to 0.03–0.36°.
 //!
 //! A drive that only turns about the vertical cannot observe the height (`(R_V − I)` has no
-//! vertical row), and without the images' scale the offset along the drive is barely seen;
-//! such directions stay where they started and are named in [`HandEyeFit::unobserved`].
+//! vertical row), and without the images' scale the sideways offset (vehicle y) is barely seen,
+//! since a turn moves it along the drive, where only the unknown scale of the motion would show
+//! it; such directions stay where they started and are named in [`HandEyeFit::unobserved`].
 
 use glam::{DMat3, DQuat, DVec3};
 use rayon::prelude::*;
@@ -50,8 +51,7 @@ const RANSAC_ITERATIONS: usize = 400;
 /// entries are the turn in radians, 0.05–0.5).
 const PRIOR_WEIGHT: f64 = 0.03;
 /// A translation direction whose information is below this (per pair, in the closed form's
-/// units) is reported as not observed; after the refinement, one where the pull to the start
-/// outweighs the images.
+/// units) is reported as not observed (the refinement has its own, [`OBSERVED_RELATIVE`]).
 const OBSERVED_INFORMATION: f64 = 2.0e-3;
 
 /// One image pair of a camera: its motion seen in the images, the vehicle's from the trajectory.
@@ -421,7 +421,8 @@ pub fn solve(pairs: &[MotionPair], start: Rigid) -> Result<HandEyeFit, HandEyeEr
         (closed_form, observed)
     } else {
         let (fit, relative) = refine(&kept, closed_form, start.translation);
-        (fit, std::array::from_fn(|i| relative[i][i] >= 1.0))
+        let (fit, observed) = keep_observed(fit, relative, start.translation);
+        (fit, observed)
     };
     let mut rotation_res: Vec<f64> = kept.iter().map(|p| residuals(p, fit).0).collect();
     let mut direction_res: Vec<f64> = kept.iter().map(|p| residuals(p, fit).1).collect();
@@ -583,6 +584,32 @@ fn refine(pairs: &[MotionPair], start: Rigid, prior_translation: DVec3) -> (Rigi
         }
     }
     (x, information)
+}
+
+/// The translation's information relative to the prior's above which an eigen-direction of it
+/// counts as observed. On the simulator's figure-8 the front and back cameras' x reaches
+/// 100–180, the side cameras' 0.3–20 (a sideways camera sees the turns' sideways shift as
+/// motion along its optical axis), y 1e-4–1e-3 and z nothing.
+const OBSERVED_RELATIVE: f64 = 3.0;
+
+/// `fit` with its translation moved from `start` only along the eigen-directions of the
+/// translation's information (relative to the prior's) that the images observe: in that basis
+/// the directions are independent, so one the drive cannot see does not drag the others. Also
+/// which vehicle axes are observed (their information, relative, as high).
+fn keep_observed(fit: Rigid, relative: [[f64; 3]; 3], start: DVec3) -> (Rigid, [bool; 3]) {
+    let (values, vectors) = spd::symmetric_eigen(relative);
+    let moved = fit.translation - start;
+    let mut kept = DVec3::ZERO;
+    for k in 0..3 {
+        if values[k] >= OBSERVED_RELATIVE {
+            let e = DVec3::new(vectors[0][k], vectors[1][k], vectors[2][k]);
+            kept += e * e.dot(moved);
+        }
+    }
+    (
+        Rigid::new(fit.rotation, start + kept),
+        std::array::from_fn(|i| relative[i][i] >= OBSERVED_RELATIVE),
+    )
 }
 
 fn median(values: &mut [f64]) -> f64 {
