@@ -63,9 +63,7 @@ pub struct MotionPair {
     pub camera_direction: DVec3,
     /// `vehicle_i_from_vehicle_j`, from the trajectory.
     pub vehicle_motion: Rigid,
-    /// Verified matches behind the pair.
-    pub inliers: usize,
-    /// Up to [`RAYS_PER_PAIR`] of them, as unit rays in camera `i` and camera `j`.
+    /// Up to [`RAYS_PER_PAIR`] of its verified matches, as unit rays in camera `i` and camera `j`.
     pub rays: Vec<(DVec3, DVec3)>,
 }
 
@@ -223,7 +221,6 @@ pub fn pair_from_keypoints(
         camera_rotation,
         camera_direction,
         vehicle_motion: vehicle_i_from_vehicle_j,
-        inliers: verified.len(),
         rays: crate::log::spread_evenly(&verified, RAYS_PER_PAIR),
     })
 }
@@ -303,7 +300,7 @@ fn motion_direction(pair: &MotionPair, translation: DVec3) -> Option<DVec3> {
     (v.rotation * translation - translation + v.translation).try_normalize()
 }
 
-/// Median residuals of a pair at `fit` (degrees): rotation, direction.
+/// Residuals of one pair at `fit` (degrees): rotation, direction.
 fn residuals(pair: &MotionPair, fit: Rigid) -> (f64, f64) {
     // C predicted = X⁻¹ V X.
     let predicted = fit.inverse() * pair.vehicle_motion * fit;
@@ -397,16 +394,19 @@ pub fn solve(pairs: &[MotionPair], start: Rigid) -> Result<HandEyeFit, HandEyeEr
         return Err(HandEyeError::TooStraight { max_turn_deg });
     }
     let (first, _) = fit_once(pairs, start);
-    let score = |p: &MotionPair, fit: Rigid| {
-        let (r, d) = residuals(p, fit);
-        r.max(d)
-    };
-    let mut scores: Vec<f64> = pairs.iter().map(|p| score(p, first)).collect();
-    let limit = (3.0 * median(&mut scores)).max(1.0);
+    let scores: Vec<f64> = pairs
+        .iter()
+        .map(|p| {
+            let (r, d) = residuals(p, first);
+            r.max(d)
+        })
+        .collect();
+    let limit = (3.0 * median(&mut scores.clone())).max(1.0);
     let kept: Vec<MotionPair> = pairs
         .iter()
-        .filter(|p| score(p, first) <= limit)
-        .cloned()
+        .zip(&scores)
+        .filter(|(_, score)| **score <= limit)
+        .map(|(p, _)| p.clone())
         .collect();
     if kept.len() < MIN_PAIRS {
         return Err(HandEyeError::TooFewPairs {
@@ -421,11 +421,10 @@ pub fn solve(pairs: &[MotionPair], start: Rigid) -> Result<HandEyeFit, HandEyeEr
         (closed_form, observed)
     } else {
         let (fit, relative) = refine(&kept, closed_form, start.translation);
-        let (fit, observed) = keep_observed(fit, relative, start.translation);
-        (fit, observed)
+        keep_observed(fit, relative, start.translation)
     };
-    let mut rotation_res: Vec<f64> = kept.iter().map(|p| residuals(p, fit).0).collect();
-    let mut direction_res: Vec<f64> = kept.iter().map(|p| residuals(p, fit).1).collect();
+    let (mut rotation_res, mut direction_res): (Vec<f64>, Vec<f64>) =
+        kept.iter().map(|p| residuals(p, fit)).unzip();
     let unobserved = ["x", "y", "z"]
         .into_iter()
         .enumerate()
@@ -742,7 +741,6 @@ mod tests {
                     camera_rotation: so3::exp(wobble(0)) * c.rotation,
                     camera_direction: (so3::exp(wobble(3)) * c.translation).normalize_or_zero(),
                     vehicle_motion: motion,
-                    inliers: rays.len(),
                     rays,
                 });
             }
