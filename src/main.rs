@@ -93,6 +93,15 @@ enum Command {
         /// bounds how far a camera can move)
         #[arg(long)]
         camera_lr: Option<f32>,
+        /// unical with cameras: the cameras' translation rate as a multiple of their rotation
+        /// rate (default 1; translations are the slower-observed part of a camera's pose)
+        #[arg(long)]
+        camera_translation_rate: Option<f32>,
+        /// unical with cameras: what the cameras' translation rate decays to by the end of the
+        /// run, as a fraction of its start (default: 0.01, as the rotation's); a larger one
+        /// keeps translations moving late, when the rotations have settled
+        #[arg(long)]
+        camera_translation_final: Option<f32>,
         /// unical: run in ROUNDS rounds of --iterations each, every one with a fresh scene
         /// formed at the extrinsics the previous round reached (a scene formed around the
         /// cameras' errors holds them back)
@@ -285,6 +294,8 @@ fn run() -> Result<()> {
             camera_scale,
             camera_rays,
             camera_lr,
+            camera_translation_rate,
+            camera_translation_final,
             rounds,
             coarse_to_fine,
             shared_camera_translation,
@@ -312,6 +323,8 @@ fn run() -> Result<()> {
                 camera_scale,
                 camera_rays,
                 camera_lr,
+                camera_translation_rate,
+                camera_translation_final,
                 rounds,
                 coarse_to_fine,
                 shared_camera_translation,

@@ -9,7 +9,7 @@ use std::process::Command;
 
 use glam::DVec3;
 use rigcal::calib::CalibrationFile;
-use rigcal::classical::camera_motion::fit_camera;
+use rigcal::classical::camera_motion::{fit_camera, fit_rig_cameras};
 use rigcal::geometry::{Rigid, so3};
 use rigcal::log::Drive;
 use rigcal::sim::rigs::{RigPreset, SimRig};
@@ -69,6 +69,38 @@ fn cameras_ten_degrees_off_come_back_to_their_motion_and_keep_their_height() {
             assert!((found.translation.x - t.translation.x).abs() < 0.1);
             assert!(fit.unobserved.contains(&"z"), "{:?}", fit.unobserved);
             assert!((found.translation.z - start.translation.z).abs() < 1e-3);
+        }
+    }
+
+    // The whole rig at once (what the CLI and the studio run): both cameras moved, an unknown
+    // name kept with its reason, every other sensor untouched.
+    let mut start = truth.clone();
+    for name in ["front_camera", "back_camera"] {
+        let s = start.sensor_mut(name).unwrap();
+        s.vehicle_from_sensor = Rigid::new(
+            so3::exp(DVec3::new(0.3, 1.0, -0.2).normalize_or_zero() * 8f64.to_radians())
+                * s.vehicle_from_sensor.rotation,
+            s.vehicle_from_sensor.translation + DVec3::new(0.2, 0.1, -0.1),
+        );
+    }
+    let names = ["front_camera", "back_camera", "no_such_camera"].map(String::from);
+    let (fitted, outcomes) = fit_rig_cameras(&drive, &start, &names, 24, &[], &|_, _, _| {});
+    assert_eq!(outcomes.len(), 3);
+    for o in &outcomes[..2] {
+        let fit = o.fit.as_ref().unwrap();
+        let t = truth.sensor(&o.name).unwrap().vehicle_from_sensor;
+        let got = fitted.sensor(&o.name).unwrap().vehicle_from_sensor;
+        assert_eq!(got, fit.vehicle_from_camera);
+        assert!(t.difference(got).0.to_degrees() < 0.5, "{}", o.summary());
+        let s0 = start.sensor(&o.name).unwrap().vehicle_from_sensor;
+        assert!((o.moved.0 - s0.difference(got).0).abs() < 1e-12);
+        assert!(o.summary().contains("moved"), "{}", o.summary());
+    }
+    assert!(outcomes[2].fit.is_err());
+    assert!(outcomes[2].summary().contains("no_such_camera kept"));
+    for s in &start.sensors {
+        if !names.contains(&s.name) {
+            assert_eq!(fitted.sensor(&s.name).unwrap(), s);
         }
     }
 }

@@ -450,6 +450,49 @@ fn unical_with_cameras_runs_from_the_optimiser_panel() {
     assert!(h.state().status.iter().all(|s| !s.starts_with("error")));
 }
 
+/// The hand-eye initialiser from the optimiser panel: ticked, it runs before the scene is
+/// prepared and reports each camera in the status bar; on this straight drive it keeps the
+/// camera and says why, and the run goes on from the same rig.
+#[test]
+fn the_hand_eye_runs_from_the_optimiser_panel_and_reports_each_camera() {
+    use rigcal::app::optimiser::Method;
+    let mut h = harness(pandaset());
+    h.run_steps(2);
+    h.state_mut().optimiser.method = Method::Unical;
+    h.state_mut().optimiser.frames = 1;
+    h.state_mut().optimiser.cameras = vec!["front_camera".into()];
+    h.run_steps(2);
+    h.get_by_label_contains("fit each camera to its own motion first")
+        .click();
+    h.run_steps(2);
+    assert!(h.state().optimiser.hand_eye);
+    let before = h.state().current.clone();
+    h.get_by_label("Start").click();
+    h.run_steps(1);
+    assert!(h.state().optimiser.run.is_some(), "{:?}", s_status(&h));
+    let note = "camera hand-eye: front_camera kept: the vehicle turns at most";
+    assert!(
+        run_until(&mut h, 300.0, |s| s.status.iter().any(|m| m.contains(note))),
+        "{:?}",
+        s_status(&h)
+    );
+    assert!(
+        run_until(&mut h, 300.0, |s| s.optimiser.progress.0 > 0),
+        "no packet from UniCal: {:?}",
+        s_status(&h)
+    );
+    h.get_by_label("Stop").click();
+    assert!(run_until(&mut h, 120.0, |s| s.optimiser.run.is_none()));
+    assert!(h.state().status.iter().all(|s| !s.starts_with("error")));
+    // Kept by the hand-eye; the LiDARs and the unticked cameras never move.
+    let after = &h.state().current;
+    for s in &before.sensors {
+        if s.name != "front_camera" && s.kind != rigcal::calib::SensorKind::Lidar {
+            assert_eq!(after.sensor(&s.name).unwrap(), s, "{}", s.name);
+        }
+    }
+}
+
 /// ICP from the optimiser panel: every LiDAR registered against the reference LiDAR; the run
 /// ends on its own, publishes its RMSE and fitness, leaves the reference LiDAR and the cameras
 /// alone and keeps the PandarGT within the reference's accuracy of the recorded calibration.

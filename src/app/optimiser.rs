@@ -55,6 +55,12 @@ pub struct OptimiserPanel {
     pub cameras: Vec<String>,
     /// UniCal with cameras: every LiDAR keeps its extrinsic (e.g. registered by ICP first).
     pub hold_lidars: bool,
+    /// UniCal with cameras: fit each camera to its own motion first (hand-eye against the
+    /// trajectory; for starts degrees off).
+    pub hand_eye: bool,
+    /// What the hand-eye did to each camera, written by the run's preparation and moved to
+    /// the status bar by [`poll`].
+    pub hand_eye_notes: std::sync::Arc<std::sync::Mutex<Vec<String>>>,
     pub frames: usize,
     pub run: Option<Run>,
     /// The rig when the run started (restored by undo).
@@ -77,6 +83,11 @@ impl OptimiserPanel {
 
 /// Drain packets from a running optimiser (non-blocking).
 pub fn poll(studio: &mut Studio, ctx: &egui::Context) {
+    let notes: Vec<String> = match studio.optimiser.hand_eye_notes.lock() {
+        Ok(mut notes) => notes.drain(..).collect(),
+        Err(_) => Vec::new(),
+    };
+    studio.status.extend(notes);
     let Some(run) = studio.optimiser.run.as_ref() else {
         return;
     };
@@ -199,7 +210,25 @@ pub fn start(studio: &mut Studio) {
             correspondence_cache: Some(crate::session::state_dir().join("matches")),
             ..Default::default()
         };
+        let hand_eye = method == Method::Unical && studio.optimiser.hand_eye;
+        let notes = studio.optimiser.hand_eye_notes.clone();
         studio.optimiser.run = Some(Run::spawn_preparing(move |preparing| {
+            let prepare_rig = if hand_eye {
+                let (fitted, outcomes) = crate::classical::camera_motion::fit_rig_cameras(
+                    &drive,
+                    &prepare_rig,
+                    &cameras,
+                    crate::classical::camera_motion::DEFAULT_FRAMES,
+                    &segments,
+                    &|phase, done, total| preparing.report(phase, done, total),
+                );
+                if let Ok(mut notes) = notes.lock() {
+                    notes.extend(outcomes.iter().map(|o| o.summary()));
+                }
+                fitted
+            } else {
+                prepare_rig
+            };
             let stage = crate::unical::calibrator::UnicalLidarStage::from_drive(
                 &drive,
                 &prepare_rig,
@@ -365,6 +394,16 @@ pub fn optimiser_ui(studio: &mut Studio, ui: &mut egui::Ui) {
             ui.checkbox(
                 &mut studio.optimiser.hold_lidars,
                 "hold every LiDAR (e.g. registered by ICP first)",
+            );
+            ui.checkbox(
+                &mut studio.optimiser.hand_eye,
+                "fit each camera to its own motion first (hand-eye; for starts degrees off, \
+                 on a drive that turns)",
+            )
+            .on_hover_text(
+                "Matches each camera's images a few metres apart and fits its rotation (and the \
+                 translation the turns observe) to the vehicle's motion before the scene is \
+                 learned. Takes about 5 s per camera; a straight drive keeps the cameras.",
             );
         }
     });

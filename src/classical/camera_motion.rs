@@ -61,3 +61,78 @@ pub fn fit_camera(
     });
     solve(&pairs, sensor.vehicle_from_sensor).map_err(|e| e.to_string())
 }
+
+/// What the hand-eye did to one camera of a rig.
+#[derive(Clone, Debug)]
+pub struct CameraOutcome {
+    pub name: String,
+    /// The fit, or why the camera kept its start.
+    pub fit: Result<HandEyeFit, String>,
+    /// How far the fit moved the camera (rad, m); zero when it was kept.
+    pub moved: (f64, f64),
+}
+
+impl CameraOutcome {
+    /// One line for a log or a status bar.
+    pub fn summary(&self) -> String {
+        let name = &self.name;
+        match &self.fit {
+            Ok(fit) => {
+                let kept = if fit.unobserved.is_empty() {
+                    String::new()
+                } else {
+                    format!(
+                        " ({} not observed by the drive: kept)",
+                        fit.unobserved.join(", ")
+                    )
+                };
+                format!(
+                    "camera hand-eye: {name} moved {:.3}° / {:.1} cm to fit its motion{kept}; \
+                     {} of {} image pairs, median residuals {:.2}° (rotation) and {:.2}° \
+                     (direction)",
+                    self.moved.0.to_degrees(),
+                    self.moved.1 * 100.0,
+                    fit.pairs_used,
+                    fit.pairs_given,
+                    fit.rotation_residual_deg,
+                    fit.direction_residual_deg,
+                )
+            }
+            Err(e) => format!("camera hand-eye: {name} kept: {e}"),
+        }
+    }
+}
+
+/// Fit each camera of `names` in `rig` to its own motion ([`fit_camera`], `frames` images
+/// each), one after the other (each fit is parallel inside). Returns the rig with every fitted
+/// camera moved, and each camera's outcome; a camera that cannot be fitted keeps its start.
+/// `report` gets phase names prefixed with the camera's.
+pub fn fit_rig_cameras(
+    drive: &Drive,
+    rig: &Rig,
+    names: &[String],
+    frames: usize,
+    segments_nanos: &[(i64, i64)],
+    report: &(dyn Fn(&str, usize, usize) + Sync),
+) -> (Rig, Vec<CameraOutcome>) {
+    let mut out = rig.clone();
+    let mut outcomes = Vec::with_capacity(names.len());
+    for name in names {
+        let fit = fit_camera(drive, rig, name, frames, segments_nanos, &|phase, d, t| {
+            report(&format!("{name}: {phase}"), d, t)
+        });
+        let mut moved = (0.0, 0.0);
+        if let (Ok(fit), Some(sensor)) = (&fit, out.sensor_mut(name)) {
+            moved = sensor
+                .vehicle_from_sensor
+                .difference(fit.vehicle_from_camera);
+            sensor.vehicle_from_sensor = fit.vehicle_from_camera;
+        }
+        outcomes.push(CameraOutcome {
+            name: name.clone(),
+            fit,
+            moved,
+        });
+    }
+    (out, outcomes)
+}

@@ -15,7 +15,7 @@
 use std::path::PathBuf;
 
 use crate::calib::{CalibrationFile, Rig, SensorKind};
-use crate::classical::camera_motion::{self, fit_camera};
+use crate::classical::camera_motion;
 use crate::classical::icp::IcpConfig;
 use crate::classical::icp_calibrator::IcpCalibrator;
 use crate::classical::mi_calibrator::MiCalibrator;
@@ -65,6 +65,13 @@ pub struct CalibrateArgs {
     pub camera_rays: usize,
     /// unical with cameras: the camera pose rate (default: [`DepthCalibConfig::default`]'s).
     pub camera_lr: Option<f32>,
+    /// unical with cameras: the cameras' translation rate as a multiple of their rotation's
+    /// (default: [`DepthCalibConfig::default`]'s).
+    pub camera_translation_rate: Option<f32>,
+    /// unical with cameras: what the cameras' translation rate decays to by the end, as a
+    /// fraction of its start (default: as the rotation's;
+    /// [`DepthCalibConfig::camera_translation_final_fraction`]).
+    pub camera_translation_final: Option<f32>,
     /// unical: rounds of `iterations` each, every one with a fresh scene formed at the
     /// extrinsics the previous round reached (1: one run).
     pub rounds: usize,
@@ -231,7 +238,7 @@ fn register_lidars(
     Ok(out)
 }
 
-/// `rig` with every selected camera fitted to its own motion ([`fit_camera`]); a camera the
+/// `rig` with every selected camera fitted to its own motion ([`camera_motion::fit_rig_cameras`]); a camera the
 /// drive cannot fit is kept where it is, and the output says why.
 fn register_cameras(
     drive: &Drive,
@@ -240,49 +247,18 @@ fn register_cameras(
     segments: &[(i64, i64)],
 ) -> Rig {
     let bars = super::progress::PhasedProgress::default();
-    let mut out = rig.clone();
-    for name in selected_cameras(args, rig) {
-        let fit = fit_camera(
-            drive,
-            rig,
-            &name,
-            camera_motion::DEFAULT_FRAMES,
-            segments,
-            &|phase, done, total| bars.report(&format!("{name}: {phase}"), done, total),
-        );
-        let Some(sensor) = out.sensor_mut(&name) else {
-            continue;
-        };
-        match fit {
-            Ok(fit) => {
-                let (rot, trans) = sensor
-                    .vehicle_from_sensor
-                    .difference(fit.vehicle_from_camera);
-                let kept = if fit.unobserved.is_empty() {
-                    String::new()
-                } else {
-                    format!(
-                        " ({} not observed by the drive: kept)",
-                        fit.unobserved.join(", ")
-                    )
-                };
-                eprintln!(
-                    "camera hand-eye: {name} moved {:.3}° / {:.1} cm to fit its motion{kept}; \
-                     {} of {} image pairs, median residuals {:.2}° (rotation) and {:.2}° \
-                     (direction)",
-                    rot.to_degrees(),
-                    trans * 100.0,
-                    fit.pairs_used,
-                    fit.pairs_given,
-                    fit.rotation_residual_deg,
-                    fit.direction_residual_deg,
-                );
-                sensor.vehicle_from_sensor = fit.vehicle_from_camera;
-            }
-            Err(e) => eprintln!("camera hand-eye: {name} kept: {e}"),
-        }
-    }
+    let (out, outcomes) = camera_motion::fit_rig_cameras(
+        drive,
+        rig,
+        &selected_cameras(args, rig),
+        camera_motion::DEFAULT_FRAMES,
+        segments,
+        &|phase, done, total| bars.report(phase, done, total),
+    );
     bars.finish();
+    for outcome in &outcomes {
+        eprintln!("{}", outcome.summary());
+    }
     out
 }
 
@@ -384,6 +360,24 @@ pub fn calibrate(
                 Some(lr) => return Err(format!("--camera-lr {lr}: expected a rate above 0")),
                 None => DepthCalibConfig::default().lr_camera_pose,
             };
+            let camera_translation_rate = match args.camera_translation_rate {
+                Some(r) if r.is_finite() && r >= 0.0 => r,
+                Some(r) => {
+                    return Err(format!(
+                        "--camera-translation-rate {r}: expected a multiple of 0 or more"
+                    ));
+                }
+                None => DepthCalibConfig::default().camera_translation_rate,
+            };
+            let camera_translation_final_fraction = match args.camera_translation_final {
+                Some(f) if f.is_finite() && f > 0.0 && f <= 1.0 => Some(f),
+                Some(f) => {
+                    return Err(format!(
+                        "--camera-translation-final {f}: expected a fraction in (0, 1]"
+                    ));
+                }
+                None => DepthCalibConfig::default().camera_translation_final_fraction,
+            };
             if args.lidar_icp {
                 rig = register_lidars(&drive, &rig, args, &segments)?;
             }
@@ -398,6 +392,8 @@ pub fn calibrate(
                 held_sensors: held_sensors(args, &rig),
                 rays_per_camera: args.camera_rays.max(1),
                 lr_camera_pose,
+                camera_translation_rate,
+                camera_translation_final_fraction,
                 coarse_to_fine: match args.coarse_to_fine.as_deref() {
                     Some(s) => parse_coarse_to_fine(s)?,
                     None => DepthCalibConfig::default().coarse_to_fine,

@@ -78,6 +78,13 @@ pub struct DepthCalibConfig {
     /// What the camera pose rate decays to by the last iteration, as a fraction of
     /// `lr_camera_pose` (geometric from the end of the warm-up).
     pub camera_pose_final_fraction: f32,
+    /// What the cameras' translation rate decays to by the last iteration, as a fraction of
+    /// its value at the end of the warm-up (`None`: as the rotation's,
+    /// `camera_pose_final_fraction`). A translation that is still far off when the rotations
+    /// have settled (the height a level drive leaves, a hand-eye start's sideways offset)
+    /// needs its rate late in the run more than early, where a fast translation lets a camera
+    /// slide into a wrong basin before the scene holds detail (BENCHMARKS.md).
+    pub camera_translation_final_fraction: Option<f32>,
     /// The first iterations fit the SDF directly to the LiDAR returns ([`super::sdf_init`])
     /// with this many rays each (split evenly across LiDARs); poses stay fixed.
     pub geometry_init_steps: usize,
@@ -197,6 +204,7 @@ impl Default for DepthCalibConfig {
             shared_camera_translation: false,
             grouped_camera_translation: false,
             camera_pose_final_fraction: 0.01,
+            camera_translation_final_fraction: None,
             geometry_init_steps: 150,
             geometry_init_rays: 8192,
             // Poses wait for 50 rendering steps, then their rates ramp up. Released at full
@@ -356,6 +364,22 @@ impl DepthCalibConfig {
                 rate * self.alignment_release_rate * ((since + 1) as f32 / n as f32).min(1.0)
             }
         }
+    }
+
+    /// How far a camera's translation steps at `iteration` relative to its rotation:
+    /// `camera_translation_rate`, times the ratio of the two decays when the translation
+    /// decays to its own [`Self::camera_translation_final_fraction`] (the translation's rate is
+    /// then `lr · final^s` at the fraction `s` of the iterations in which poses move).
+    pub fn camera_translation_scale(&self, iteration: usize) -> f64 {
+        let rate = self.camera_translation_rate as f64;
+        let Some(final_fraction) = self.camera_translation_final_fraction else {
+            return rate;
+        };
+        let moving = self.iterations.saturating_sub(self.pose_warmup).max(1);
+        let since = iteration.saturating_sub(self.pose_warmup);
+        let s = (since as f64 / moving as f64).min(1.0);
+        let ratio = final_fraction as f64 / (self.camera_pose_final_fraction as f64).max(1e-12);
+        rate * ratio.powf(s)
     }
 
     /// The iteration from which camera poses move: [`Self::alignment_release`] if it comes
@@ -629,8 +653,9 @@ impl CameraStage {
         frozen: &[bool],
         lr: f32,
         config: &DepthCalibConfig,
+        iteration: usize,
     ) {
-        let translation_scale = config.camera_translation_rate as f64;
+        let translation_scale = config.camera_translation_scale(iteration);
         let free: Vec<usize> = (0..self.poses.len().min(grads.len()))
             .filter(|&k| !frozen.get(k).copied().unwrap_or(true))
             .collect();
@@ -1558,7 +1583,7 @@ impl DepthCalibration {
         drop(GradAccumulator::drain_all(&mut self.grid_accs));
         let frozen = self.frozen_cameras();
         if let Some(stage) = self.camera.as_mut() {
-            stage.step_poses(&align.pose, &frozen, lr, &self.config);
+            stage.step_poses(&align.pose, &frozen, lr, &self.config, self.iteration);
         }
         (align.loss, align.kept)
     }
@@ -1860,7 +1885,13 @@ impl DepthCalibration {
                 e.offset.copy_from_slice(&flat[3..]);
             }
             if let Some(stage) = self.camera.as_mut() {
-                stage.step_poses(&pose_grads, &held, lr_camera_pose, &self.config);
+                stage.step_poses(
+                    &pose_grads,
+                    &held,
+                    lr_camera_pose,
+                    &self.config,
+                    self.iteration,
+                );
                 stage
                     .colour_opt
                     .step(&mut stage.colour_params, &grad_flat(&colour), lr_field);
@@ -2008,6 +2039,36 @@ mod tests {
     /// Cameras released early by the correspondence term ramp up from their release and start
     /// the usual schedule again at the warm-up's end; LiDARs still wait for it; a release after
     /// the warm-up changes nothing.
+    #[test]
+    fn a_translation_with_its_own_decay_keeps_more_of_its_rate_late() {
+        let config = DepthCalibConfig {
+            iterations: 1200,
+            pose_warmup: 200,
+            camera_pose_final_fraction: 0.01,
+            camera_translation_rate: 2.0,
+            camera_translation_final_fraction: Some(0.05),
+            ..DepthCalibConfig::default()
+        };
+        // At the warm-up's end the plain multiple; by the end the two decays' ratio on top.
+        assert!((config.camera_translation_scale(0) - 2.0).abs() < 1e-12);
+        assert!((config.camera_translation_scale(200) - 2.0).abs() < 1e-12);
+        assert!((config.camera_translation_scale(1200) - 10.0).abs() < 1e-9);
+        assert!((config.camera_translation_scale(5000) - 10.0).abs() < 1e-9);
+        // The translation's own rate is the rate decayed to its own final fraction.
+        for it in [300, 700, 1100] {
+            let s = (it - 200) as f64 / 1000.0;
+            let rotation = decayed_lr(1.0, 0.01, it - 200, 1000) as f64;
+            let translation = rotation * config.camera_translation_scale(it);
+            assert!((translation - 2.0 * 0.05f64.powf(s)).abs() < 1e-5, "{it}");
+        }
+        // Without its own decay it is the plain multiple throughout.
+        let plain = DepthCalibConfig {
+            camera_translation_final_fraction: None,
+            ..config
+        };
+        assert_eq!(plain.camera_translation_scale(900), 2.0);
+    }
+
     #[test]
     fn an_alignment_release_starts_only_the_cameras_early() {
         let config = DepthCalibConfig {
