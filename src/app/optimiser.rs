@@ -204,7 +204,7 @@ pub fn start(studio: &mut Studio) {
             })
             .map(|s| s.name.clone())
             .collect();
-        let config = crate::unical::depth_calib::DepthCalibConfig {
+        let mut config = crate::unical::depth_calib::DepthCalibConfig {
             frozen_sensor: Some(lidar),
             held_sensors,
             correspondence_cache: Some(crate::session::state_dir().join("matches")),
@@ -225,6 +225,17 @@ pub fn start(studio: &mut Studio) {
                 if let Ok(mut notes) = notes.lock() {
                     notes.extend(outcomes.iter().map(|o| o.summary()));
                 }
+                // UniCal may turn a fitted camera only so far from its fit.
+                config.camera_rotation_bounds_deg = outcomes
+                    .iter()
+                    .filter(|o| o.fit.is_ok())
+                    .map(|o| {
+                        (
+                            o.name.clone(),
+                            crate::classical::camera_motion::ROTATION_BOUND_DEG,
+                        )
+                    })
+                    .collect();
                 fitted
             } else {
                 prepare_rig

@@ -10,13 +10,19 @@
 use glam::{DVec2, DVec3};
 use rayon::prelude::*;
 
-use super::hand_eye::{HandEyeFit, candidate_pairs, motion_pairs, solve};
+use super::hand_eye::{HandEyeFit, candidate_pairs, check_turns, motion_pairs, solve};
 use crate::calib::Rig;
 use crate::log::{Drive, spread_evenly};
 use crate::unical::correspondences::training_keypoints;
 
 /// Images per camera the CLI's `--camera-hand-eye` reads.
 pub const DEFAULT_FRAMES: usize = 48;
+
+/// How far (degrees) UniCal may turn a camera from its hand-eye fit
+/// ([`crate::unical::depth_calib::DepthCalibConfig::camera_rotation_bounds_deg`]): the fit
+/// brings rotations from 10° to within 0.7° on the simulator's drives (BENCHMARKS.md), so a
+/// camera the scene pulls further than this has slid into a wrong basin.
+pub const ROTATION_BOUND_DEG: f64 = 1.0;
 
 /// Fit camera `name` of `rig` to its motion over `frames` images of `drive` within
 /// `segments_nanos`, reporting `(done, total)` per phase name.
@@ -43,6 +49,9 @@ pub fn fit_camera(
         .iter()
         .map(|&i| stream.frames[i].stamp_nanos)
         .collect();
+    // A drive too straight for the fit is refused before any image is decoded.
+    let candidates = candidate_pairs(&drive.trajectory, &stamps);
+    check_turns(&candidates).map_err(|e| e.to_string())?;
     let done = std::sync::atomic::AtomicUsize::new(0);
     let keypoints = picked
         .par_iter()
@@ -54,7 +63,6 @@ pub fn fit_camera(
             Ok(found)
         })
         .collect::<Result<Vec<_>, String>>()?;
-    let candidates = candidate_pairs(&drive.trajectory, &stamps);
     let unproject = |x: f64, y: f64| -> Option<DVec3> { intrinsics.unproject(DVec2::new(x, y)) };
     let pairs = motion_pairs(&keypoints, &candidates, &unproject, &|d, t| {
         report("camera motion", d, t)

@@ -645,6 +645,25 @@ pub fn candidate_pairs(
     out
 }
 
+/// Whether the candidate pairs' vehicle motions turn enough to fix a camera's rotation
+/// (checked before any image is read: a straight drive is refused at once).
+pub fn check_turns(candidates: &[(usize, usize, Rigid)]) -> Result<(), HandEyeError> {
+    if candidates.len() < MIN_PAIRS {
+        return Err(HandEyeError::TooFewPairs {
+            found: candidates.len(),
+            needed: MIN_PAIRS,
+        });
+    }
+    let max_turn_deg = candidates
+        .iter()
+        .map(|(_, _, motion)| so3::angle_rad(motion.rotation).to_degrees())
+        .fold(0.0, f64::max);
+    if max_turn_deg < MIN_TURN_DEG {
+        return Err(HandEyeError::TooStraight { max_turn_deg });
+    }
+    Ok(())
+}
+
 /// Every candidate pair of one camera's frames turned into a [`MotionPair`] where its images
 /// agree on a motion (in parallel), reporting `(pairs done, pairs)`.
 pub fn motion_pairs(
@@ -831,5 +850,26 @@ mod tests {
             solve(&pairs[..2], truth),
             Err(HandEyeError::TooFewPairs { found: 2, .. })
         ));
+        // The same verdicts from the trajectory alone, before any image is read.
+        let candidates: Vec<(usize, usize, Rigid)> = pairs
+            .iter()
+            .enumerate()
+            .map(|(k, p)| (k, k + 1, p.vehicle_motion))
+            .collect();
+        assert!(matches!(
+            check_turns(&candidates),
+            Err(HandEyeError::TooStraight { .. })
+        ));
+        assert!(matches!(
+            check_turns(&candidates[..2]),
+            Err(HandEyeError::TooFewPairs { found: 2, .. })
+        ));
+        let turning: Vec<(usize, usize, Rigid)> = (0..6)
+            .map(|k| {
+                let turn = so3::exp(DVec3::Z * (k as f64 * 2.0).to_radians());
+                (k, k + 1, Rigid::new(turn, DVec3::X * 3.0))
+            })
+            .collect();
+        assert_eq!(check_turns(&turning), Ok(()));
     }
 }

@@ -238,14 +238,14 @@ fn register_lidars(
     Ok(out)
 }
 
-/// `rig` with every selected camera fitted to its own motion ([`camera_motion::fit_rig_cameras`]); a camera the
+/// `rig` with every selected camera fitted to its own motion, and the cameras it fitted ([`camera_motion::fit_rig_cameras`]); a camera the
 /// drive cannot fit is kept where it is, and the output says why.
 fn register_cameras(
     drive: &Drive,
     rig: &Rig,
     args: &CalibrateArgs,
     segments: &[(i64, i64)],
-) -> Rig {
+) -> (Rig, Vec<String>) {
     let bars = super::progress::PhasedProgress::default();
     let (out, outcomes) = camera_motion::fit_rig_cameras(
         drive,
@@ -259,7 +259,12 @@ fn register_cameras(
     for outcome in &outcomes {
         eprintln!("{}", outcome.summary());
     }
-    out
+    let fitted = outcomes
+        .iter()
+        .filter(|o| o.fit.is_ok())
+        .map(|o| o.name.clone())
+        .collect();
+    (out, fitted)
 }
 
 /// The cameras with intrinsics that `--sensors` selects (all when empty).
@@ -381,8 +386,14 @@ pub fn calibrate(
             if args.lidar_icp {
                 rig = register_lidars(&drive, &rig, args, &segments)?;
             }
+            let mut camera_rotation_bounds_deg = Vec::new();
             if args.camera_hand_eye {
-                rig = register_cameras(&drive, &rig, args, &segments);
+                let (fitted_rig, fitted) = register_cameras(&drive, &rig, args, &segments);
+                rig = fitted_rig;
+                camera_rotation_bounds_deg = fitted
+                    .into_iter()
+                    .map(|name| (name, camera_motion::ROTATION_BOUND_DEG))
+                    .collect();
             }
             let config = DepthCalibConfig {
                 iterations: args.iterations.unwrap_or(300),
@@ -394,6 +405,7 @@ pub fn calibrate(
                 lr_camera_pose,
                 camera_translation_rate,
                 camera_translation_final_fraction,
+                camera_rotation_bounds_deg,
                 coarse_to_fine: match args.coarse_to_fine.as_deref() {
                     Some(s) => parse_coarse_to_fine(s)?,
                     None => DepthCalibConfig::default().coarse_to_fine,
@@ -525,8 +537,30 @@ pub fn calibrate(
         }
     }
     let doc = document(args, &rig, calibrator.as_ref(), &last, "complete".into());
+    if args.camera_hand_eye {
+        warn_at_bound(&rig, &calibrator.best());
+    }
     doc.save(&args.out).map_err(|e| e.to_string())?;
     Ok(doc)
+}
+
+/// Cameras that end at the rotation bound around their hand-eye fit: the scene pulled them
+/// further, so either the fit or the result is off by about the bound; the user should look.
+fn warn_at_bound(start: &Rig, result: &Rig) {
+    for s in start.cameras() {
+        let Some(r) = result.sensor(&s.name) else {
+            continue;
+        };
+        let (rot, _) = s.vehicle_from_sensor.difference(r.vehicle_from_sensor);
+        if rot.to_degrees() >= camera_motion::ROTATION_BOUND_DEG - 0.01 {
+            eprintln!(
+                "warning: {} ends {:.2}° from its hand-eye fit, at the bound UniCal may move it \
+                 within: check its overlay",
+                s.name,
+                rot.to_degrees()
+            );
+        }
+    }
 }
 
 /// Seconds between checkpoints of a running calibration.

@@ -85,6 +85,12 @@ pub struct DepthCalibConfig {
     /// needs its rate late in the run more than early, where a fast translation lets a camera
     /// slide into a wrong basin before the scene holds detail (BENCHMARKS.md).
     pub camera_translation_final_fraction: Option<f32>,
+    /// Cameras whose rotation stays within this many degrees of its start, by name: a start an
+    /// independent measurement fixed (the hand-eye fit to the camera's own motion). Early in a
+    /// run the colour field is still coarse, and a camera stepping at full rate can slide into
+    /// a wrong basin degrees away and not come back (BENCHMARKS.md, "Large initial errors");
+    /// the bound keeps it in the trust region its start earned. Empty: no bound.
+    pub camera_rotation_bounds_deg: Vec<(String, f64)>,
     /// The first iterations fit the SDF directly to the LiDAR returns ([`super::sdf_init`])
     /// with this many rays each (split evenly across LiDARs); poses stay fixed.
     pub geometry_init_steps: usize,
@@ -205,6 +211,7 @@ impl Default for DepthCalibConfig {
             grouped_camera_translation: false,
             camera_pose_final_fraction: 0.01,
             camera_translation_final_fraction: None,
+            camera_rotation_bounds_deg: Vec::new(),
             geometry_init_steps: 150,
             geometry_init_rays: 8192,
             // Poses wait for 50 rendering steps, then their rates ramp up. Released at full
@@ -643,6 +650,19 @@ fn pose_step(
     }
 }
 
+/// Keep `pose`'s rotation within `bound_rad` of `start`: a rotation further off is turned back
+/// along the geodesic to the bound (its translation is left as it is).
+fn bound_rotation(pose: &mut PoseParams, start: glam::DQuat, bound_rad: f64) {
+    let now = glam::DQuat::from_mat3(&pose.rotation()).normalize();
+    let offset = crate::geometry::so3::log(start.inverse() * now);
+    let angle = offset.length();
+    if angle <= bound_rad {
+        return;
+    }
+    let held = start * crate::geometry::so3::exp(offset * (bound_rad / angle));
+    pose.r6 = crate::geometry::rot6d::from_matrix(glam::DMat3::from_quat(held));
+}
+
 impl CameraStage {
     /// One step of every free camera's pose on its gradient (`grads[k]`, rotation then
     /// translation), and with [`DepthCalibConfig::shared_camera_translation`] of the
@@ -668,6 +688,18 @@ impl CameraStage {
                 translation_scale,
                 config.grouped_camera_translation,
             );
+            let name = &self.cameras[k].name;
+            if let Some((_, bound_deg)) = config
+                .camera_rotation_bounds_deg
+                .iter()
+                .find(|(n, _)| n == name)
+            {
+                bound_rotation(
+                    &mut self.poses[k],
+                    self.cameras[k].initial.rotation,
+                    bound_deg.to_radians(),
+                );
+            }
         }
         if !config.shared_camera_translation || free.len() < 2 || lr == 0.0 {
             return;
@@ -2039,6 +2071,33 @@ mod tests {
     /// Cameras released early by the correspondence term ramp up from their release and start
     /// the usual schedule again at the warm-up's end; LiDARs still wait for it; a release after
     /// the warm-up changes nothing.
+    #[test]
+    fn a_bounded_rotation_is_turned_back_to_its_bound_along_the_geodesic() {
+        use crate::geometry::so3;
+        let start = so3::exp(DVec3::new(0.2, -0.4, 1.0));
+        let axis = DVec3::new(1.0, 2.0, -0.5).normalize_or_zero();
+        let bound = 1f64.to_radians();
+        // Inside the bound nothing changes.
+        let inside = Rigid::new(start * so3::exp(axis * 0.5f64.to_radians()), DVec3::X);
+        let mut p = PoseParams::from_rigid(inside);
+        let before = p;
+        bound_rotation(&mut p, start, bound);
+        assert_eq!(p, before);
+        // Outside it, back to the bound about the same axis; the translation stays.
+        let outside = Rigid::new(start * so3::exp(axis * 3f64.to_radians()), DVec3::X);
+        let mut p = PoseParams::from_rigid(outside);
+        bound_rotation(&mut p, start, bound);
+        let got = p.to_rigid();
+        let offset = so3::log(start.inverse() * got.rotation);
+        assert!(
+            (offset.length() - bound).abs() < 1e-9,
+            "{}",
+            offset.length()
+        );
+        assert!(offset.normalize_or_zero().dot(axis) > 1.0 - 1e-9);
+        assert_eq!(got.translation, DVec3::X);
+    }
+
     #[test]
     fn a_translation_with_its_own_decay_keeps_more_of_its_rate_late() {
         let config = DepthCalibConfig {
