@@ -101,6 +101,10 @@ fn bad_arguments_fail_with_one_line() {
     assert!(!ok && err.contains("--root: 'roof'"), "{err}");
     let (ok, err) = run(&["--method", "unical", "--camera-lr", "0"]);
     assert!(!ok && err.contains("--camera-lr 0"), "{err}");
+    let (ok, err) = run(&["--method", "unical", "--camera-translation-rate=-1"]);
+    assert!(!ok && err.contains("--camera-translation-rate -1"), "{err}");
+    let (ok, err) = run(&["--method", "unical", "--camera-translation-final", "2"]);
+    assert!(!ok && err.contains("--camera-translation-final 2"), "{err}");
     let (ok, err) = run(&["--method", "unical", "--rounds", "0"]);
     assert!(!ok && err.contains("--rounds 0"), "{err}");
     // A valid run with an unwritable output fails before calibrating, naming the path.

@@ -225,7 +225,11 @@ pub fn start(studio: &mut Studio) {
                 if let Ok(mut notes) = notes.lock() {
                     notes.extend(outcomes.iter().map(|o| o.summary()));
                 }
-                // UniCal may turn a fitted camera only so far from its fit.
+                // Fitted cameras get the hand-eye schedule, and UniCal may turn them only so
+                // far from their fit.
+                if outcomes.iter().any(|o| o.fit.is_ok()) {
+                    config = config.after_hand_eye();
+                }
                 config.camera_rotation_bounds_deg = outcomes
                     .iter()
                     .filter(|o| o.fit.is_ok())

@@ -360,28 +360,27 @@ pub fn calibrate(
             if args.rounds == 0 {
                 return Err("--rounds 0: expected at least one round".into());
             }
-            let lr_camera_pose = match args.camera_lr {
-                Some(lr) if lr.is_finite() && lr > 0.0 => lr,
-                Some(lr) => return Err(format!("--camera-lr {lr}: expected a rate above 0")),
-                None => DepthCalibConfig::default().lr_camera_pose,
+            let camera_lr = match args.camera_lr {
+                Some(lr) if !(lr.is_finite() && lr > 0.0) => {
+                    return Err(format!("--camera-lr {lr}: expected a rate above 0"));
+                }
+                lr => lr,
             };
             let camera_translation_rate = match args.camera_translation_rate {
-                Some(r) if r.is_finite() && r >= 0.0 => r,
-                Some(r) => {
+                Some(r) if !(r.is_finite() && r >= 0.0) => {
                     return Err(format!(
                         "--camera-translation-rate {r}: expected a multiple of 0 or more"
                     ));
                 }
-                None => DepthCalibConfig::default().camera_translation_rate,
+                r => r,
             };
-            let camera_translation_final_fraction = match args.camera_translation_final {
-                Some(f) if f.is_finite() && f > 0.0 && f <= 1.0 => Some(f),
-                Some(f) => {
+            let camera_translation_final = match args.camera_translation_final {
+                Some(f) if !(f.is_finite() && f > 0.0 && f <= 1.0) => {
                     return Err(format!(
                         "--camera-translation-final {f}: expected a fraction in (0, 1]"
                     ));
                 }
-                None => DepthCalibConfig::default().camera_translation_final_fraction,
+                f => f,
             };
             if args.lidar_icp {
                 rig = register_lidars(&drive, &rig, args, &segments)?;
@@ -395,6 +394,13 @@ pub fn calibrate(
                     .map(|name| (name, camera_motion::ROTATION_BOUND_DEG))
                     .collect();
             }
+            // Cameras the hand-eye fitted start close in rotation and get its schedule
+            // (DepthCalibConfig::after_hand_eye); the options override either preset.
+            let preset = if camera_rotation_bounds_deg.is_empty() {
+                DepthCalibConfig::default()
+            } else {
+                DepthCalibConfig::default().after_hand_eye()
+            };
             let config = DepthCalibConfig {
                 iterations: args.iterations.unwrap_or(300),
                 seed: args.seed,
@@ -402,13 +408,15 @@ pub fn calibrate(
                 // Sensors not asked for stay where they are while the others move.
                 held_sensors: held_sensors(args, &rig),
                 rays_per_camera: args.camera_rays.max(1),
-                lr_camera_pose,
-                camera_translation_rate,
-                camera_translation_final_fraction,
+                lr_camera_pose: camera_lr.unwrap_or(preset.lr_camera_pose),
+                camera_translation_rate: camera_translation_rate
+                    .unwrap_or(preset.camera_translation_rate),
+                camera_translation_final_fraction: camera_translation_final
+                    .or(preset.camera_translation_final_fraction),
                 camera_rotation_bounds_deg,
                 coarse_to_fine: match args.coarse_to_fine.as_deref() {
                     Some(s) => parse_coarse_to_fine(s)?,
-                    None => DepthCalibConfig::default().coarse_to_fine,
+                    None => preset.coarse_to_fine,
                 },
                 alignment: args.alignment,
                 shared_camera_translation: args.shared_camera_translation,
@@ -418,7 +426,7 @@ pub fn calibrate(
                     .then(crate::unical::transient::TransientSettings::default),
                 mask_own_vehicle: args.drop_moving,
                 correspondence_cache: Some(crate::session::state_dir().join("matches")),
-                ..DepthCalibConfig::default()
+                ..preset
             };
             let bars = super::progress::PhasedProgress::default();
             let stage = UnicalLidarStage::from_drive(&drive, &rig, 4, &segments, config)?

@@ -340,6 +340,23 @@ impl DepthCalibConfig {
         }
     }
 
+    /// The camera schedule after a hand-eye start ([`crate::classical::hand_eye`]): the
+    /// rotations start within a few tenths of a degree, so they move at half the CPU preset's
+    /// rate; the translations start as far off as before in the directions the drive did not
+    /// observe (height, mostly sideways), so they keep the preset's rate (twice the halved
+    /// one) and decay only to 5 % of it, moving late in the run when the rotations have
+    /// settled. On the simulator's three drives this meets every threshold of issue 5
+    /// where neither the preset nor either change alone did (BENCHMARKS.md, "Large initial
+    /// errors").
+    pub fn after_hand_eye(self) -> Self {
+        Self {
+            lr_camera_pose: self.lr_camera_pose * 0.5,
+            camera_translation_rate: self.camera_translation_rate * 2.0,
+            camera_translation_final_fraction: Some(0.05),
+            ..self
+        }
+    }
+
     /// A pose rate at `iteration`: 0 during the warm-up, then rising linearly over `pose_ramp`
     /// iterations while it decays geometrically to `final_fraction` of `rate` by the last
     /// iteration. The decay counts from the end of the warm-up, over the iterations in which
@@ -2111,8 +2128,8 @@ mod tests {
         // At the warm-up's end the plain multiple; by the end the two decays' ratio on top.
         assert!((config.camera_translation_scale(0) - 2.0).abs() < 1e-12);
         assert!((config.camera_translation_scale(200) - 2.0).abs() < 1e-12);
-        assert!((config.camera_translation_scale(1200) - 10.0).abs() < 1e-9);
-        assert!((config.camera_translation_scale(5000) - 10.0).abs() < 1e-9);
+        assert!((config.camera_translation_scale(1200) - 10.0).abs() < 1e-5);
+        assert!((config.camera_translation_scale(5000) - 10.0).abs() < 1e-5);
         // The translation's own rate is the rate decayed to its own final fraction.
         for it in [300, 700, 1100] {
             let s = (it - 200) as f64 / 1000.0;
@@ -2126,6 +2143,23 @@ mod tests {
             ..config
         };
         assert_eq!(plain.camera_translation_scale(900), 2.0);
+        // After a hand-eye start: rotations at half the preset's rate, translations at its
+        // full rate when poses are released, decaying to 5 % instead of 1 %.
+        let preset = DepthCalibConfig::default();
+        let he = preset.clone().after_hand_eye();
+        assert_eq!(he.lr_camera_pose, preset.lr_camera_pose * 0.5);
+        let release = he.pose_warmup;
+        let translation_at = |c: &DepthCalibConfig, it: usize| {
+            c.pose_rate(c.lr_camera_pose, c.camera_pose_final_fraction, it) as f64
+                * c.camera_translation_scale(it)
+        };
+        assert!(translation_at(&he, release) > 0.0);
+        assert!(
+            (translation_at(&he, release) / translation_at(&preset, release) - 1.0).abs() < 1e-6
+        );
+        let last = he.iterations - 1;
+        let ratio = translation_at(&he, last) / translation_at(&preset, last);
+        assert!((ratio - 5.0).abs() < 0.1, "{ratio}");
     }
 
     #[test]
