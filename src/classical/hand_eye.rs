@@ -380,19 +380,7 @@ fn fit_once(pairs: &[MotionPair], start: Rigid) -> (Rigid, [[f64; 3]; 3]) {
 /// directions keep). Pairs whose residual exceeds three times the median (and 1°) are dropped
 /// once and the fit repeated.
 pub fn solve(pairs: &[MotionPair], start: Rigid) -> Result<HandEyeFit, HandEyeError> {
-    if pairs.len() < MIN_PAIRS {
-        return Err(HandEyeError::TooFewPairs {
-            found: pairs.len(),
-            needed: MIN_PAIRS,
-        });
-    }
-    let max_turn_deg = pairs
-        .iter()
-        .map(|p| so3::angle_rad(p.vehicle_motion.rotation).to_degrees())
-        .fold(0.0, f64::max);
-    if max_turn_deg < MIN_TURN_DEG {
-        return Err(HandEyeError::TooStraight { max_turn_deg });
-    }
+    require_turns(pairs.iter().map(|p| p.vehicle_motion))?;
     let (first, _) = fit_once(pairs, start);
     let scores: Vec<f64> = pairs
         .iter()
@@ -648,15 +636,19 @@ pub fn candidate_pairs(
 /// Whether the candidate pairs' vehicle motions turn enough to fix a camera's rotation
 /// (checked before any image is read: a straight drive is refused at once).
 pub fn check_turns(candidates: &[(usize, usize, Rigid)]) -> Result<(), HandEyeError> {
-    if candidates.len() < MIN_PAIRS {
+    require_turns(candidates.iter().map(|(_, _, motion)| *motion))
+}
+
+/// Enough vehicle motions ([`MIN_PAIRS`]), one of which turns at least [`MIN_TURN_DEG`].
+fn require_turns(motions: impl ExactSizeIterator<Item = Rigid>) -> Result<(), HandEyeError> {
+    if motions.len() < MIN_PAIRS {
         return Err(HandEyeError::TooFewPairs {
-            found: candidates.len(),
+            found: motions.len(),
             needed: MIN_PAIRS,
         });
     }
-    let max_turn_deg = candidates
-        .iter()
-        .map(|(_, _, motion)| so3::angle_rad(motion.rotation).to_degrees())
+    let max_turn_deg = motions
+        .map(|motion| so3::angle_rad(motion.rotation).to_degrees())
         .fold(0.0, f64::max);
     if max_turn_deg < MIN_TURN_DEG {
         return Err(HandEyeError::TooStraight { max_turn_deg });
