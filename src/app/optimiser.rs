@@ -225,21 +225,14 @@ pub fn start(studio: &mut Studio) {
                 if let Ok(mut notes) = notes.lock() {
                     notes.extend(outcomes.iter().map(|o| o.summary()));
                 }
-                // Fitted cameras get the hand-eye schedule, and UniCal may turn them only so
-                // far from their fit.
-                if outcomes.iter().any(|o| o.fit.is_ok()) {
-                    config = config.after_hand_eye();
-                }
-                config.camera_rotation_bounds_deg = outcomes
+                // Fitted cameras get the hand-eye schedule and bound.
+                let names: Vec<String> = outcomes
                     .iter()
                     .filter(|o| o.fit.is_ok())
-                    .map(|o| {
-                        (
-                            o.name.clone(),
-                            crate::classical::camera_motion::ROTATION_BOUND_DEG,
-                        )
-                    })
+                    .map(|o| o.name.clone())
                     .collect();
+                config = config
+                    .after_hand_eye(&names, crate::classical::camera_motion::ROTATION_BOUND_DEG);
                 fitted
             } else {
                 prepare_rig

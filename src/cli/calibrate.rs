@@ -385,22 +385,13 @@ pub fn calibrate(
             if args.lidar_icp {
                 rig = register_lidars(&drive, &rig, args, &segments)?;
             }
-            let mut camera_rotation_bounds_deg = Vec::new();
+            let mut fitted = Vec::new();
             if args.camera_hand_eye {
-                let (fitted_rig, fitted) = register_cameras(&drive, &rig, args, &segments);
-                rig = fitted_rig;
-                camera_rotation_bounds_deg = fitted
-                    .into_iter()
-                    .map(|name| (name, camera_motion::ROTATION_BOUND_DEG))
-                    .collect();
+                (rig, fitted) = register_cameras(&drive, &rig, args, &segments);
             }
-            // Cameras the hand-eye fitted start close in rotation and get its schedule
-            // (DepthCalibConfig::after_hand_eye); the options override either preset.
-            let preset = if camera_rotation_bounds_deg.is_empty() {
-                DepthCalibConfig::default()
-            } else {
-                DepthCalibConfig::default().after_hand_eye()
-            };
+            // Cameras the hand-eye fitted get its schedule and bound; the options override.
+            let preset = DepthCalibConfig::default()
+                .after_hand_eye(&fitted, camera_motion::ROTATION_BOUND_DEG);
             let config = DepthCalibConfig {
                 iterations: args.iterations.unwrap_or(300),
                 seed: args.seed,
@@ -413,7 +404,6 @@ pub fn calibrate(
                     .unwrap_or(preset.camera_translation_rate),
                 camera_translation_final_fraction: camera_translation_final
                     .or(preset.camera_translation_final_fraction),
-                camera_rotation_bounds_deg,
                 coarse_to_fine: match args.coarse_to_fine.as_deref() {
                     Some(s) => parse_coarse_to_fine(s)?,
                     None => preset.coarse_to_fine,

@@ -340,19 +340,27 @@ impl DepthCalibConfig {
         }
     }
 
-    /// The camera schedule after a hand-eye start ([`crate::classical::hand_eye`]): the
-    /// rotations start within a few tenths of a degree, so they move at half the CPU preset's
-    /// rate; the translations start as far off as before in the directions the drive did not
-    /// observe (height, mostly sideways), so they keep the preset's rate (twice the halved
-    /// one) and decay only to 5 % of it, moving late in the run when the rotations have
-    /// settled. On the simulator's three drives this meets every threshold of issue 5
-    /// where neither the preset nor either change alone did (BENCHMARKS.md, "Large initial
-    /// errors").
-    pub fn after_hand_eye(self) -> Self {
+    /// The camera schedule after a hand-eye start ([`crate::classical::hand_eye`]) for the
+    /// cameras it `fitted` (unchanged when it fitted none): their rotations start within a few
+    /// tenths of a degree, so they move at half the CPU preset's rate and at most
+    /// `rotation_bound_deg` from the fit ([`Self::camera_rotation_bounds_deg`]); their
+    /// translations start as far off as before in the directions the drive did not observe
+    /// (height, mostly sideways), so they keep the preset's rate (twice the halved one) and
+    /// decay only to 5 % of it, moving late in the run when the rotations have settled. On the
+    /// simulator's three drives this meets every threshold of issue 5 where neither the preset
+    /// nor either change alone did (BENCHMARKS.md, "A hand-eye start").
+    pub fn after_hand_eye(self, fitted: &[String], rotation_bound_deg: f64) -> Self {
+        if fitted.is_empty() {
+            return self;
+        }
         Self {
             lr_camera_pose: self.lr_camera_pose * 0.5,
             camera_translation_rate: self.camera_translation_rate * 2.0,
             camera_translation_final_fraction: Some(0.05),
+            camera_rotation_bounds_deg: fitted
+                .iter()
+                .map(|name| (name.clone(), rotation_bound_deg))
+                .collect(),
             ..self
         }
     }
@@ -2146,7 +2154,12 @@ mod tests {
         // After a hand-eye start: rotations at half the preset's rate, translations at its
         // full rate when poses are released, decaying to 5 % instead of 1 %.
         let preset = DepthCalibConfig::default();
-        let he = preset.clone().after_hand_eye();
+        let he = preset.clone().after_hand_eye(&["front".to_string()], 1.0);
+        assert_eq!(
+            he.camera_rotation_bounds_deg,
+            vec![("front".to_string(), 1.0)]
+        );
+        assert_eq!(preset.clone().after_hand_eye(&[], 1.0), preset);
         assert_eq!(he.lr_camera_pose, preset.lr_camera_pose * 0.5);
         let release = he.pose_warmup;
         let translation_at = |c: &DepthCalibConfig, it: usize| {
