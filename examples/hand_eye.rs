@@ -1,10 +1,11 @@
-//! Fit every camera of a drive to its own motion (hand-eye against the trajectory) from the
-//! ground truth and from perturbed starts, and print how far each ends from the truth.
+//! Fit every camera of a drive to its own motion (hand-eye against the trajectory), then its
+//! translation to the LiDAR map (the LiDARs at the truth), from the ground truth and from
+//! perturbed starts, and print how far each ends from the truth after each fit.
 //!
 //! `cargo run --release --no-default-features --example hand_eye -- LOG.mcap GT.yaml [DEG CM SEEDS]`
 
 use rigcal::calib::CalibrationFile;
-use rigcal::classical::camera_motion::{DEFAULT_FRAMES, fit_camera};
+use rigcal::classical::camera_motion::{DEFAULT_FRAMES, fit_rig_cameras, lidar_map};
 use rigcal::log::Drive;
 use rigcal::sim::synth::perturb_rig;
 
@@ -26,6 +27,7 @@ fn main() -> Result<(), String> {
         .ok()
         .and_then(|s| s.parse().ok())
         .unwrap_or(DEFAULT_FRAMES);
+    let map = lidar_map(&drive, &truth)?;
     for seed in 0..=seeds {
         let start = if seed == 0 {
             truth.clone()
@@ -40,29 +42,52 @@ fn main() -> Result<(), String> {
                 format!("{deg}° / {cm} cm, seed {seed}")
             }
         );
-        for cam in truth.cameras() {
-            let t = cam.vehicle_from_sensor;
-            match fit_camera(&drive, &start, &cam.name, frames, &[], &|_, _, _| {}) {
-                Ok(fit) => {
-                    let f = fit.vehicle_from_camera;
-                    let (rot, _) = t.difference(f);
-                    let d = (f.translation - t.translation) * 100.0;
-                    println!(
-                        "  {:20} {:6.3}°  dx {:6.1} dy {:6.1} dz {:6.1} cm  pairs {}/{} res {:.2}° {:.2}° unobserved {:?}",
-                        cam.name,
-                        rot.to_degrees(),
-                        d.x,
-                        d.y,
-                        d.z,
-                        fit.pairs_used,
-                        fit.pairs_given,
-                        fit.rotation_residual_deg,
-                        fit.direction_residual_deg,
-                        fit.unobserved
-                    );
+        let names: Vec<String> = truth.cameras().map(|c| c.name.clone()).collect();
+        let (fitted, outcomes) = fit_rig_cameras(
+            &drive,
+            &start,
+            &names,
+            frames,
+            &[],
+            Some(&map),
+            &|_, _, _| {},
+        );
+        for o in outcomes {
+            let t = truth.sensor(&o.name).map(|s| s.vehicle_from_sensor);
+            let (Some(t), Ok(fit)) = (t, &o.fit) else {
+                println!("  {}", o.summary());
+                continue;
+            };
+            let row = |f: rigcal::geometry::Rigid| {
+                let d = (f.translation - t.translation) * 100.0;
+                format!(
+                    "{:6.3}° dx {:6.1} dy {:6.1} dz {:6.1} cm",
+                    t.difference(f).0.to_degrees(),
+                    d.x,
+                    d.y,
+                    d.z
+                )
+            };
+            let end = fitted.sensor(&o.name).map(|s| s.vehicle_from_sensor);
+            println!(
+                "  {:20} hand-eye {}  | LiDAR map {}  pairs {}/{} unobserved {:?}{}",
+                o.name,
+                row(fit.vehicle_from_camera),
+                end.map(row).unwrap_or_default(),
+                fit.pairs_used,
+                fit.pairs_given,
+                fit.unobserved,
+                match &o.translation {
+                    Some(Ok(tf)) => format!(
+                        " map: {} points, median {:.1} cm, unobserved {:?}",
+                        tf.points,
+                        tf.median_residual_m * 100.0,
+                        tf.unobserved
+                    ),
+                    Some(Err(e)) => format!(" map: {e}"),
+                    None => String::new(),
                 }
-                Err(e) => println!("  {:20} {e}", cam.name),
-            }
+            );
         }
     }
     Ok(())

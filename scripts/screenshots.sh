@@ -3,7 +3,7 @@
 # (lavapipe): the PandaSet drive (one camera, all cameras, reprojection checks, export) and the
 # demo drive before and after a run of the optimiser. Views are set with session files
 # (`rigcal studio --session`), buttons are clicked with xdotool.
-# Usage: scripts/screenshots.sh [SHOT…]  (default: all of pandaset pandaset-grid pandaset-checks
+# Usage: scripts/screenshots.sh [SHOT…]  (default: all of pandaset pandaset-unical pandaset-grid pandaset-checks
 # pandaset-export checkerboard-checks demo)      Needs: xvfb mesa-vulkan-drivers libvulkan1 imagemagick xdotool
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -38,6 +38,14 @@ want() { [ -z "$SHOTS" ] || [[ " $SHOTS " == *" $1 "* ]]; }
 if want pandaset; then
   session one 3 false 0 range optimise
   start --session "$tmp/one.json"; shot pandaset 6; stop
+fi
+if want pandaset-unical; then
+  # The optimiser panel on UniCal (its options, the hand-eye among them), chosen by the session.
+  cat > "$tmp/unical.json" <<JSON
+{"rigcal_session": 1, "log": "$log", "initial": null, "current": null, "camera": 3,
+ "view": {"color_by": "range", "tab": "optimise", "optimiser_method": "unical"}}
+JSON
+  start --session "$tmp/unical.json"; shot pandaset-unical 6; stop
 fi
 if want pandaset-grid; then
   session grid 3 true 2 lidar optimise

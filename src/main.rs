@@ -104,6 +104,13 @@ enum Command {
         /// keeps translations moving late, when the rotations have settled
         #[arg(long)]
         camera_translation_final: Option<f32>,
+        /// unical with cameras: ITER[,RATE]: the cameras start to move at iteration ITER of
+        /// the geometry initialisation, on the correspondence term alone, at RATE (default
+        /// 0.1) times their rate, so the first extrinsic update comes seconds into the run
+        /// instead of after the warm-up; after --camera-hand-eye only their translations move
+        /// until the warm-up ends
+        #[arg(long, value_name = "ITER[,RATE]")]
+        camera_early_release: Option<String>,
         /// unical: run in ROUNDS rounds of --iterations each, every one with a fresh scene
         /// formed at the extrinsics the previous round reached (a scene formed around the
         /// cameras' errors holds them back)
@@ -298,6 +305,7 @@ fn run() -> Result<()> {
             camera_lr,
             camera_translation_rate,
             camera_translation_final,
+            camera_early_release,
             rounds,
             coarse_to_fine,
             shared_camera_translation,
@@ -327,6 +335,7 @@ fn run() -> Result<()> {
                 camera_lr,
                 camera_translation_rate,
                 camera_translation_final,
+                camera_early_release,
                 rounds,
                 coarse_to_fine,
                 shared_camera_translation,

@@ -93,6 +93,10 @@ pub struct SessionView {
     /// The export panel's format (a `rigcal export --format` name; empty: native).
     #[serde(default, skip_serializing_if = "String::is_empty")]
     pub export_format: String,
+    /// The optimiser panel's method (`edge`, `icp`, `mi`, `target`, `pose-graph`,
+    /// `unical-lidar`, `unical`; empty: the default).
+    #[serde(default, skip_serializing_if = "String::is_empty")]
+    pub optimiser_method: String,
 }
 
 fn default_color_by() -> String {

@@ -29,7 +29,7 @@ fn calibrate_recovers_a_rotated_camera_and_writes_the_native_file() {
     let init_path = dir.join("init.yaml");
     CalibrationFile::from_rig(&init).save(&init_path).unwrap();
     let out = dir.join("out.yaml");
-    let status = Command::new(env!("CARGO_BIN_EXE_rigcal"))
+    let o = Command::new(env!("CARGO_BIN_EXE_rigcal"))
         .args(["calibrate"])
         .arg(pandaset())
         .args([
@@ -44,9 +44,12 @@ fn calibrate_recovers_a_rotated_camera_and_writes_the_native_file() {
         .arg(&init_path)
         .arg("--out")
         .arg(&out)
-        .status()
+        .output()
         .unwrap();
-    assert!(status.success());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{err}");
+    // The run says when the extrinsics first changed.
+    assert!(err.contains("first extrinsic update: step "), "{err}");
     let doc = CalibrationFile::load(&out).unwrap();
     assert!(doc.provenance.contains_key("method") && doc.provenance.contains_key("input"));
     assert_eq!(
@@ -105,6 +108,14 @@ fn bad_arguments_fail_with_one_line() {
     assert!(!ok && err.contains("--camera-translation-rate -1"), "{err}");
     let (ok, err) = run(&["--method", "unical", "--camera-translation-final", "2"]);
     assert!(!ok && err.contains("--camera-translation-final 2"), "{err}");
+    for bad in ["x", "30,0", "30,2", "-1"] {
+        let option = format!("--camera-early-release={bad}");
+        let (ok, err) = run(&["--method", "unical", &option]);
+        assert!(
+            !ok && err.contains(&format!("--camera-early-release '{bad}'")),
+            "{err}"
+        );
+    }
     let (ok, err) = run(&["--method", "unical", "--rounds", "0"]);
     assert!(!ok && err.contains("--rounds 0"), "{err}");
     // A valid run with an unwritable output fails before calibrating, naming the path.
@@ -152,6 +163,8 @@ fn unical_with_lidar_icp_registers_the_lidars_first_and_holds_them() {
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(o.status.success(), "{err}");
     assert!(err.contains("lidar icp: pandar_gt moved"), "{err}");
+    // ICP moved it before the optimisation, which held everything.
+    assert!(!err.contains("first extrinsic update"), "{err}");
     // This drive is straight: the reference LiDAR is not fitted to its trajectory.
     assert!(
         err.contains("lidar icp: pandar64 kept: the drive turns"),

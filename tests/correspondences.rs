@@ -237,12 +237,13 @@ fn the_alignment_term_alone_moves_the_cameras() {
 
 /// With an alignment release the cameras move during the geometry initialisation, on the
 /// correspondence term alone, while the LiDARs wait for the warm-up; without one nothing moves
-/// before it.
+/// before it; a release that does not rotate moves only the cameras' translations.
 #[test]
 fn an_alignment_release_moves_only_the_cameras_during_the_geometry_initialisation() {
     let drive = Drive::open(&pandaset().join("pandaset-002.mcap")).unwrap();
     let rig = reference_rig(&drive);
-    let moved = |alignment_release| {
+    // (cameras turned, cameras shifted, LiDARs moved, summed alignment term)
+    let moved = |alignment_release, alignment_release_rotates| {
         let config = DepthCalibConfig {
             iterations: 40,
             geometry_init_steps: 3,
@@ -250,6 +251,7 @@ fn an_alignment_release_moves_only_the_cameras_during_the_geometry_initialisatio
             pose_warmup: 10,
             pose_ramp: 0,
             alignment_release,
+            alignment_release_rotates,
             rays_per_sensor: 64,
             rays_per_camera: 16,
             alignment_settings: AlignSettings {
@@ -272,23 +274,35 @@ fn an_alignment_release_moves_only_the_cameras_during_the_geometry_initialisatio
                 .map_or(0.0, |l| l.1);
         }
         let now = s.current();
-        let count = |lidar: bool| {
+        let count = |lidar: bool, part: fn((f64, f64)) -> f64| {
             rig.sensors
                 .iter()
                 .filter(|c| (c.kind == rigcal::calib::SensorKind::Lidar) == lidar)
                 .filter(|c| {
-                    let (r, t) = c
+                    let d = c
                         .vehicle_from_sensor
                         .difference(now.sensor(&c.name).unwrap().vehicle_from_sensor);
-                    r + t > 1e-9
+                    part(d) > 1e-9
                 })
                 .count()
         };
-        (count(false), count(true), alignment)
+        let both = |(r, t): (f64, f64)| r + t;
+        (
+            count(false, |(r, _)| r),
+            count(false, |(_, t)| t),
+            count(true, both),
+            alignment,
+        )
     };
-    let (cameras, lidars, alignment) = moved(Some(1));
-    assert!(cameras >= 2, "{cameras} cameras moved");
+    let (turned, shifted, lidars, alignment) = moved(Some(1), true);
+    assert!(
+        turned >= 2 && shifted >= 2,
+        "{turned} turned, {shifted} shifted"
+    );
     assert_eq!(lidars, 0);
     assert!(alignment > 0.0);
-    assert_eq!(moved(None), (0, 0, 0.0));
+    let (turned, shifted, lidars, _) = moved(Some(1), false);
+    assert_eq!((turned, lidars), (0, 0), "translations only");
+    assert!(shifted >= 2, "{shifted} cameras shifted");
+    assert_eq!(moved(None, true), (0, 0, 0, 0.0));
 }

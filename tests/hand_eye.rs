@@ -84,7 +84,7 @@ fn cameras_ten_degrees_off_come_back_to_their_motion_and_keep_their_height() {
         );
     }
     let names = ["front_camera", "back_camera", "no_such_camera"].map(String::from);
-    let (fitted, outcomes) = fit_rig_cameras(&drive, &start, &names, 24, &[], &|_, _, _| {});
+    let (fitted, outcomes) = fit_rig_cameras(&drive, &start, &names, 24, &[], None, &|_, _, _| {});
     assert_eq!(outcomes.len(), 3);
     for o in &outcomes[..2] {
         let fit = o.fit.as_ref().unwrap();

@@ -300,6 +300,8 @@ fn a_session_restores_edits_segments_and_locks_and_export_round_trips() {
     h.state_mut()
         .locks
         .insert(camera.clone(), [true, false, false, false, false, false]);
+    use rigcal::app::optimiser::Method;
+    h.state_mut().optimiser.method = Method::Unical;
     let edited = h.state().current.clone();
     let dir = std::env::temp_dir().join(format!("rigcal-session-test-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
@@ -309,11 +311,17 @@ fn a_session_restores_edits_segments_and_locks_and_export_round_trips() {
     let log = pandaset();
     h.state_mut().open_log(&log);
     assert_ne!(h.state().current, edited);
+    h.state_mut().optimiser.method = Method::EdgeAlign;
     h.state_mut().restore_session(&path);
     h.run_steps(2);
     assert_eq!(h.state().current, edited, "{:?}", h.state().status);
     assert_eq!(h.state().segments, vec![(t0, t0 + 2_000_000_000)]);
     assert_eq!(h.state().locked_axes(&camera), vec!["x"]);
+    assert_eq!(
+        h.state().optimiser.method,
+        Method::Unical,
+        "the panel's method"
+    );
     // A broken session file is an error in the UI; nothing is lost.
     std::fs::write(dir.join("bad.json"), "{").unwrap();
     h.state_mut().restore_session(&dir.join("bad.json"));

@@ -28,6 +28,35 @@ pub enum Method {
 }
 
 impl Method {
+    /// Every method, in the panel's order.
+    pub const ALL: [Method; 7] = [
+        Method::EdgeAlign,
+        Method::Icp,
+        Method::MutualInformation,
+        Method::Target,
+        Method::PoseGraph,
+        Method::UnicalLidar,
+        Method::Unical,
+    ];
+
+    /// The name a session file stores (`rigcal calibrate --method`'s where there is one).
+    pub fn key(self) -> &'static str {
+        match self {
+            Method::EdgeAlign => "edge",
+            Method::Icp => "icp",
+            Method::MutualInformation => "mi",
+            Method::Target => "target",
+            Method::PoseGraph => "pose-graph",
+            Method::UnicalLidar => "unical-lidar",
+            Method::Unical => "unical",
+        }
+    }
+
+    /// The method a session's key names, `None` for an unknown one.
+    pub fn from_key(key: &str) -> Option<Method> {
+        Self::ALL.into_iter().find(|m| m.key() == key)
+    }
+
     fn label(self) -> &'static str {
         match self {
             Method::EdgeAlign => "Edge alignment (cameras vs LiDAR, rotation)",
@@ -214,12 +243,20 @@ pub fn start(studio: &mut Studio) {
         let notes = studio.optimiser.hand_eye_notes.clone();
         studio.optimiser.run = Some(Run::spawn_preparing(move |preparing| {
             let prepare_rig = if hand_eye {
-                let (fitted, outcomes) = crate::classical::camera_motion::fit_rig_cameras(
+                use crate::classical::camera_motion;
+                let map = camera_motion::lidar_map(&drive, &prepare_rig);
+                if let (Err(e), Ok(mut notes)) = (&map, notes.lock()) {
+                    notes.push(format!(
+                        "camera hand-eye: no LiDAR map to measure translations against: {e}"
+                    ));
+                }
+                let (fitted, outcomes) = camera_motion::fit_rig_cameras(
                     &drive,
                     &prepare_rig,
                     &cameras,
-                    crate::classical::camera_motion::DEFAULT_FRAMES,
+                    camera_motion::DEFAULT_FRAMES,
                     &segments,
+                    map.as_ref().ok(),
                     &|phase, done, total| preparing.report(phase, done, total),
                 );
                 if let Ok(mut notes) = notes.lock() {

@@ -418,6 +418,7 @@ impl Studio {
                 .format
                 .map(|f| f.name().to_string())
                 .unwrap_or_default(),
+            optimiser_method: self.optimiser.method.key().into(),
         });
         s
     }
@@ -505,6 +506,9 @@ impl Studio {
                 _ => Tab::Optimise,
             };
             self.export.format = v.export_format.parse().ok();
+            if let Some(m) = super::optimiser::Method::from_key(&v.optimiser_method) {
+                self.optimiser.method = m;
+            }
         }
         self.overlays.clear();
         self.status

@@ -10,8 +10,10 @@
 use glam::{DVec2, DVec3};
 use rayon::prelude::*;
 
-use super::hand_eye::{HandEyeFit, candidate_pairs, check_turns, motion_pairs, solve};
+use super::hand_eye::{HandEyeFit, MotionPair, candidate_pairs, check_turns, motion_pairs, solve};
+use super::lidar_translation::{LidarMap, TranslationFit, fit_translation};
 use crate::calib::Rig;
+use crate::geometry::Rigid;
 use crate::log::{Drive, spread_evenly};
 use crate::unical::correspondences::training_keypoints;
 
@@ -24,16 +26,24 @@ pub const DEFAULT_FRAMES: usize = 48;
 /// camera the scene pulls further than this has slid into a wrong basin.
 pub const ROTATION_BOUND_DEG: f64 = 1.0;
 
-/// Fit camera `name` of `rig` to its motion over `frames` images of `drive` within
-/// `segments_nanos`, reporting `(done, total)` per phase name.
-pub fn fit_camera(
+/// One camera's image pairs with verified motion, and the vehicle pose of each of its frames
+/// (what [`MotionPair::first_image`] indexes).
+pub struct CameraPairs {
+    pub pairs: Vec<MotionPair>,
+    pub world_from_vehicle: Vec<Rigid>,
+}
+
+/// The motion pairs of camera `name` of `rig` over `frames` images of `drive` within
+/// `segments_nanos`, reporting `(done, total)` per phase name. A drive too straight for the
+/// hand-eye is refused before any image is decoded.
+pub fn camera_pairs(
     drive: &Drive,
     rig: &Rig,
     name: &str,
     frames: usize,
     segments_nanos: &[(i64, i64)],
     report: &(dyn Fn(&str, usize, usize) + Sync),
-) -> Result<HandEyeFit, String> {
+) -> Result<CameraPairs, String> {
     let sensor = rig
         .sensor(name)
         .ok_or_else(|| format!("no camera '{name}' in the rig"))?;
@@ -49,7 +59,6 @@ pub fn fit_camera(
         .iter()
         .map(|&i| stream.frames[i].stamp_nanos)
         .collect();
-    // A drive too straight for the fit is refused before any image is decoded.
     let candidates = candidate_pairs(&drive.trajectory, &stamps);
     check_turns(&candidates).map_err(|e| e.to_string())?;
     let done = std::sync::atomic::AtomicUsize::new(0);
@@ -67,7 +76,39 @@ pub fn fit_camera(
     let pairs = motion_pairs(&keypoints, &candidates, &unproject, &|d, t| {
         report("camera motion", d, t)
     });
-    solve(&pairs, sensor.vehicle_from_sensor).map_err(|e| e.to_string())
+    // Every candidate's frames lie inside the trajectory (candidate_pairs skips the others);
+    // a frame outside it is never indexed.
+    let world_from_vehicle = stamps
+        .iter()
+        .map(|&t| {
+            drive
+                .trajectory
+                .world_from_vehicle(t)
+                .unwrap_or(Rigid::IDENTITY)
+        })
+        .collect();
+    Ok(CameraPairs {
+        pairs,
+        world_from_vehicle,
+    })
+}
+
+/// Fit camera `name` of `rig` to its motion over `frames` images of `drive` within
+/// `segments_nanos`, reporting `(done, total)` per phase name.
+pub fn fit_camera(
+    drive: &Drive,
+    rig: &Rig,
+    name: &str,
+    frames: usize,
+    segments_nanos: &[(i64, i64)],
+    report: &(dyn Fn(&str, usize, usize) + Sync),
+) -> Result<HandEyeFit, String> {
+    let start = rig
+        .sensor(name)
+        .ok_or_else(|| format!("no camera '{name}' in the rig"))?
+        .vehicle_from_sensor;
+    let found = camera_pairs(drive, rig, name, frames, segments_nanos, report)?;
+    solve(&found.pairs, start).map_err(|e| e.to_string())
 }
 
 /// What the hand-eye did to one camera of a rig.
@@ -76,7 +117,10 @@ pub struct CameraOutcome {
     pub name: String,
     /// The fit, or why the camera kept its start.
     pub fit: Result<HandEyeFit, String>,
-    /// How far the fit moved the camera (rad, m); zero when it was kept.
+    /// The translation then measured against the LiDAR map ([`super::lidar_translation`]),
+    /// or why not; `None` without a map or a fit.
+    pub translation: Option<Result<TranslationFit, String>>,
+    /// How far the fits moved the camera (rad, m); zero when it was kept.
     pub moved: (f64, f64),
 }
 
@@ -84,63 +128,107 @@ impl CameraOutcome {
     /// One line for a log or a status bar.
     pub fn summary(&self) -> String {
         let name = &self.name;
-        match &self.fit {
-            Ok(fit) => {
-                let kept = if fit.unobserved.is_empty() {
+        let fit = match &self.fit {
+            Ok(fit) => fit,
+            Err(e) => return format!("camera hand-eye: {name} kept: {e}"),
+        };
+        let kept = if fit.unobserved.is_empty() {
+            String::new()
+        } else {
+            format!(
+                " ({} not observed by the drive: kept)",
+                fit.unobserved.join(", ")
+            )
+        };
+        let lidar = match &self.translation {
+            None => String::new(),
+            Some(Ok(t)) => format!(
+                "; translation against the LiDAR map: {} points, median {:.1} cm off it{}",
+                t.points,
+                t.median_residual_m * 100.0,
+                if t.unobserved.is_empty() {
                     String::new()
                 } else {
-                    format!(
-                        " ({} not observed by the drive: kept)",
-                        fit.unobserved.join(", ")
-                    )
-                };
-                format!(
-                    "camera hand-eye: {name} moved {:.3}° / {:.1} cm to fit its motion{kept}; \
-                     {} of {} image pairs, median residuals {:.2}° (rotation) and {:.2}° \
-                     (direction)",
-                    self.moved.0.to_degrees(),
-                    self.moved.1 * 100.0,
-                    fit.pairs_used,
-                    fit.pairs_given,
-                    fit.rotation_residual_deg,
-                    fit.direction_residual_deg,
-                )
-            }
-            Err(e) => format!("camera hand-eye: {name} kept: {e}"),
-        }
+                    format!(" ({} not observed: kept)", t.unobserved.join(", "))
+                }
+            ),
+            Some(Err(e)) => format!("; translation against the LiDAR map not measured: {e}"),
+        };
+        format!(
+            "camera hand-eye: {name} moved {:.3}° / {:.1} cm to fit its motion{kept}; {} of {} \
+             image pairs, median residuals {:.2}° (rotation) and {:.2}° (direction){lidar}",
+            self.moved.0.to_degrees(),
+            self.moved.1 * 100.0,
+            fit.pairs_used,
+            fit.pairs_given,
+            fit.rotation_residual_deg,
+            fit.direction_residual_deg,
+        )
     }
 }
 
-/// Fit each camera of `names` in `rig` to its own motion ([`fit_camera`], `frames` images
-/// each), one after the other (each fit is parallel inside). Returns the rig with every fitted
-/// camera moved, and each camera's outcome; a camera that cannot be fitted keeps its start.
-/// `report` gets phase names prefixed with the camera's.
+/// Fit each camera of `names` in `rig` to its own motion (the hand-eye of [`fit_camera`],
+/// `frames` images each), then, with a `map`, its translation to the LiDAR map; one camera
+/// after the other (each fit is parallel inside). Returns the rig with every fitted camera
+/// moved, and each camera's outcome; a camera that cannot be fitted keeps its start. `report`
+/// gets phase names prefixed with the camera's.
 pub fn fit_rig_cameras(
     drive: &Drive,
     rig: &Rig,
     names: &[String],
     frames: usize,
     segments_nanos: &[(i64, i64)],
+    map: Option<&LidarMap>,
     report: &(dyn Fn(&str, usize, usize) + Sync),
 ) -> (Rig, Vec<CameraOutcome>) {
     let mut out = rig.clone();
     let mut outcomes = Vec::with_capacity(names.len());
     for name in names {
-        let fit = fit_camera(drive, rig, name, frames, segments_nanos, &|phase, d, t| {
+        let found = camera_pairs(drive, rig, name, frames, segments_nanos, &|phase, d, t| {
             report(&format!("{name}: {phase}"), d, t)
         });
+        let start = rig.sensor(name).map(|s| s.vehicle_from_sensor);
+        let fit = match (&found, start) {
+            (Ok(found), Some(start)) => solve(&found.pairs, start).map_err(|e| e.to_string()),
+            (Err(e), _) => Err(e.clone()),
+            (_, None) => Err(format!("no camera '{name}' in the rig")),
+        };
+        let translation = match (&found, &fit, map) {
+            (Ok(found), Ok(fit), Some(map)) => Some(
+                fit_translation(
+                    map,
+                    &found.pairs,
+                    &found.world_from_vehicle,
+                    fit.vehicle_from_camera,
+                )
+                .map_err(|e| e.to_string()),
+            ),
+            _ => None,
+        };
         let mut moved = (0.0, 0.0);
-        if let (Ok(fit), Some(sensor)) = (&fit, out.sensor_mut(name)) {
-            moved = sensor
-                .vehicle_from_sensor
-                .difference(fit.vehicle_from_camera);
-            sensor.vehicle_from_sensor = fit.vehicle_from_camera;
+        let fitted = match &translation {
+            Some(Ok(t)) => Some(t.vehicle_from_camera),
+            _ => fit.as_ref().ok().map(|f| f.vehicle_from_camera),
+        };
+        if let (Some(fitted), Some(sensor)) = (fitted, out.sensor_mut(name)) {
+            moved = sensor.vehicle_from_sensor.difference(fitted);
+            sensor.vehicle_from_sensor = fitted;
         }
         outcomes.push(CameraOutcome {
             name: name.clone(),
             fit,
+            translation,
             moved,
         });
     }
     (out, outcomes)
+}
+
+/// The LiDAR map [`fit_rig_cameras`] measures translations against: every LiDAR of `rig`
+/// (at its extrinsic there), 16 sweeps each spread over the drive, one point per 10 cm voxel.
+pub fn lidar_map(drive: &Drive, rig: &Rig) -> Result<LidarMap, String> {
+    let config = crate::optim::photo_consistency::PhotoConfig::default();
+    crate::optim::photo_consistency::lidar_map(drive, rig, &config)
+        .map(LidarMap::new)
+        .map_err(|e| e.to_string())
 }

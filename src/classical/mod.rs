@@ -8,12 +8,14 @@
 //! `target_calibrator` (every camera against a reference LiDAR); `pose_graph` (pairwise
 //! results as edges with information matrices, one robust Levenberg–Marquardt solve) and
 //! `pose_graph_calibrator` (every LiDAR pair by ICP, every camera–LiDAR pair by checkerboards
-//! or mutual information, unified by the graph).
+//! or mutual information, unified by the graph). `hand_eye` and `camera_motion` fit a camera to
+//! its own motion; `lidar_translation` then measures its translation against the LiDAR map.
 
 pub mod camera_motion;
 pub mod hand_eye;
 pub mod icp;
 pub mod icp_calibrator;
+pub mod lidar_translation;
 pub mod mi_calibrator;
 pub mod mutual_info;
 pub mod pose_graph;

@@ -72,6 +72,10 @@ pub struct CalibrateArgs {
     /// fraction of its start (default: as the rotation's;
     /// [`DepthCalibConfig::camera_translation_final_fraction`]).
     pub camera_translation_final: Option<f32>,
+    /// unical with cameras: `ITER[,RATE]`, the cameras follow the correspondence term from
+    /// iteration ITER of the geometry initialisation at RATE (default 0.1) times their rate
+    /// ([`DepthCalibConfig::alignment_release`]); `None`: they wait for the warm-up.
+    pub camera_early_release: Option<String>,
     /// unical: rounds of `iterations` each, every one with a fresh scene formed at the
     /// extrinsics the previous round reached (1: one run).
     pub rounds: usize,
@@ -238,7 +242,8 @@ fn register_lidars(
     Ok(out)
 }
 
-/// `rig` with every selected camera fitted to its own motion, and the cameras it fitted ([`camera_motion::fit_rig_cameras`]); a camera the
+/// `rig` with every selected camera fitted to its own motion and its translation to the map of
+/// `rig`'s LiDARs, and the cameras it fitted ([`camera_motion::fit_rig_cameras`]); a camera the
 /// drive cannot fit is kept where it is, and the output says why.
 fn register_cameras(
     drive: &Drive,
@@ -246,6 +251,13 @@ fn register_cameras(
     args: &CalibrateArgs,
     segments: &[(i64, i64)],
 ) -> (Rig, Vec<String>) {
+    let map = match camera_motion::lidar_map(drive, rig) {
+        Ok(map) => Some(map),
+        Err(e) => {
+            eprintln!("camera hand-eye: no LiDAR map to measure translations against: {e}");
+            None
+        }
+    };
     let bars = super::progress::PhasedProgress::default();
     let (out, outcomes) = camera_motion::fit_rig_cameras(
         drive,
@@ -253,6 +265,7 @@ fn register_cameras(
         &selected_cameras(args, rig),
         camera_motion::DEFAULT_FRAMES,
         segments,
+        map.as_ref(),
         &|phase, done, total| bars.report(phase, done, total),
     );
     bars.finish();
@@ -277,6 +290,44 @@ fn selected_cameras(args: &CalibrateArgs, rig: &Rig) -> Vec<String> {
 }
 
 /// Parse `--coarse-to-fine LEVELS,FRACTION` or `off` ([`CoarseToFine::parse_setting`]).
+/// An optional numeric option, checked: finite and `ok`, else an error naming the option and
+/// what it expects.
+fn checked(
+    value: Option<f32>,
+    option: &str,
+    expected: &str,
+    ok: impl Fn(f32) -> bool,
+) -> Result<Option<f32>, String> {
+    match value {
+        Some(v) if !(v.is_finite() && ok(v)) => Err(format!("{option} {v}: expected {expected}")),
+        v => Ok(v),
+    }
+}
+
+/// `ITER[,RATE]` of `--camera-early-release`: the iteration and the fraction of the cameras'
+/// rate, in (0, 1] (default 0.1, [`DepthCalibConfig::alignment_release_rate`]).
+fn parse_early_release(s: &str) -> Result<(usize, f32), String> {
+    let bad = |why: &str| format!("--camera-early-release '{s}': {why}");
+    let (iter, rate) = match s.split_once(',') {
+        Some((i, r)) => (i, Some(r)),
+        None => (s, None),
+    };
+    let iter = iter
+        .trim()
+        .parse::<usize>()
+        .map_err(|_| bad("expected ITER[,RATE] with ITER an iteration"))?;
+    let rate = match rate {
+        None => DepthCalibConfig::default().alignment_release_rate,
+        Some(r) => r
+            .trim()
+            .parse::<f32>()
+            .ok()
+            .filter(|r| r.is_finite() && *r > 0.0 && *r <= 1.0)
+            .ok_or_else(|| bad("RATE must be a fraction in (0, 1]"))?,
+    };
+    Ok((iter, rate))
+}
+
 fn parse_coarse_to_fine(s: &str) -> Result<Option<CoarseToFine>, String> {
     CoarseToFine::parse_setting(s).map_err(|e| format!("--coarse-to-fine: {e}"))
 }
@@ -360,28 +411,26 @@ pub fn calibrate(
             if args.rounds == 0 {
                 return Err("--rounds 0: expected at least one round".into());
             }
-            let camera_lr = match args.camera_lr {
-                Some(lr) if !(lr.is_finite() && lr > 0.0) => {
-                    return Err(format!("--camera-lr {lr}: expected a rate above 0"));
-                }
-                lr => lr,
-            };
-            let camera_translation_rate = match args.camera_translation_rate {
-                Some(r) if !(r.is_finite() && r >= 0.0) => {
-                    return Err(format!(
-                        "--camera-translation-rate {r}: expected a multiple of 0 or more"
-                    ));
-                }
-                r => r,
-            };
-            let camera_translation_final = match args.camera_translation_final {
-                Some(f) if !(f.is_finite() && f > 0.0 && f <= 1.0) => {
-                    return Err(format!(
-                        "--camera-translation-final {f}: expected a fraction in (0, 1]"
-                    ));
-                }
-                f => f,
-            };
+            let camera_lr = checked(args.camera_lr, "--camera-lr", "a rate above 0", |lr| {
+                lr > 0.0
+            })?;
+            let camera_translation_rate = checked(
+                args.camera_translation_rate,
+                "--camera-translation-rate",
+                "a multiple of 0 or more",
+                |r| r >= 0.0,
+            )?;
+            let camera_translation_final = checked(
+                args.camera_translation_final,
+                "--camera-translation-final",
+                "a fraction in (0, 1]",
+                |f| f > 0.0 && f <= 1.0,
+            )?;
+            let early_release = args
+                .camera_early_release
+                .as_deref()
+                .map(parse_early_release)
+                .transpose()?;
             if args.lidar_icp {
                 rig = register_lidars(&drive, &rig, args, &segments)?;
             }
@@ -404,6 +453,9 @@ pub fn calibrate(
                     .unwrap_or(preset.camera_translation_rate),
                 camera_translation_final_fraction: camera_translation_final
                     .or(preset.camera_translation_final_fraction),
+                alignment_release: early_release.map(|(i, _)| i),
+                alignment_release_rate: early_release
+                    .map_or(preset.alignment_release_rate, |(_, r)| r),
                 coarse_to_fine: match args.coarse_to_fine.as_deref() {
                     Some(s) => parse_coarse_to_fine(s)?,
                     None => preset.coarse_to_fine,
@@ -518,9 +570,15 @@ pub fn calibrate(
         format!("running: step 0 of {max_steps}"),
     )?;
     let mut saved_at = std::time::Instant::now();
+    let optimising_since = std::time::Instant::now();
+    let mut first_update_seen = false;
     for step in 1..=max_steps {
         let r = calibrator.step();
         last = r.losses;
+        if !first_update_seen && rig_moved(&rig, &calibrator.current()) {
+            first_update_seen = true;
+            report_first_update(step, optimising_since.elapsed().as_secs_f64());
+        }
         progress(step, max_steps);
         if r.done {
             break;
@@ -540,6 +598,28 @@ pub fn calibrate(
     }
     doc.save(&args.out).map_err(|e| e.to_string())?;
     Ok(doc)
+}
+
+/// Whether any sensor of `now` differs from `start` (by more than rounding).
+fn rig_moved(start: &Rig, now: &Rig) -> bool {
+    start.sensors.iter().any(|s| {
+        now.sensor(&s.name).is_some_and(|n| {
+            let (rot, trans) = s.vehicle_from_sensor.difference(n.vehicle_from_sensor);
+            rot + trans > 1e-9
+        })
+    })
+}
+
+/// The step and the time into the optimisation at which the extrinsics first changed: what a
+/// user watching the run waits for (issue 5 asks for it within 5 s).
+fn report_first_update(step: usize, seconds: f64) {
+    use std::io::IsTerminal;
+    let lead = if std::io::stderr().is_terminal() {
+        "\n"
+    } else {
+        ""
+    };
+    eprintln!("{lead}first extrinsic update: step {step}, {seconds:.1} s into the optimisation");
 }
 
 /// Cameras that end at the rotation bound around their hand-eye fit: the scene pulled them

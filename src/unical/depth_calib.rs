@@ -116,6 +116,11 @@ pub struct DepthCalibConfig {
     /// The cameras' rate before the warm-up's end, as a fraction of their rate (after an
     /// [`Self::alignment_release`]).
     pub alignment_release_rate: f32,
+    /// Whether the cameras' rotations move too after an [`Self::alignment_release`] (else only
+    /// their translations do until the warm-up's end: after a hand-eye start the rotations are
+    /// already close, and the correspondence term, with translations still off, turns them
+    /// to make up for the offset; BENCHMARKS.md, "The cameras' first move").
+    pub alignment_release_rotates: bool,
     pub iterations: usize,
     pub seed: u64,
     /// Camera rays per camera and step (the budget is split evenly across sensors, §7).
@@ -228,6 +233,7 @@ impl Default for DepthCalibConfig {
             // first move").
             alignment_release: None,
             alignment_release_rate: 0.1,
+            alignment_release_rotates: true,
             iterations: 2000,
             seed: 1,
             rays_per_camera: 512,
@@ -357,6 +363,7 @@ impl DepthCalibConfig {
             lr_camera_pose: self.lr_camera_pose * 0.5,
             camera_translation_rate: self.camera_translation_rate * 2.0,
             camera_translation_final_fraction: Some(0.05),
+            alignment_release_rotates: false,
             camera_rotation_bounds_deg: fitted
                 .iter()
                 .map(|name| (name.clone(), rotation_bound_deg))
@@ -374,7 +381,7 @@ impl DepthCalibConfig {
         let Some(since) = iteration.checked_sub(self.pose_warmup) else {
             return 0.0;
         };
-        let moving = self.iterations.saturating_sub(self.pose_warmup).max(1);
+        let moving = self.moving_iterations();
         let ramp = match self.pose_ramp.min(moving / 4) {
             0 => 1.0,
             n => ((since + 1) as f32 / n as f32).min(1.0),
@@ -407,11 +414,15 @@ impl DepthCalibConfig {
         let Some(final_fraction) = self.camera_translation_final_fraction else {
             return rate;
         };
-        let moving = self.iterations.saturating_sub(self.pose_warmup).max(1);
         let since = iteration.saturating_sub(self.pose_warmup);
-        let s = (since as f64 / moving as f64).min(1.0);
-        let ratio = final_fraction as f64 / (self.camera_pose_final_fraction as f64).max(1e-12);
-        rate * ratio.powf(s)
+        let ratio = final_fraction / self.camera_pose_final_fraction.max(1e-12);
+        rate * decayed_lr(1.0, ratio, since, self.moving_iterations()) as f64
+    }
+
+    /// The iterations in which poses move (from the warm-up's end), at least 1: what their
+    /// rates decay over.
+    fn moving_iterations(&self) -> usize {
+        self.iterations.saturating_sub(self.pose_warmup).max(1)
     }
 
     /// The iteration from which camera poses move: [`Self::alignment_release`] if it comes
@@ -1635,7 +1646,11 @@ impl DepthCalibration {
             return (0.0, 0);
         }
         let lr = self.camera_rate_now();
-        let align = self.alignment_gradients();
+        let mut align = self.alignment_gradients();
+        if !self.config.alignment_release_rotates {
+            // Adam's moments stay at zero for the rotation: it does not move.
+            align.pose.iter_mut().for_each(|g| g[..6].fill(0.0));
+        }
         // Its hash-grid gradients went to the accumulators: the SDF fit must not see them.
         drop(GradAccumulator::drain_all(&mut self.grid_accs));
         let frozen = self.frozen_cameras();
@@ -2161,6 +2176,10 @@ mod tests {
         );
         assert_eq!(preset.clone().after_hand_eye(&[], 1.0), preset);
         assert_eq!(he.lr_camera_pose, preset.lr_camera_pose * 0.5);
+        assert!(
+            !he.alignment_release_rotates,
+            "its rotations stay during a release"
+        );
         let release = he.pose_warmup;
         let translation_at = |c: &DepthCalibConfig, it: usize| {
             c.pose_rate(c.lr_camera_pose, c.camera_pose_final_fraction, it) as f64
