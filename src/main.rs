@@ -107,8 +107,8 @@ enum Command {
         /// unical with cameras: ITER[,RATE]: the cameras start to move at iteration ITER of
         /// the geometry initialisation, on the correspondence term alone, at RATE (default
         /// 0.1) times their rate, so the first extrinsic update comes seconds into the run
-        /// instead of after the warm-up; after --camera-hand-eye only their translations move
-        /// until the warm-up ends
+        /// instead of after the warm-up; --camera-hand-eye sets it at 30, and then only the
+        /// translations of the cameras it fitted move until the warm-up ends
         #[arg(long, value_name = "ITER[,RATE]")]
         camera_early_release: Option<String>,
         /// unical: run in ROUNDS rounds of --iterations each, every one with a fresh scene

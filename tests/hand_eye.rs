@@ -1,7 +1,8 @@
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 //! Hand-eye initialisation of cameras from their own motion, end to end on a simulated drive
 //! that turns: from 10° and half a metre off, the front and back cameras's rotation comes back and its height
-//! (which a level drive cannot observe) stays where it started; on the real PandaSet drive,
+//! (which a level drive cannot observe) stays where it started, until the LiDAR map measures
+//! it; on the real PandaSet drive,
 //! which runs straight, the CLI keeps every camera and says why.
 
 use std::path::PathBuf;
@@ -9,7 +10,7 @@ use std::process::Command;
 
 use glam::DVec3;
 use rigcal::calib::CalibrationFile;
-use rigcal::classical::camera_motion::{fit_camera, fit_rig_cameras};
+use rigcal::classical::camera_motion::{fit_camera, fit_rig_cameras, lidar_map};
 use rigcal::geometry::{Rigid, so3};
 use rigcal::log::Drive;
 use rigcal::sim::rigs::{RigPreset, SimRig};
@@ -98,6 +99,29 @@ fn cameras_ten_degrees_off_come_back_to_their_motion_and_keep_their_height() {
     }
     assert!(outcomes[2].fit.is_err());
     assert!(outcomes[2].summary().contains("no_such_camera kept"));
+    // With the LiDAR map the translation comes back too, the height the drive cannot observe
+    // included (the start is 20 cm forward, 10 cm left and 10 cm low).
+    let map = lidar_map(&drive, &truth).unwrap();
+    let (fitted, outcomes) = fit_rig_cameras(
+        &drive,
+        &start,
+        &names[..2],
+        24,
+        &[],
+        Some(&map),
+        &|_, _, _| {},
+    );
+    for o in &outcomes {
+        let t = truth.sensor(&o.name).unwrap().vehicle_from_sensor;
+        let got = fitted.sensor(&o.name).unwrap().vehicle_from_sensor;
+        let error = got.translation - t.translation;
+        assert!(error.length() < 0.08, "{error} {}", o.summary());
+        assert!(
+            o.summary().contains("translation against the LiDAR map:"),
+            "{}",
+            o.summary()
+        );
+    }
     for s in &start.sensors {
         if !names.contains(&s.name) {
             assert_eq!(fitted.sensor(&s.name).unwrap(), s);

@@ -132,13 +132,16 @@ impl CameraOutcome {
             Ok(fit) => fit,
             Err(e) => return format!("camera hand-eye: {name} kept: {e}"),
         };
-        let kept = if fit.unobserved.is_empty() {
-            String::new()
-        } else {
-            format!(
+        let kept = match (fit.unobserved.is_empty(), &self.translation) {
+            (true, _) => String::new(),
+            (false, Some(Ok(_))) => format!(
+                " ({} not observed by the drive: measured against the LiDAR map)",
+                fit.unobserved.join(", ")
+            ),
+            (false, _) => format!(
                 " ({} not observed by the drive: kept)",
                 fit.unobserved.join(", ")
-            )
+            ),
         };
         let lidar = match &self.translation {
             None => String::new(),

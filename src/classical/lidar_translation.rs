@@ -334,7 +334,7 @@ mod tests {
                     .filter_map(|&p| {
                         let (a, b) = (ci.transform_point(p), cj.transform_point(p));
                         (a.z > 1.0 && b.z > 1.0 && a.x.abs() < a.z && a.y.abs() < 0.6 * a.z)
-                            .then(|| (a.normalize(), b.normalize()))
+                            .then(|| (a.normalize_or_zero(), b.normalize_or_zero()))
                     })
                     .collect();
                 let rays = crate::log::spread_evenly(&seen, 150);

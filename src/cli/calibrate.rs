@@ -453,7 +453,7 @@ pub fn calibrate(
                     .unwrap_or(preset.camera_translation_rate),
                 camera_translation_final_fraction: camera_translation_final
                     .or(preset.camera_translation_final_fraction),
-                alignment_release: early_release.map(|(i, _)| i),
+                alignment_release: early_release.map(|(i, _)| i).or(preset.alignment_release),
                 alignment_release_rate: early_release
                     .map_or(preset.alignment_release_rate, |(_, r)| r),
                 coarse_to_fine: match args.coarse_to_fine.as_deref() {
