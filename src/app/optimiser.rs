@@ -388,15 +388,7 @@ pub fn optimiser_ui(studio: &mut Studio, ui: &mut egui::Ui) {
         egui::ComboBox::from_label("method")
             .selected_text(studio.optimiser.method.label())
             .show_ui(ui, |ui| {
-                for m in [
-                    Method::EdgeAlign,
-                    Method::Icp,
-                    Method::MutualInformation,
-                    Method::Target,
-                    Method::PoseGraph,
-                    Method::UnicalLidar,
-                    Method::Unical,
-                ] {
+                for m in Method::ALL {
                     ui.selectable_value(&mut studio.optimiser.method, m, m.label());
                 }
             });
