@@ -15,7 +15,8 @@
 //! a start a metre off still finds the ground and the façades. After each step the points are
 //! triangulated again (a pair that turns moves with the translation too). The ground pins the
 //! height; façades and poles the horizontal directions. A direction the points do not observe
-//! (a weak eigenvalue of the 3 × 3 normal equations) stays where it started.
+//! (an eigenvalue of the 3 × 3 normal equations below about 30 points' worth) stays where it
+//! started.
 
 use glam::{DMat3, DVec3};
 use rayon::prelude::*;
@@ -40,8 +41,11 @@ const MIN_PARALLAX_RAD: f64 = 0.026;
 const MAX_GAP_RELATIVE: f64 = 0.01;
 /// Map neighbourhoods flatter than this get a normal (as ICP's targets).
 const MAX_FLATNESS: f64 = 0.15;
-/// A direction whose information is below this fraction of the largest stays at the start.
-const MIN_RELATIVE_INFORMATION: f64 = 0.02;
+/// A direction whose information is below this stays at the start: about as many points
+/// whose normals lie fully along it (each point adds at most 1). Absolute, not relative to the
+/// best-observed direction: a side camera facing a long façade has thousands of points across
+/// the drive and a few hundred on the ground, which still fix its height.
+const MIN_INFORMATION: f64 = 30.0;
 /// Points a fit needs.
 const MIN_POINTS: usize = 50;
 
@@ -168,26 +172,26 @@ pub fn fit_translation(
         for _ in 0..ITERATIONS_PER_LEVEL {
             let camera = Rigid::new(start.rotation, translation);
             let points = triangulate(pairs, world_from_vehicle, camera);
-            let (h, g, used, median) = normal_equations(map, &points, radius);
-            last = (used, median, h);
+            let (h, information, g, used, median) = normal_equations(map, &points, radius);
+            last = (used, median, information);
             if used < MIN_POINTS {
                 break;
             }
-            let step = solve_observed(h, -g);
+            let step = solve_observed(h, information, -g);
             translation += step;
             if step.length() < 1e-4 {
                 break;
             }
         }
     }
-    let (used, median, h) = last;
+    let (used, median, information) = last;
     if used < MIN_POINTS {
         return Err(TranslationError::TooFewPoints {
             found: used,
             needed: MIN_POINTS,
         });
     }
-    let weak = weak_directions(h);
+    let weak = weak_directions(information);
     // A weak direction keeps the start: undo whatever the steps did along it.
     for &axis in &weak {
         translation -= axis * axis.dot(translation - start.translation);
@@ -207,12 +211,14 @@ pub fn fit_translation(
 }
 
 /// Huber-weighted point-to-plane normal equations `(H, g)` over `points` with map neighbours
-/// within `radius_m`, the number used and their median |residual|.
+/// within `radius_m`, the unweighted information `Σ m mᵀ` (what decides which directions are
+/// observed: Huber weights would count a start a metre off as unobserved), the number used and
+/// their median |residual|.
 fn normal_equations(
     map: &LidarMap,
     points: &[(DVec3, DMat3)],
     radius_m: f64,
-) -> (DMat3, DVec3, usize, f64) {
+) -> (DMat3, DMat3, DVec3, usize, f64) {
     let terms: Vec<(DVec3, f64)> = points
         .par_iter()
         .filter_map(|&(p, world_rotation)| {
@@ -221,41 +227,47 @@ fn normal_equations(
             Some((world_rotation.transpose() * n, n.dot(p - q)))
         })
         .collect();
-    let (mut h, mut g) = (DMat3::ZERO, DVec3::ZERO);
+    let (mut h, mut information, mut g) = (DMat3::ZERO, DMat3::ZERO, DVec3::ZERO);
     for &(m, r) in &terms {
         let w = if r.abs() <= HUBER_M {
             1.0
         } else {
             HUBER_M / r.abs()
         };
-        h += DMat3::from_cols(m * (w * m.x), m * (w * m.y), m * (w * m.z));
+        let outer = DMat3::from_cols(m * m.x, m * m.y, m * m.z);
+        h += outer * w;
+        information += outer;
         g += m * (w * r);
     }
     let mut residuals: Vec<f64> = terms.iter().map(|t| t.1.abs()).collect();
     residuals.sort_by(f64::total_cmp);
     let median = residuals.get(residuals.len() / 2).copied().unwrap_or(0.0);
-    (h, g, terms.len(), median)
+    (h, information, g, terms.len(), median)
 }
 
-/// Unit eigen-directions of `h` whose eigenvalue is below [`MIN_RELATIVE_INFORMATION`] of the
-/// largest.
-fn weak_directions(h: DMat3) -> Vec<DVec3> {
-    let (values, vectors) = eigen(h);
-    let largest = values.iter().copied().fold(0.0, f64::max);
+/// Unit eigen-directions of `information` whose eigenvalue is below [`MIN_INFORMATION`].
+fn weak_directions(information: DMat3) -> Vec<DVec3> {
+    let (values, vectors) = eigen(information);
     (0..3)
-        .filter(|&k| values[k] < MIN_RELATIVE_INFORMATION * largest)
+        .filter(|&k| values[k] < MIN_INFORMATION)
         .map(|k| vectors[k])
         .collect()
 }
 
-/// `h⁻¹ b` restricted to the eigen-directions of `h` that are observed (the rest: 0).
-fn solve_observed(h: DMat3, b: DVec3) -> DVec3 {
-    let (values, vectors) = eigen(h);
-    let largest = values.iter().copied().fold(0.0, f64::max);
-    (0..3)
-        .filter(|&k| largest > 0.0 && values[k] >= MIN_RELATIVE_INFORMATION * largest)
-        .map(|k| vectors[k] * (vectors[k].dot(b) / values[k]))
-        .sum()
+/// `h⁻¹ b` within the directions `information` observes (nothing along the weak ones): `h`
+/// restricted to the observed subspace, the identity on the weak one.
+fn solve_observed(h: DMat3, information: DMat3, b: DVec3) -> DVec3 {
+    let weak = weak_directions(information);
+    let weak_part: DMat3 = weak
+        .iter()
+        .map(|w| DMat3::from_cols(*w * w.x, *w * w.y, *w * w.z))
+        .fold(DMat3::ZERO, |a, m| a + m);
+    let observed = DMat3::IDENTITY - weak_part;
+    let a = observed * h * observed + weak_part;
+    if a.determinant().abs() < 1e-12 {
+        return DVec3::ZERO;
+    }
+    observed * (a.inverse() * (observed * b))
 }
 
 /// Eigenvalues and unit eigenvectors of the symmetric `h`.
@@ -384,6 +396,19 @@ mod tests {
             assert!(error.length() < 0.03, "{offset} -> {error} ({fit:?})");
             assert_eq!(fit.vehicle_from_camera.rotation, camera.rotation);
         }
+    }
+
+    #[test]
+    fn a_direction_is_observed_by_enough_points_however_many_see_the_others() {
+        // Thousands of points on a façade across the drive, sixty on the ground: the height is
+        // observed; five are not enough.
+        let h = |ground: f64| DMat3::from_diagonal(DVec3::new(800.0, 5000.0, ground));
+        assert!(weak_directions(h(60.0)).is_empty());
+        let weak = weak_directions(h(5.0));
+        assert_eq!(weak.len(), 1);
+        assert!(weak[0].z.abs() > 0.99, "{weak:?}");
+        let step = solve_observed(h(5.0), h(5.0), DVec3::new(800.0, 5000.0, 5.0));
+        assert!((step - DVec3::new(1.0, 1.0, 0.0)).length() < 1e-9, "{step}");
     }
 
     #[test]
