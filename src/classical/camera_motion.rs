@@ -29,6 +29,8 @@ pub const ROTATION_BOUND_DEG: f64 = 1.0;
 /// One camera's image pairs with verified motion, and the vehicle pose of each of its frames
 /// (what [`MotionPair::first_image`] indexes).
 pub struct CameraPairs {
+    /// The camera's extrinsic in the rig it was read with: where a fit starts.
+    pub start: Rigid,
     pub pairs: Vec<MotionPair>,
     pub world_from_vehicle: Vec<Rigid>,
 }
@@ -88,6 +90,7 @@ pub fn camera_pairs(
         })
         .collect();
     Ok(CameraPairs {
+        start: sensor.vehicle_from_sensor,
         pairs,
         world_from_vehicle,
     })
@@ -103,12 +106,8 @@ pub fn fit_camera(
     segments_nanos: &[(i64, i64)],
     report: &(dyn Fn(&str, usize, usize) + Sync),
 ) -> Result<HandEyeFit, String> {
-    let start = rig
-        .sensor(name)
-        .ok_or_else(|| format!("no camera '{name}' in the rig"))?
-        .vehicle_from_sensor;
     let found = camera_pairs(drive, rig, name, frames, segments_nanos, report)?;
-    solve(&found.pairs, start).map_err(|e| e.to_string())
+    solve(&found.pairs, found.start).map_err(|e| e.to_string())
 }
 
 /// What the hand-eye did to one camera of a rig.
@@ -190,11 +189,9 @@ pub fn fit_rig_cameras(
         let found = camera_pairs(drive, rig, name, frames, segments_nanos, &|phase, d, t| {
             report(&format!("{name}: {phase}"), d, t)
         });
-        let start = rig.sensor(name).map(|s| s.vehicle_from_sensor);
-        let fit = match (&found, start) {
-            (Ok(found), Some(start)) => solve(&found.pairs, start).map_err(|e| e.to_string()),
-            (Err(e), _) => Err(e.clone()),
-            (_, None) => Err(format!("no camera '{name}' in the rig")),
+        let fit = match &found {
+            Ok(found) => solve(&found.pairs, found.start).map_err(|e| e.to_string()),
+            Err(e) => Err(e.clone()),
         };
         let translation = match (&found, &fit, map) {
             (Ok(found), Ok(fit), Some(map)) => Some(

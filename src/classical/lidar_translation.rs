@@ -75,14 +75,6 @@ impl LidarMap {
         }
     }
 
-    pub fn len(&self) -> usize {
-        self.points.len()
-    }
-
-    pub fn is_empty(&self) -> bool {
-        self.points.is_empty()
-    }
-
     /// The nearest map point within `max_m` of `p` that has a normal: `(point, normal)`.
     fn plane_near(&self, p: DVec3, max_m: f64) -> Option<(DVec3, DVec3)> {
         let k = self.tree.nearest(p, max_m)? as usize;

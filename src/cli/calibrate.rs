@@ -289,7 +289,6 @@ fn selected_cameras(args: &CalibrateArgs, rig: &Rig) -> Vec<String> {
         .collect()
 }
 
-/// Parse `--coarse-to-fine LEVELS,FRACTION` or `off` ([`CoarseToFine::parse_setting`]).
 /// An optional numeric option, checked: finite and `ok`, else an error naming the option and
 /// what it expects.
 fn checked(
@@ -328,6 +327,7 @@ fn parse_early_release(s: &str) -> Result<(usize, f32), String> {
     Ok((iter, rate))
 }
 
+/// Parse `--coarse-to-fine LEVELS,FRACTION` or `off` ([`CoarseToFine::parse_setting`]).
 fn parse_coarse_to_fine(s: &str) -> Result<Option<CoarseToFine>, String> {
     CoarseToFine::parse_setting(s).map_err(|e| format!("--coarse-to-fine: {e}"))
 }
