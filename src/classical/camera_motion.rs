@@ -32,7 +32,8 @@ pub struct CameraPairs {
     /// The camera's extrinsic in the rig it was read with: where a fit starts.
     pub start: Rigid,
     pub pairs: Vec<MotionPair>,
-    pub world_from_vehicle: Vec<Rigid>,
+    /// `None` for a frame outside the trajectory (no candidate pair uses one).
+    pub world_from_vehicle: Vec<Option<Rigid>>,
 }
 
 /// The motion pairs of camera `name` of `rig` over `frames` images of `drive` within
@@ -78,16 +79,9 @@ pub fn camera_pairs(
     let pairs = motion_pairs(&keypoints, &candidates, &unproject, &|d, t| {
         report("camera motion", d, t)
     });
-    // Every candidate's frames lie inside the trajectory (candidate_pairs skips the others);
-    // a frame outside it is never indexed.
     let world_from_vehicle = stamps
         .iter()
-        .map(|&t| {
-            drive
-                .trajectory
-                .world_from_vehicle(t)
-                .unwrap_or(Rigid::IDENTITY)
-        })
+        .map(|&t| drive.trajectory.world_from_vehicle(t).ok())
         .collect();
     Ok(CameraPairs {
         start: sensor.vehicle_from_sensor,

@@ -103,18 +103,22 @@ pub enum TranslationError {
 
 /// The matches of `pairs` triangulated with the camera at `vehicle_from_camera`, in the world:
 /// `(point, world_from_vehicle rotation of the pair's first image)`. `world_from_vehicle[i]` is
-/// the vehicle pose of image `i` ([`MotionPair::first_image`]).
+/// the vehicle pose of image `i` ([`MotionPair::first_image`]); a pair whose first image has
+/// none is skipped.
 pub fn triangulate(
     pairs: &[MotionPair],
-    world_from_vehicle: &[Rigid],
+    world_from_vehicle: &[Option<Rigid>],
     vehicle_from_camera: Rigid,
 ) -> Vec<(DVec3, DMat3)> {
     let camera_from_vehicle = vehicle_from_camera.inverse();
     pairs
         .par_iter()
         .filter_map(|pair| {
-            let w = world_from_vehicle.get(pair.first_image)?;
-            let world_from_camera = *w * vehicle_from_camera;
+            let w = world_from_vehicle
+                .get(pair.first_image)
+                .copied()
+                .flatten()?;
+            let world_from_camera = w * vehicle_from_camera;
             let i_from_j = camera_from_vehicle * pair.vehicle_motion * vehicle_from_camera;
             let rotation = DMat3::from_quat(w.rotation);
             Some(
@@ -155,7 +159,7 @@ fn midpoint(i_from_j: Rigid, a: DVec3, b: DVec3) -> Option<DVec3> {
 pub fn fit_translation(
     map: &LidarMap,
     pairs: &[MotionPair],
-    world_from_vehicle: &[Rigid],
+    world_from_vehicle: &[Option<Rigid>],
     start: Rigid,
 ) -> Result<TranslationFit, TranslationError> {
     let mut translation = start.translation;
@@ -327,6 +331,11 @@ mod tests {
     }
 
     /// Exact matches of `camera` between images `i` and `i + 2`, from map points it sees.
+    /// Every pose known (inside the trajectory).
+    fn known(poses: &[Rigid]) -> Vec<Option<Rigid>> {
+        poses.iter().copied().map(Some).collect()
+    }
+
     fn pairs(camera: Rigid, poses: &[Rigid], map: &[DVec3]) -> Vec<MotionPair> {
         (0..poses.len() - 2)
             .map(|i| {
@@ -358,7 +367,7 @@ mod tests {
     fn triangulated_matches_lie_on_the_map_at_the_true_translation() {
         let (map, poses, camera) = (street(), drive(), left_camera());
         let pairs = pairs(camera, &poses, &map);
-        let points = triangulate(&pairs, &poses, camera);
+        let points = triangulate(&pairs, &known(&poses), camera);
         assert!(points.len() > 500, "{}", points.len());
         let lidar = LidarMap::new(map);
         let worst = points
@@ -369,6 +378,15 @@ mod tests {
             })
             .fold(0.0, f64::max);
         assert!(worst < 0.08, "{worst}");
+        // A pair whose first image lies outside the trajectory gives no points.
+        let mut partly = known(&poses);
+        partly[pairs[0].first_image] = None;
+        let fewer = triangulate(&pairs, &partly, camera).len();
+        assert!(
+            fewer < points.len() && fewer > 0,
+            "{fewer} of {}",
+            points.len()
+        );
     }
 
     #[test]
@@ -383,7 +401,7 @@ mod tests {
             DVec3::new(-0.5, 0.7, -0.4),
         ] {
             let start = Rigid::new(camera.rotation, camera.translation + offset);
-            let fit = fit_translation(&lidar, &pairs, &poses, start).unwrap();
+            let fit = fit_translation(&lidar, &pairs, &known(&poses), start).unwrap();
             let error = fit.vehicle_from_camera.translation - camera.translation;
             assert!(error.length() < 0.03, "{offset} -> {error} ({fit:?})");
             assert_eq!(fit.vehicle_from_camera.rotation, camera.rotation);
@@ -412,7 +430,7 @@ mod tests {
             .map(|p| *p + DVec3::new(0.0, 0.0, 50.0))
             .collect();
         let lidar = LidarMap::new(far);
-        let err = fit_translation(&lidar, &pairs, &poses, camera).unwrap_err();
+        let err = fit_translation(&lidar, &pairs, &known(&poses), camera).unwrap_err();
         assert!(
             matches!(err, TranslationError::TooFewPoints { .. }),
             "{err}"
