@@ -329,7 +329,7 @@ fn solve_translation(
     let mut rhs = [0.0f64; 3];
     for pair in pairs {
         let u = rotation * pair.camera_direction;
-        let project = DMat3::IDENTITY - outer(u, u);
+        let project = DMat3::IDENTITY - so3::outer(u, u);
         let a = project * (DMat3::from_quat(pair.vehicle_motion.rotation) - DMat3::IDENTITY);
         let b = -(project * pair.vehicle_motion.translation);
         // Normal equations: AᵀA p = Aᵀ b (glam matrices are column-major: row i of A is
@@ -356,10 +356,6 @@ fn solve_translation(
     let b: Vec<f64> = (0..3).map(|i| rhs[i] + prior * start[i]).collect();
     let p = spd::solve(&a, &b).map_or(start, |x| DVec3::new(x[0], x[1], x[2]));
     (p, information)
-}
-
-fn outer(a: DVec3, b: DVec3) -> DMat3 {
-    DMat3::from_cols(a * b.x, a * b.y, a * b.z)
 }
 
 /// One round of the alternation over `pairs` from `start`.

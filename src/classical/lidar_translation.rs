@@ -25,6 +25,7 @@ use super::hand_eye::MotionPair;
 use super::icp::{KdTree, NORMAL_RADIUS_M};
 use crate::eval::registration::plane_normal_from_moments;
 use crate::geometry::Rigid;
+use crate::geometry::so3::outer;
 
 /// Correspondence distances, coarse to fine (m).
 const LEVELS_M: [f64; 4] = [2.0, 1.0, 0.5, 0.25];
@@ -230,9 +231,9 @@ fn normal_equations(
         } else {
             HUBER_M / r.abs()
         };
-        let outer = DMat3::from_cols(m * m.x, m * m.y, m * m.z);
-        h += outer * w;
-        information += outer;
+        let m_mt = outer(m, m);
+        h += m_mt * w;
+        information += m_mt;
         g += m * (w * r);
     }
     let mut residuals: Vec<f64> = terms.iter().map(|t| t.1.abs()).collect();
@@ -256,7 +257,7 @@ fn solve_observed(h: DMat3, information: DMat3, b: DVec3) -> DVec3 {
     let weak = weak_directions(information);
     let weak_part: DMat3 = weak
         .iter()
-        .map(|w| DMat3::from_cols(*w * w.x, *w * w.y, *w * w.z))
+        .map(|&w| outer(w, w))
         .fold(DMat3::ZERO, |a, m| a + m);
     let observed = DMat3::IDENTITY - weak_part;
     let a = observed * h * observed + weak_part;
@@ -330,12 +331,12 @@ mod tests {
             .collect()
     }
 
-    /// Exact matches of `camera` between images `i` and `i + 2`, from map points it sees.
     /// Every pose known (inside the trajectory).
     fn known(poses: &[Rigid]) -> Vec<Option<Rigid>> {
         poses.iter().copied().map(Some).collect()
     }
 
+    /// Exact matches of `camera` between images `i` and `i + 2`, from map points it sees.
     fn pairs(camera: Rigid, poses: &[Rigid], map: &[DVec3]) -> Vec<MotionPair> {
         (0..poses.len() - 2)
             .map(|i| {

@@ -47,6 +47,11 @@ pub fn hat(a: DVec3) -> DMat3 {
     )
 }
 
+/// Outer product `a bᵀ` (`outer(a, b) * c == a (b · c)`).
+pub fn outer(a: DVec3, b: DVec3) -> DMat3 {
+    DMat3::from_cols(a * b.x, a * b.y, a * b.z)
+}
+
 /// Angle of a rotation in radians, in [0, π].
 pub fn angle_rad(rotation: DQuat) -> f64 {
     log(rotation).length()
