@@ -130,7 +130,7 @@ impl KdTree {
             if d.length_squared() <= r2 {
                 m.0 += 1;
                 m.1 += d;
-                m.2 += glam::DMat3::from_cols(d * d.x, d * d.y, d * d.z);
+                m.2 += so3::outer(d, d);
             }
         };
         if hi - lo <= LEAF {

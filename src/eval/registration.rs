@@ -15,6 +15,8 @@ use std::collections::HashMap;
 use glam::{DMat3, DVec3};
 use rayon::prelude::*;
 
+use crate::geometry::so3;
+
 /// The paper's inlier distance (m).
 pub const MAX_CORRESPONDENCE_M: f64 = 0.3;
 /// Radius of the target neighbourhood a normal is fitted to (m).
@@ -97,7 +99,7 @@ pub fn plane_normal(points: &[DVec3]) -> Option<DVec3> {
     let mut cov = DMat3::ZERO;
     for p in points {
         let q = *p - mean;
-        cov += DMat3::from_cols(q * q.x, q * q.y, q * q.z);
+        cov += so3::outer(q, q);
     }
     normal_of_covariance(cov, MAX_FLATNESS)
 }
@@ -115,7 +117,7 @@ pub fn plane_normal_from_moments(
         return None;
     }
     let mean = sum / n as f64;
-    let cov = outer - DMat3::from_cols(mean * sum.x, mean * sum.y, mean * sum.z);
+    let cov = outer - so3::outer(mean, sum);
     normal_of_covariance(cov, max_flatness)
 }
 

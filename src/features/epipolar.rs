@@ -155,8 +155,7 @@ fn project_essential(m: DMat3) -> Option<DMat3> {
     for &k in &order[..2] {
         let v = DVec3::new(vectors[0][k], vectors[1][k], vectors[2][k]);
         let u = (m * v).try_normalize()?;
-        // u vᵀ: column j is u·v_j.
-        out += DMat3::from_cols(u * v.x, u * v.y, u * v.z);
+        out += crate::geometry::so3::outer(u, v);
     }
     Some(out)
 }
