@@ -8,6 +8,8 @@
 
 use glam::{DMat3, DVec3};
 
+use crate::geometry::so3;
+
 /// The verified essential matrix (`n_bᵀ E n_a = 0`) and the inlier mask.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Verified {
@@ -155,7 +157,7 @@ fn project_essential(m: DMat3) -> Option<DMat3> {
     for &k in &order[..2] {
         let v = DVec3::new(vectors[0][k], vectors[1][k], vectors[2][k]);
         let u = (m * v).try_normalize()?;
-        out += crate::geometry::so3::outer(u, v);
+        out += so3::outer(u, v);
     }
     Some(out)
 }

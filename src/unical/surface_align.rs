@@ -14,7 +14,7 @@
 //! then Gram–Schmidt) and to `p`: `∂L/∂o_a += ∂L/∂p`, `∂L/∂d_a += D̄ ∂L/∂p`, and
 //! `∂L/∂D̄ = ∂L/∂p · d_a` into the compositing (`∂D̄/∂D = 1/A`, `∂D̄/∂A = −D/A²`) and the field.
 
-use glam::{DMat3, DVec2, DVec3};
+use glam::{DVec2, DVec3};
 
 use super::camera_rgb::march;
 use super::composite::{Composite, Opacity, Upstream, composite, composite_backward};
@@ -22,8 +22,8 @@ use super::field::{FieldSample, SceneField};
 use super::hash_grid::GradSink;
 use super::mlp::MlpGrad;
 use super::pose::{PoseGrad, PoseParams, rot6d_backward};
-use crate::geometry::Rigid;
 use crate::geometry::camera::CameraIntrinsics;
+use crate::geometry::{Rigid, so3};
 
 /// Which correspondence term the optimisation uses (the paper's Table A9 ablation).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default, serde::Serialize)]
@@ -281,7 +281,7 @@ fn backward_direction(
     // Camera `to`: q = R_toᵀ (x − t_to), x the point in the vehicle frame.
     let rotation_to = to_cam.pose.rotation();
     let x = reprojection.in_vehicle - to_cam.pose.translation_m;
-    let d_rotation = DMat3::from_cols(x * g_q.x, x * g_q.y, x * g_q.z);
+    let d_rotation = so3::outer(x, g_q);
     let to_grad = PoseGrad {
         r6: rot6d_backward(to_cam.pose.r6, d_rotation),
         translation_m: -(rotation_to * g_q),
@@ -422,7 +422,7 @@ mod tests {
     use super::*;
     use crate::unical::composite::OpacityModel;
     use crate::unical::hash_grid::SparseGrad;
-    use glam::DQuat;
+    use glam::{DMat3, DQuat};
 
     /// Two forward-looking cameras 1 m apart watching a field; matches are the true
     /// projections of points at 6–9 m (so the errors are small but not zero).
