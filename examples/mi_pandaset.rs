@@ -96,4 +96,22 @@ fn main() {
             p.mi(r)
         );
     }
+    // Where each camera ended, as a rotation vector in the vehicle (Pandar64) frame, and the
+    // translation's offset (est · ref⁻¹ and est − ref).
+    for (p, _) in cal.problems() {
+        let r = reference.sensor(&p.camera).unwrap().vehicle_from_sensor;
+        let e = end.sensor(&p.camera).unwrap().vehicle_from_sensor;
+        let w = (e.rotation * r.rotation.inverse()).to_scaled_axis();
+        let t = (e.translation - r.translation) * 100.0;
+        println!(
+            "{}: rotation (vehicle) {:+.2} {:+.2} {:+.2} °, translation {:+.1} {:+.1} {:+.1} cm",
+            p.camera,
+            w.x.to_degrees(),
+            w.y.to_degrees(),
+            w.z.to_degrees(),
+            t.x,
+            t.y,
+            t.z
+        );
+    }
 }

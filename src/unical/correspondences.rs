@@ -55,11 +55,19 @@ pub fn training_keypoints(img: &image::RgbImage, training_width: u32) -> Vec<Key
     crate::features::orb::detect(&gray, dw as usize, dh as usize, 2048)
         .into_iter()
         .map(|k| Keypoint {
-            x: k.x * to_training,
-            y: k.y * to_training,
+            x: rescale_pixel(k.x, to_training),
+            y: rescale_pixel(k.y, to_training),
             ..k
         })
         .collect()
+}
+
+/// A pixel coordinate of an image resized by `factor`, with pixel centres at integers (the
+/// convention of [`crate::geometry::camera::CameraIntrinsics::scaled`], so that a point keeps its place
+/// under the scaled intrinsics): `(x + 0.5) · factor − 0.5`. Plain `x · factor` puts every
+/// keypoint a quarter of a pixel off at half size, the same way in every image.
+pub fn rescale_pixel(x: f32, factor: f32) -> f32 {
+    (x + 0.5) * factor - 0.5
 }
 
 /// Matched pixels (training resolution) of frame `a` and frame `b`, each `(camera, frame)`.
@@ -103,7 +111,7 @@ impl Correspondences {
 
 /// Changes whenever the matching's settings or the file layout change (old files are then
 /// simply not found).
-const CACHE_VERSION: &str = "rigcal-matches-1: 0.3 s, 2 s, 10 %, 12 inliers, 1.5 px, ratio 0.8";
+const CACHE_VERSION: &str = "rigcal-matches-2: 0.3 s, 2 s, 10 %, 12 inliers, 1.5 px, ratio 0.8";
 
 /// The on-disk form of [`Correspondences`].
 #[derive(Serialize, Deserialize)]
@@ -372,4 +380,38 @@ fn match_pair(
         .map(|(p, _)| p)
         .collect();
     (pixels.len() >= MIN_INLIERS).then_some(MatchedPair { a, b, pixels })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::camera::CameraIntrinsics;
+
+    /// A point projected at full size and at the training size lands where `rescale_pixel`
+    /// puts the full-size pixel, for the sizes the pipeline uses (1920 → 960 → 480, and back up
+    /// for the hand-eye's full-size keypoints).
+    #[test]
+    fn rescaled_pixels_stay_on_the_scaled_cameras_projection() {
+        let full = CameraIntrinsics::pinhole(1920, 1080, 1970.0, 1970.0, 970.3, 541.7);
+        for point in [
+            DVec3::new(0.0, 0.0, 10.0),
+            DVec3::new(-3.1, 1.7, 8.0),
+            DVec3::new(4.4, -2.2, 12.5),
+        ] {
+            let p = full.project(point).unwrap();
+            for (from, to) in [(1.0, 0.5), (0.5, 0.25), (0.5, 1.0), (1.0, 0.25)] {
+                let (a, b) = (full.scaled(from), full.scaled(to));
+                let pa = a.project(point).unwrap();
+                let pb = b.project(point).unwrap();
+                let factor = (to / from) as f32;
+                let x = rescale_pixel(pa.x as f32, factor) as f64;
+                let y = rescale_pixel(pa.y as f32, factor) as f64;
+                assert!((x - pb.x).abs() < 1e-3 && (y - pb.y).abs() < 1e-3, "{p}: {x} {y} vs {pb}");
+                // The old `x · factor` is a quarter pixel off at half size.
+                if (from, to) == (0.5, 0.25) {
+                    assert!((pa.x * 0.5 - pb.x - 0.25).abs() < 1e-3);
+                }
+            }
+        }
+    }
 }
