@@ -406,7 +406,10 @@ mod tests {
                 let factor = (to / from) as f32;
                 let x = rescale_pixel(pa.x as f32, factor) as f64;
                 let y = rescale_pixel(pa.y as f32, factor) as f64;
-                assert!((x - pb.x).abs() < 1e-3 && (y - pb.y).abs() < 1e-3, "{p}: {x} {y} vs {pb}");
+                assert!(
+                    (x - pb.x).abs() < 1e-3 && (y - pb.y).abs() < 1e-3,
+                    "{p}: {x} {y} vs {pb}"
+                );
                 // The old `x · factor` is a quarter pixel off at half size.
                 if (from, to) == (0.5, 0.25) {
                     assert!((pa.x * 0.5 - pb.x - 0.25).abs() < 1e-3);
