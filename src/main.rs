@@ -81,7 +81,7 @@ enum Command {
         /// starts too far off for the scene (10°, a metre); directions the drive does not
         /// observe (the height on a level drive) are kept. Fitted cameras then move at half
         /// the rotation rate, their translations at the full rate decaying to 5 %, and UniCal
-        /// turns them at most 1° from their fit
+        /// turns them at most 0.5° from their fit
         #[arg(long)]
         camera_hand_eye: bool,
         /// unical with cameras: the scale images are used at (0.125: 1920×1080 → 240×135)
