@@ -439,10 +439,14 @@ pub fn calibrate(
                 (rig, fitted) = register_cameras(&drive, &rig, args, &segments);
             }
             // Cameras the hand-eye fitted get its schedule and bound; the options override.
-            let preset = DepthCalibConfig::default()
-                .after_hand_eye(&fitted, camera_motion::ROTATION_BOUND_DEG);
+            let iterations = args.iterations.unwrap_or(300);
+            let preset = DepthCalibConfig {
+                iterations,
+                ..DepthCalibConfig::default()
+            }
+            .after_hand_eye(&fitted, camera_motion::ROTATION_BOUND_DEG);
             let config = DepthCalibConfig {
-                iterations: args.iterations.unwrap_or(300),
+                iterations,
                 seed: args.seed,
                 frozen_sensor: args.root.clone(),
                 // Sensors not asked for stay where they are while the others move.

@@ -361,7 +361,13 @@ impl DepthCalibConfig {
     /// nor either change alone did (BENCHMARKS.md, "A hand-eye start"). Their translations
     /// start moving early, at [`HAND_EYE_RELEASE`], on the correspondence term alone (the
     /// rotations wait for the warm-up: [`Self::alignment_release_rotates`]), so the first
-    /// extrinsic update comes 1–2 s into the run instead of 28–34 s.
+    /// extrinsic update comes 1–2 s into the run instead of 28–34 s. Every pose then waits
+    /// for 2/7 of the run (at least the preset's warm-up) and ramps up over 3/14 of it (at
+    /// least the preset's ramp): 400 and 300 of 1400 steps. A camera that starts this close
+    /// has little to gain from the young scene and much to lose to it: with the preset's 200
+    /// and 150, drive 7's back camera, started 0.02° / 3.3 cm from the truth, was pulled to
+    /// 0.48° / 20 cm and ended 0.41° / 8.7 cm off; with these, 0.08° / 3.4 cm (BENCHMARKS.md,
+    /// "A tighter rotation bound"). Call it with [`Self::iterations`] set.
     pub fn after_hand_eye(self, fitted: &[String], rotation_bound_deg: f64) -> Self {
         if fitted.is_empty() {
             return self;
@@ -376,6 +382,8 @@ impl DepthCalibConfig {
                 .iter()
                 .map(|name| (name.clone(), rotation_bound_deg))
                 .collect(),
+            pose_warmup: self.pose_warmup.max(self.iterations * 2 / 7),
+            pose_ramp: self.pose_ramp.max(self.iterations * 3 / 14),
             ..self
         }
     }
@@ -2184,6 +2192,22 @@ mod tests {
         );
         assert_eq!(preset.clone().after_hand_eye(&[], 1.0), preset);
         assert_eq!(he.lr_camera_pose, preset.lr_camera_pose * 0.5);
+        // The warm-up and ramp scale with the run, never below the preset's.
+        let long = DepthCalibConfig {
+            iterations: 1400,
+            ..preset.clone()
+        }
+        .after_hand_eye(&["front".to_string()], 1.0);
+        assert_eq!((long.pose_warmup, long.pose_ramp), (400, 300));
+        let short = DepthCalibConfig {
+            iterations: 300,
+            ..preset.clone()
+        }
+        .after_hand_eye(&["front".to_string()], 1.0);
+        assert_eq!(
+            (short.pose_warmup, short.pose_ramp),
+            (preset.pose_warmup, preset.pose_ramp)
+        );
         assert!(
             !he.alignment_release_rotates,
             "its rotations stay during a release"
@@ -2194,6 +2218,12 @@ mod tests {
         let translation_at = |c: &DepthCalibConfig, it: usize| {
             c.pose_rate(c.lr_camera_pose, c.camera_pose_final_fraction, it) as f64
                 * c.camera_translation_scale(it)
+        };
+        // Against the preset's rates on the same warm-up and ramp.
+        let preset = DepthCalibConfig {
+            pose_warmup: he.pose_warmup,
+            pose_ramp: he.pose_ramp,
+            ..preset
         };
         assert!(translation_at(&he, release) > 0.0);
         assert!(
