@@ -88,6 +88,13 @@ pub struct CameraIntrinsics {
     pub distortion: Vec<f64>,
 }
 
+/// A pixel coordinate of an image resized by `factor`, with pixel centres at integers (so a
+/// point keeps its place under [`CameraIntrinsics::scaled`]): `(x + 0.5) · factor − 0.5`.
+/// Plain `x · factor` puts every point a quarter of a pixel off at half size.
+pub fn rescale_pixel(x: f64, factor: f64) -> f64 {
+    (x + 0.5) * factor - 0.5
+}
+
 impl CameraIntrinsics {
     pub fn pinhole(width: u32, height: u32, fx: f64, fy: f64, cx: f64, cy: f64) -> Self {
         Self {
@@ -266,7 +273,7 @@ impl CameraIntrinsics {
     /// Intrinsics of the same camera with the image resized by `factor` (OpenCV pixel-centre
     /// convention: `c' = (c + 0.5) · factor - 0.5`). Distortion is unit-free and unchanged.
     pub fn scaled(&self, factor: f64) -> Self {
-        let centre = |c: f64| (c + 0.5) * factor - 0.5;
+        let centre = |c: f64| rescale_pixel(c, factor);
         Self {
             width: (self.width as f64 * factor).round() as u32,
             height: (self.height as f64 * factor).round() as u32,

@@ -26,6 +26,7 @@ use super::depth_calib::CameraData;
 use crate::features::epipolar::verify;
 use crate::features::matching::match_mutual;
 use crate::features::orb::Keypoint;
+use crate::geometry::camera::rescale_pixel;
 use crate::geometry::{Rigid, Trajectory};
 
 /// Frames of different cameras at most this far apart in time form pairs.
@@ -51,23 +52,15 @@ pub fn training_keypoints(img: &image::RgbImage, training_width: u32) -> Vec<Key
         img.clone()
     };
     let gray = crate::eval::fast::luma(&detect_on);
-    let to_training = training_width as f32 / dw as f32;
+    let to_training = training_width as f64 / dw as f64;
     crate::features::orb::detect(&gray, dw as usize, dh as usize, 2048)
         .into_iter()
         .map(|k| Keypoint {
-            x: rescale_pixel(k.x, to_training),
-            y: rescale_pixel(k.y, to_training),
+            x: rescale_pixel(k.x as f64, to_training) as f32,
+            y: rescale_pixel(k.y as f64, to_training) as f32,
             ..k
         })
         .collect()
-}
-
-/// A pixel coordinate of an image resized by `factor`, with pixel centres at integers (the
-/// convention of [`crate::geometry::camera::CameraIntrinsics::scaled`], so that a point keeps its place
-/// under the scaled intrinsics): `(x + 0.5) · factor − 0.5`. Plain `x · factor` puts every
-/// keypoint a quarter of a pixel off at half size, the same way in every image.
-pub fn rescale_pixel(x: f32, factor: f32) -> f32 {
-    (x + 0.5) * factor - 0.5
 }
 
 /// Matched pixels (training resolution) of frame `a` and frame `b`, each `(camera, frame)`.
@@ -403,9 +396,8 @@ mod tests {
                 let (a, b) = (full.scaled(from), full.scaled(to));
                 let pa = a.project(point).unwrap();
                 let pb = b.project(point).unwrap();
-                let factor = (to / from) as f32;
-                let x = rescale_pixel(pa.x as f32, factor) as f64;
-                let y = rescale_pixel(pa.y as f32, factor) as f64;
+                let factor = to / from;
+                let (x, y) = (rescale_pixel(pa.x, factor), rescale_pixel(pa.y, factor));
                 assert!(
                     (x - pb.x).abs() < 1e-3 && (y - pb.y).abs() < 1e-3,
                     "{p}: {x} {y} vs {pb}"
