@@ -88,6 +88,9 @@ pub struct CalibrateArgs {
     /// unical with cameras: a camera's translation coordinates share Adam's step scale
     /// ([`DepthCalibConfig::grouped_camera_translation`]).
     pub grouped_camera_translation: bool,
+    /// unical with cameras: camera rays only up to the LiDARs' highest beam
+    /// ([`DepthCalibConfig::camera_rays_below_lidar_top`]).
+    pub camera_rays_below_lidar_top: bool,
     /// unical: drop moving traffic and mask the vehicle's own body
     /// ([`DepthCalibConfig::transient_returns`], [`DepthCalibConfig::mask_own_vehicle`]).
     pub drop_moving: bool,
@@ -467,6 +470,7 @@ pub fn calibrate(
                 alignment: args.alignment,
                 shared_camera_translation: args.shared_camera_translation,
                 grouped_camera_translation: args.grouped_camera_translation,
+                camera_rays_below_lidar_top: args.camera_rays_below_lidar_top,
                 transient_returns: args
                     .drop_moving
                     .then(crate::unical::transient::TransientSettings::default),
@@ -484,6 +488,17 @@ pub fn calibrate(
                     &|phase, done, total| bars.report(phase, done, total),
                 )?;
             bars.finish();
+            if args.camera_rays_below_lidar_top {
+                match stage.calibration().camera_ray_top_elevation_rad() {
+                    Some(top) => eprintln!(
+                        "camera rays: only up to {:.1}° above the vehicle's horizon (the LiDARs' highest returns)",
+                        top.to_degrees()
+                    ),
+                    None => {
+                        eprintln!("camera rays: no LiDAR returns to bound them, every ray is drawn")
+                    }
+                }
+            }
             if let Some(stats) = stage.transient_stats() {
                 eprintln!(
                     "moving traffic: {} of {} LiDAR returns seen through by other sweeps, dropped ({:.1} %)",

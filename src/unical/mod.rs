@@ -22,6 +22,8 @@
 //! - [`calibrator`]: that stage prepared from a drive as an `optim::runner::Calibrator`.
 //! - [`pose_newton`]: preconditioned LiDAR pose steps (the objective's gradient, the rendered
 //!   depth's point-to-plane curvature).
+//! - [`coverage`]: how high the LiDARs look; camera rays above their highest beam are optionally
+//!   not drawn (the scene has no geometry there).
 //! - [`composite`]: SDF → opacity and front-to-back compositing of depth, opacity and features
 //!   (Eq. 2), with a division-free backward pass.
 
@@ -31,6 +33,7 @@ pub mod calibrator;
 pub mod camera_rgb;
 pub mod composite;
 pub mod correspondences;
+pub mod coverage;
 pub mod depth_calib;
 pub mod field;
 pub mod hash_grid;
