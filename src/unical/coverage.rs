@@ -45,9 +45,8 @@ pub fn lidar_top_elevation_rad(lidars: &[LidarData]) -> Option<f64> {
             if elevations.is_empty() {
                 return None;
             }
-            elevations.sort_by(f64::total_cmp);
             let k = ((elevations.len() - 1) as f64 * TOP_QUANTILE).round() as usize;
-            Some(elevations[k])
+            Some(*elevations.select_nth_unstable_by(k, f64::total_cmp).1)
         })
         .max_by(f64::total_cmp)
 }
