@@ -254,10 +254,12 @@ mod tests {
         }
     }
 
-    fn tmp(name: &str) -> PathBuf {
-        let dir = std::env::temp_dir().join(format!("rigcal-session-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        dir.join(name)
+    /// A scratch folder, removed when dropped.
+    fn tmp() -> tempfile::TempDir {
+        tempfile::Builder::new()
+            .prefix("rigcal-session-")
+            .tempdir()
+            .unwrap()
     }
 
     #[test]
@@ -274,7 +276,8 @@ mod tests {
             (0, vec![("edge".into(), 3.5)]),
             (1, vec![("edge".into(), 2.5)]),
         ];
-        let path = tmp("a.json");
+        let dir = tmp();
+        let path = dir.path().join("a.json");
         s.save(&path).unwrap();
         let back = Session::load(&path).unwrap();
         assert_eq!(back, s);
@@ -290,7 +293,8 @@ mod tests {
 
     #[test]
     fn bad_session_files_are_errors_naming_the_file() {
-        let path = tmp("bad.json");
+        let dir = tmp();
+        let path = dir.path().join("bad.json");
         std::fs::write(&path, "{ not json").unwrap();
         let e = Session::load(&path).unwrap_err().to_string();
         assert!(
@@ -304,7 +308,9 @@ mod tests {
         .unwrap();
         let e = Session::load(&path).unwrap_err().to_string();
         assert!(e.contains("version 99"), "{e}");
-        let e = Session::load(&tmp("missing.json")).unwrap_err().to_string();
+        let e = Session::load(&dir.path().join("missing.json"))
+            .unwrap_err()
+            .to_string();
         assert!(
             e.contains("missing.json") && e.contains("cannot read"),
             "{e}"
@@ -313,7 +319,8 @@ mod tests {
 
     #[test]
     fn recent_files_keep_the_newest_first_without_duplicates() {
-        let path = tmp("recent.txt");
+        let dir = tmp();
+        let path = dir.path().join("recent.txt");
         let mut r = RecentFiles::default();
         for i in 0..12 {
             r.push(Path::new(&format!("/nonexistent/{i}.mcap")));
@@ -324,6 +331,10 @@ mod tests {
         assert_eq!(r.paths.iter().filter(|p| p.ends_with("5.mcap")).count(), 1);
         r.save(&path).unwrap();
         assert_eq!(RecentFiles::load(&path), r);
-        assert!(RecentFiles::load(&tmp("none.txt")).paths.is_empty());
+        assert!(
+            RecentFiles::load(&dir.path().join("none.txt"))
+                .paths
+                .is_empty()
+        );
     }
 }

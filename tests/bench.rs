@@ -17,12 +17,14 @@ use rigcal::sim::synth::perturb_rig;
 use rigcal::sim::trajectories::TrajectoryKind;
 use rigcal::sim::world::SceneKind;
 use rigcal::unical::surface_align::AlignmentLoss;
+use tempfile::TempDir;
 
-fn temp_dir(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("rigcal-bench-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
+/// A scratch folder, removed when dropped.
+fn temp_dir(name: &str) -> TempDir {
+    tempfile::Builder::new()
+        .prefix(&format!("rigcal-bench-{name}-"))
+        .tempdir()
+        .unwrap()
 }
 
 fn tiny_suite() -> Suite {
@@ -129,12 +131,13 @@ fn tiny_suite() -> Suite {
 
 #[test]
 fn a_tiny_suite_measures_every_run_and_writes_tables_and_plots() {
-    let out = temp_dir("tiny");
+    let tmp = temp_dir("tiny");
+    let out = tmp.path();
     let suite = tiny_suite();
     assert_eq!(suite.runs().len(), 6);
     let mut simulated = false;
     let mut runs_seen = Vec::new();
-    let report = run_suite(&suite, &out, &mut |stage, _, _| match stage {
+    let report = run_suite(&suite, out, &mut |stage, _, _| match stage {
         Stage::Simulating(_) => simulated = true,
         Stage::Running { index, runs, .. } => {
             assert_eq!(*runs, 6);
@@ -286,9 +289,10 @@ fn an_unwritable_output_folder_fails_before_any_run() {
 
 #[test]
 fn the_command_line_refuses_an_unknown_suite() {
+    let tmp = temp_dir("cli");
     let out = Command::new(env!("CARGO_BIN_EXE_rigcal"))
         .args(["bench", "--suite", "nope", "--out"])
-        .arg(temp_dir("cli"))
+        .arg(tmp.path())
         .output()
         .unwrap();
     assert!(!out.status.success());

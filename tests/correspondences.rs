@@ -55,8 +55,12 @@ fn phase(reports: &[(String, usize, usize)], name: &str) -> Vec<(usize, usize)> 
 fn matches_agree_with_the_reference_calibration() {
     let drive = Drive::open(&pandaset().join("pandaset-002.mcap")).unwrap();
     let rig = reference_rig(&drive);
-    let cache = std::env::temp_dir().join(format!("rigcal-matches-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&cache);
+    // The cache folder is made by the stage, inside a scratch folder removed when dropped.
+    let tmp = tempfile::Builder::new()
+        .prefix("rigcal-matches-")
+        .tempdir()
+        .unwrap();
+    let cache = tmp.path().join("cache");
     let config = DepthCalibConfig {
         iterations: 1,
         geometry_init_steps: 0,
@@ -106,7 +110,6 @@ fn matches_agree_with_the_reference_calibration() {
     std::fs::write(files[0].path(), b"{ not json").unwrap();
     let rebuilt = stage(&drive, &rig, config.clone());
     assert_eq!(&rebuilt.calibration().correspondences, c);
-    let _ = std::fs::remove_dir_all(&cache);
     assert!(c.candidates > 0, "no overlapping frames");
     assert!(
         !c.pairs.is_empty(),

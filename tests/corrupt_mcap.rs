@@ -6,6 +6,7 @@ use std::path::{Path, PathBuf};
 
 use proptest::prelude::*;
 use rigcal::log::Drive;
+use tempfile::TempDir;
 
 fn fixture(name: &str) -> Vec<u8> {
     std::fs::read(
@@ -16,10 +17,16 @@ fn fixture(name: &str) -> Vec<u8> {
     .unwrap()
 }
 
-fn write_tmp(bytes: &[u8], tag: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("rigcal-corrupt-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    let path = dir.join(format!("{tag}.mcap"));
+/// A scratch folder, removed when dropped.
+fn scratch() -> TempDir {
+    tempfile::Builder::new()
+        .prefix("rigcal-corrupt-")
+        .tempdir()
+        .unwrap()
+}
+
+fn write_tmp(dir: &TempDir, bytes: &[u8], tag: &str) -> PathBuf {
+    let path = dir.path().join(format!("{tag}.mcap"));
     std::fs::write(&path, bytes).unwrap();
     path
 }
@@ -51,6 +58,7 @@ fn exercise(path: &Path) {
 
 #[test]
 fn truncated_at_every_kind_of_boundary() {
+    let dir = scratch();
     for name in ["ros2.mcap", "foxglove_protobuf.mcap", "foxglove_json.mcap"] {
         let bytes = fixture(name);
         for cut in [
@@ -65,7 +73,7 @@ fn truncated_at_every_kind_of_boundary() {
             bytes.len() - 30,
             bytes.len() - 1,
         ] {
-            exercise(&write_tmp(&bytes[..cut], &format!("trunc-{cut}")));
+            exercise(&write_tmp(&dir, &bytes[..cut], &format!("trunc-{cut}")));
         }
     }
 }
@@ -73,7 +81,8 @@ fn truncated_at_every_kind_of_boundary() {
 #[test]
 fn a_truncated_log_keeps_what_came_before() {
     let bytes = fixture("ros2.mcap");
-    let path = write_tmp(&bytes[..bytes.len() * 2 / 3], "two-thirds");
+    let dir = scratch();
+    let path = write_tmp(&dir, &bytes[..bytes.len() * 2 / 3], "two-thirds");
     let drive = Drive::open(&path).unwrap();
     assert!(!drive.problems.is_empty(), "truncation is reported");
     let total: u64 = drive.topics.iter().map(|t| t.count).sum();
@@ -82,7 +91,8 @@ fn a_truncated_log_keeps_what_came_before() {
 
 #[test]
 fn not_mcap_is_a_clear_error() {
-    let path = write_tmp(b"hello, world", "text");
+    let dir = scratch();
+    let path = write_tmp(&dir, b"hello, world", "text");
     let err = Drive::open(&path).unwrap_err().to_string();
     assert!(
         err.contains("not an MCAP file") && err.contains("text.mcap"),
@@ -105,6 +115,7 @@ proptest! {
             let i = idx.index(bytes.len());
             bytes[i] ^= 1 << bit;
         }
-        exercise(&write_tmp(&bytes, "flip"));
+        let dir = scratch();
+        exercise(&write_tmp(&dir, &bytes, "flip"));
     }
 }

@@ -14,15 +14,18 @@ use rigcal::cli::eval::{EvalArgs, EvalReport, evaluate};
 use rigcal::geometry::Rigid;
 use rigcal::geometry::so3;
 use rigcal::sim::rigs::{RigPreset, SimRig};
+use tempfile::TempDir;
 
 fn pandaset_dir() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/data/pandaset-002")
 }
 
-fn temp_dir(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("rigcal-eval-{name}-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
+/// A scratch folder, removed when dropped.
+fn temp_dir(name: &str) -> TempDir {
+    tempfile::Builder::new()
+        .prefix(&format!("rigcal-eval-{name}-"))
+        .tempdir()
+        .unwrap()
 }
 
 fn save(rig: &Rig, path: &Path) {
@@ -45,7 +48,8 @@ fn sim_rig() -> Rig {
 
 #[test]
 fn equal_calibrations_have_zero_error() {
-    let dir = temp_dir("zero");
+    let tmp = temp_dir("zero");
+    let dir = tmp.path();
     let gt = dir.join("gt.yaml");
     save(&sim_rig(), &gt);
     let report = run(&gt, &gt);
@@ -59,7 +63,8 @@ fn equal_calibrations_have_zero_error() {
 
 #[test]
 fn a_known_perturbation_is_reported_exactly_both_ways_and_under_a_common_offset() {
-    let dir = temp_dir("known");
+    let tmp = temp_dir("known");
+    let dir = tmp.path();
     let reference = sim_rig();
     let root = reference.lidars().next().unwrap().name.clone();
     let camera = reference.cameras().nth(1).unwrap().name.clone();
@@ -126,7 +131,8 @@ fn the_pandaset_ground_truth_json_is_accepted_and_misalignment_shows_in_the_data
     let reference = load_reference(&json).unwrap();
     assert_eq!(reference.sensors.len(), 8);
     assert_eq!(reference.lidars().count(), 2);
-    let dir = temp_dir("pandaset");
+    let tmp = temp_dir("pandaset");
+    let dir = tmp.path();
     let same = dir.join("same.yaml");
     save(&reference, &same);
     let report = run(&json, &same);
@@ -176,7 +182,8 @@ fn a_turned_camera_agrees_less_with_the_lidar_map_photometrically() {
     s.vehicle_from_sensor = s
         .vehicle_from_sensor
         .perturbed_right(DVec3::new(0.0, 1f64.to_radians(), 0.0), DVec3::ZERO);
-    let dir = temp_dir("photo");
+    let tmp = temp_dir("photo");
+    let dir = tmp.path();
     let path = dir.join("turned.yaml");
     save(&turned, &path);
     let args = EvalArgs {
@@ -207,7 +214,8 @@ fn a_turned_camera_agrees_less_with_the_lidar_map_photometrically() {
 
 #[test]
 fn the_command_prints_tables_and_fails_with_the_file_named() {
-    let dir = temp_dir("cli");
+    let tmp = temp_dir("cli");
+    let dir = tmp.path();
     let gt = dir.join("gt.yaml");
     save(&sim_rig(), &gt);
     let json = dir.join("report.json");

@@ -17,10 +17,15 @@ use rigcal::sim::rigs::{RigPreset, SimRig};
 use rigcal::sim::synth::{SynthConfig, synthesize};
 use rigcal::sim::trajectories::TrajectoryKind;
 use rigcal::sim::world::SceneKind;
+use tempfile::TempDir;
 
-fn drive() -> (PathBuf, PathBuf) {
-    let dir = std::env::temp_dir().join(format!("rigcal-hand-eye-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+/// The drive's folder (removed when dropped), the log and the ground truth.
+fn drive() -> (TempDir, PathBuf, PathBuf) {
+    let tmp = tempfile::Builder::new()
+        .prefix("rigcal-hand-eye-")
+        .tempdir()
+        .unwrap();
+    let dir = tmp.path();
     let mut rig = SimRig::preset(RigPreset::Pandaset);
     rig.lidars.truncate(1);
     rig.cameras
@@ -30,12 +35,12 @@ fn drive() -> (PathBuf, PathBuf) {
     cfg.camera_rate_hz = 4.0;
     let (log, gt) = (dir.join("turning.mcap"), dir.join("gt.yaml"));
     synthesize(&cfg, &log, &gt, &mut |_, _| {}).unwrap();
-    (log, gt)
+    (tmp, log, gt)
 }
 
 #[test]
 fn cameras_ten_degrees_off_come_back_to_their_motion_and_keep_their_height() {
-    let (log, gt) = drive();
+    let (_tmp, log, gt) = drive();
     let drive = Drive::open(&log).unwrap();
     let truth = CalibrationFile::load_rig(&gt).unwrap();
     for (k, name) in ["front_camera", "back_camera"].into_iter().enumerate() {
@@ -133,8 +138,11 @@ fn cameras_ten_degrees_off_come_back_to_their_motion_and_keep_their_height() {
 fn on_a_straight_drive_the_cli_keeps_the_cameras_and_says_why() {
     let pandaset = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
         .join("../shared/data/pandaset-002/pandaset-002.mcap");
-    let dir = std::env::temp_dir().join(format!("rigcal-hand-eye-cli-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let tmp = tempfile::Builder::new()
+        .prefix("rigcal-hand-eye-cli-")
+        .tempdir()
+        .unwrap();
+    let dir = tmp.path();
     let out = dir.join("out.yaml");
     let o = Command::new(env!("CARGO_BIN_EXE_rigcal"))
         .args(["calibrate"])
@@ -168,5 +176,4 @@ fn on_a_straight_drive_the_cli_keeps_the_cameras_and_says_why() {
         .vehicle_from_sensor
         .difference(after.sensor("front_camera").unwrap().vehicle_from_sensor);
     assert!(r < 1e-12 && t < 1e-12);
-    let _ = std::fs::remove_dir_all(dir);
 }

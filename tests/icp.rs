@@ -109,8 +109,11 @@ fn icp_brings_a_moved_lidar_back_to_the_reference_from_several_starts() {
 
 #[test]
 fn the_cli_runs_icp_and_writes_the_native_file() {
-    let dir = std::env::temp_dir().join(format!("rigcal-icp-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let tmp = tempfile::Builder::new()
+        .prefix("rigcal-icp-")
+        .tempdir()
+        .unwrap();
+    let dir = tmp.path();
     let drive = Drive::open(&pandaset().join("pandaset-002.mcap")).unwrap();
     let truth = reference_rig(&drive);
     let other = truth.lidars().nth(1).unwrap().name.clone();
@@ -159,8 +162,11 @@ fn the_cli_perturbs_the_initial_guess_and_icp_recovers_the_pair() {
     // cameras, which ICP leaves alone, show it in the written file) but the Pandar64, whose
     // frame is the vehicle frame (the trajectory is its own pose); ICP brings the PandarGT
     // back relative to it.
-    let dir = std::env::temp_dir().join(format!("rigcal-perturb-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let tmp = tempfile::Builder::new()
+        .prefix("rigcal-perturb-")
+        .tempdir()
+        .unwrap();
+    let dir = tmp.path();
     let drive = Drive::open(&pandaset().join("pandaset-002.mcap")).unwrap();
     let truth = reference_rig(&drive);
     let out = dir.join("icp.yaml");

@@ -17,14 +17,15 @@ use rigcal::classical::pose_graph_calibrator::{CameraPairs, PoseGraphCalibrator,
 use rigcal::geometry::rig_errors;
 use rigcal::log::Drive;
 use rigcal::optim::runner::Calibrator;
+use tempfile::TempDir;
 
-fn drive(seed: u64) -> (PathBuf, PathBuf, PathBuf) {
+fn drive(seed: u64) -> (TempDir, PathBuf, PathBuf) {
     common::checkerboard_drive("posegraph", seed)
 }
 
 #[test]
 fn the_graph_unifies_icp_and_checkerboard_edges_into_one_rig() {
-    let (dir, log, gt) = drive(3);
+    let (_tmp, log, gt) = drive(3);
     let drive = Drive::open(&log).unwrap();
     let truth = CalibrationFile::load(&gt).unwrap().to_rig(&gt).unwrap();
     let start = drive.rig.clone();
@@ -115,13 +116,12 @@ fn the_graph_unifies_icp_and_checkerboard_edges_into_one_rig() {
     let mean_deg = cameras.iter().map(|e| e.rotation_deg).sum::<f64>() / cameras.len() as f64;
     let mean_m = cameras.iter().map(|e| e.translation_m).sum::<f64>() / cameras.len() as f64;
     assert!(mean_deg < 0.8 && mean_m < 0.06, "{mean_deg}° {mean_m} m");
-    let _ = std::fs::remove_dir_all(dir);
 }
 
 #[test]
 fn the_cli_runs_the_pose_graph_and_names_skipped_pairs() {
-    let (dir, log, gt) = drive(5);
-    let out = dir.join("out.yaml");
+    let (tmp, log, gt) = drive(5);
+    let out = tmp.path().join("out.yaml");
     let o = Command::new(env!("CARGO_BIN_EXE_rigcal"))
         .args([
             "calibrate",
@@ -159,5 +159,4 @@ fn the_cli_runs_the_pose_graph_and_names_skipped_pairs() {
             .iter()
             .all(|e| e.rotation_deg < 2.0 && e.translation_m < 0.2)
     );
-    let _ = std::fs::remove_dir_all(dir);
 }

@@ -4,8 +4,6 @@
 //! stationary scene) and clearly worse with a 1° error; urban images are textured enough for
 //! corner detectors.
 
-use std::path::PathBuf;
-
 use rigcal::calib::CalibrationFile;
 use rigcal::eval::fast;
 use rigcal::geometry::{Trajectory, so3};
@@ -16,12 +14,6 @@ use rigcal::sim::silhouettes::SilhouetteCheck;
 use rigcal::sim::synth::{EPOCH_NANOS, SynthConfig, synthesize};
 use rigcal::sim::trajectories::{self, TrajectoryConfig, TrajectoryKind};
 use rigcal::sim::world::{SceneKind, World};
-
-fn tmp(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("rigcal-sim-{}", std::process::id()));
-    std::fs::create_dir_all(&d).unwrap();
-    d.join(name)
-}
 
 #[test]
 fn output_reads_back_as_asked() {
@@ -35,7 +27,11 @@ fn output_reads_back_as_asked() {
     cfg.perturb_deg = 2.0;
     cfg.perturb_cm = 20.0;
     cfg.scale = 0.1;
-    let (mcap, gt) = (tmp("rt.mcap"), tmp("rt_gt.yaml"));
+    let tmp = tempfile::Builder::new()
+        .prefix("rigcal-sim-")
+        .tempdir()
+        .unwrap();
+    let (mcap, gt) = (tmp.path().join("rt.mcap"), tmp.path().join("rt_gt.yaml"));
     let out = synthesize(&cfg, &mcap, &gt, &mut |_, _| {}).unwrap();
     let drive = Drive::open(&mcap).unwrap();
     assert!(drive.problems.is_empty(), "{:?}", drive.problems);

@@ -17,8 +17,9 @@ use rigcal::classical::target_calibrator::TargetCalibrator;
 use rigcal::geometry::rig_errors;
 use rigcal::log::Drive;
 use rigcal::optim::runner::Calibrator;
+use tempfile::TempDir;
 
-fn drive(seed: u64) -> (PathBuf, PathBuf, PathBuf) {
+fn drive(seed: u64) -> (TempDir, PathBuf, PathBuf) {
     common::checkerboard_drive("target", seed)
 }
 
@@ -50,7 +51,7 @@ fn run(drive: &Drive, start: &Rig) -> (Rig, Vec<(String, usize)>) {
 #[test]
 fn every_camera_is_recovered_from_perturbed_starts_and_the_truth() {
     for seed in [3, 8] {
-        let (dir, log, gt) = drive(seed);
+        let (_tmp, log, gt) = drive(seed);
         let drive = Drive::open(&log).unwrap();
         let truth = CalibrationFile::load(&gt).unwrap().to_rig(&gt).unwrap();
         let start = drive.rig.clone();
@@ -114,13 +115,13 @@ fn every_camera_is_recovered_from_perturbed_starts_and_the_truth() {
                 );
             }
         }
-        let _ = std::fs::remove_dir_all(dir);
     }
 }
 
 #[test]
 fn the_cli_calibrates_with_target_and_names_what_is_missing() {
-    let (dir, log, _) = drive(5);
+    let (tmp, log, _) = drive(5);
+    let dir = tmp.path();
     let out = dir.join("out.yaml");
     let o = Command::new(env!("CARGO_BIN_EXE_rigcal"))
         .args([
@@ -149,13 +150,12 @@ fn the_cli_calibrates_with_target_and_names_what_is_missing() {
         "{err}"
     );
     assert_eq!(err.trim().lines().count(), 1, "{err}");
-    let _ = std::fs::remove_dir_all(dir);
 }
 
 #[test]
 fn a_board_cache_searches_each_image_once_and_changes_nothing() {
-    // Its own folder: the other tests remove theirs when they finish.
-    let (dir, log, _gt) = common::checkerboard_drive("target-cache", 3);
+    // Its own folder, removed when `_tmp` is dropped.
+    let (_tmp, log, _gt) = common::checkerboard_drive("target-cache", 3);
     let drive = Drive::open(&log).unwrap();
     let rig = drive.rig.clone();
     let config = TargetConfig::default();
@@ -194,5 +194,4 @@ fn a_board_cache_searches_each_image_once_and_changes_nothing() {
         assert!(!fresh.views.is_empty(), "{lidar}");
         assert_eq!(cached.views, fresh.views, "{lidar}");
     }
-    let _ = std::fs::remove_dir_all(dir);
 }

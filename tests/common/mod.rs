@@ -7,6 +7,7 @@ use std::path::PathBuf;
 use rigcal::calib::Rig;
 use rigcal::calib::dataset_json::load_reference;
 use rigcal::log::Drive;
+use tempfile::TempDir;
 
 /// `../shared/data/pandaset-002`.
 pub fn pandaset_dir() -> PathBuf {
@@ -26,14 +27,18 @@ pub fn reference_rig(drive: &Drive) -> Rig {
 }
 
 /// A stationary 0.6 s drive of the pandaset rig in the checkerboard scene (cameras at 2 Hz),
-/// every sensor perturbed by 2° / 20 cm with `seed`: (its folder, the log, the ground truth).
-pub fn checkerboard_drive(tag: &str, seed: u64) -> (PathBuf, PathBuf, PathBuf) {
+/// every sensor perturbed by 2° / 20 cm with `seed`: (its folder, removed when dropped, the log,
+/// the ground truth).
+pub fn checkerboard_drive(tag: &str, seed: u64) -> (TempDir, PathBuf, PathBuf) {
     use rigcal::sim::rigs::{RigPreset, SimRig};
     use rigcal::sim::synth::{SynthConfig, synthesize};
     use rigcal::sim::trajectories::TrajectoryKind;
     use rigcal::sim::world::SceneKind;
-    let dir = std::env::temp_dir().join(format!("rigcal-{tag}-{}-{seed}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let tmp = tempfile::Builder::new()
+        .prefix(&format!("rigcal-{tag}-{seed}-"))
+        .tempdir()
+        .unwrap();
+    let dir = tmp.path();
     let mut cfg = SynthConfig::new(
         SceneKind::Checkerboard,
         SimRig::preset(RigPreset::Pandaset),
@@ -46,7 +51,7 @@ pub fn checkerboard_drive(tag: &str, seed: u64) -> (PathBuf, PathBuf, PathBuf) {
     cfg.camera_rate_hz = 2.0;
     let (log, gt) = (dir.join("boards.mcap"), dir.join("gt.yaml"));
     synthesize(&cfg, &log, &gt, &mut |_, _| {}).unwrap();
-    (dir, log, gt)
+    (tmp, log, gt)
 }
 
 /// `(name, vehicle_from_sensor)` of every sensor, for `rig_errors`.

@@ -16,6 +16,7 @@ import json
 import math
 import os
 import shlex
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -340,7 +341,17 @@ def main():
     binary = sys.argv[1]
     here = os.path.dirname(os.path.abspath(__file__))
     rig_path = sys.argv[2] if len(sys.argv) > 2 else os.path.join(here, "rig.yaml")
-    work = sys.argv[3] if len(sys.argv) > 3 else tempfile.mkdtemp(prefix="rigcal-exports-")
+    if len(sys.argv) > 3:
+        return run_checks(binary, rig_path, sys.argv[3])
+    # No work folder given: a scratch folder, removed however the checks end.
+    work = tempfile.mkdtemp(prefix="rigcal-exports-")
+    try:
+        return run_checks(binary, rig_path, work)
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+
+
+def run_checks(binary, rig_path, work):
     rig = Rig(rig_path)
     lidar = rig.lidars()[-1]["name"]
     out = lambda name: os.path.join(work, name)
