@@ -10,6 +10,7 @@
 #   scripts/bench-init-protocol.sh rotation          # 10°, seeds 1..10
 #   scripts/bench-init-protocol.sh translation       # 100 cm, seeds 1..10
 #   SEEDS="1 2 3" scripts/bench-init-protocol.sh rotation
+#   RIGCAL_BIN=/path/to/rigcal scripts/bench-init-protocol.sh translation   # a fixed binary, no build
 #
 # About 10 minutes a seed on two cores. Finished seeds are kept in the work folder and not run
 # again, so an interrupted protocol resumes; the table is printed at the end.
@@ -22,9 +23,13 @@ case "$mode" in
   *) echo "usage: $0 rotation|translation" >&2; exit 2 ;;
 esac
 seeds="${SEEDS:-1 2 3 4 5 6 7 8 9 10}"
-export CARGO_TARGET_DIR="${CARGO_TARGET_DIR:-$HOME/.cache/rigcal-target}"
-cargo build -q --release --no-default-features --bin rigcal
-bin="$CARGO_TARGET_DIR/release/rigcal"
+if [ -n "${RIGCAL_BIN:-}" ]; then
+  bin="$RIGCAL_BIN"
+else
+  export CARGO_TARGET_DIR="${CARGO_TARGET_DIR:-$HOME/.cache/rigcal-target}"
+  cargo build -q --release --no-default-features --bin rigcal
+  bin="$CARGO_TARGET_DIR/release/rigcal"
+fi
 work="${TMPDIR:-/tmp}/rigcal-bench-init"
 mkdir -p "$work"
 drive="$work/figure8-seed7.mcap"
