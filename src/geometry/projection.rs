@@ -33,6 +33,12 @@ pub struct SweepView<'a> {
 
 const BUCKET_NANOS: i64 = 1_000_000;
 
+/// The 1 ms bucket nearest a firing time (s, relative to the stamp): a point is moved with the
+/// pose at most 0.5 ms from its own time, early or late alike.
+fn bucket_of(offset_secs: f32) -> i64 {
+    (offset_secs as f64 * 1e9 / BUCKET_NANOS as f64).round() as i64
+}
+
 /// First and last 1 ms firing-time bucket of a sweep (relative to its stamp); `None` when the
 /// sweep has no per-point time (one bucket).
 fn bucket_range(sweep: &SweepView<'_>) -> Option<(i64, i64)> {
@@ -40,10 +46,7 @@ fn bucket_range(sweep: &SweepView<'_>) -> Option<(i64, i64)> {
     let (lo, hi) = offsets
         .iter()
         .fold((f32::MAX, f32::MIN), |(lo, hi), &t| (lo.min(t), hi.max(t)));
-    (lo <= hi).then_some((
-        (lo as f64 * 1e9) as i64 / BUCKET_NANOS,
-        (hi as f64 * 1e9) as i64 / BUCKET_NANOS,
-    ))
+    (lo <= hi).then_some((bucket_of(lo), bucket_of(hi)))
 }
 
 /// `world_from_lidar` at every 1 ms bucket the sweep's points fall in.
@@ -83,8 +86,7 @@ pub fn world_points(
         .step_by(stride)
         .map(|i| {
             let b = match sweep.time_offset_secs {
-                Some(t) => ((t[i] as f64 * 1e9) as i64 / BUCKET_NANOS - first)
-                    .clamp(0, poses.len() as i64 - 1) as usize,
+                Some(t) => (bucket_of(t[i]) - first).clamp(0, poses.len() as i64 - 1) as usize,
                 None => 0,
             };
             let p = sweep.points_in_lidar[i];
@@ -100,9 +102,7 @@ pub fn point_buckets(sweep: &SweepView<'_>) -> Vec<u32> {
     match (bucket_range(sweep), sweep.time_offset_secs) {
         (Some((first, last)), Some(t)) => t
             .iter()
-            .map(|&s| {
-                ((s as f64 * 1e9) as i64 / BUCKET_NANOS - first).clamp(0, last - first) as u32
-            })
+            .map(|&s| (bucket_of(s) - first).clamp(0, last - first) as u32)
             .collect(),
         _ => vec![0; n],
     }
@@ -148,7 +148,7 @@ pub fn project_sweep(
         .filter_map(|k| {
             let i = k * stride;
             let b = match sweep.time_offset_secs {
-                Some(t) => ((t[i] as f64 * 1e9) as i64 / BUCKET_NANOS - first_bucket)
+                Some(t) => (bucket_of(t[i]) - first_bucket)
                     .clamp(0, camera_from_lidar.len() as i64 - 1)
                     as usize,
                 None => 0,
