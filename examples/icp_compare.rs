@@ -105,7 +105,11 @@ fn main() -> Result<()> {
             * truth.rotation,
         truth.translation + DVec3::new(0.6, 0.7, -0.4).normalize_or_zero() * 0.10,
     );
-    let mut config = IcpConfig::default();
+    // Open3D uses every correspondence: so does rigcal here, for a like-for-like comparison.
+    let mut config = IcpConfig {
+        min_incidence_cos: 0.0,
+        ..IcpConfig::default()
+    };
     // For experiments: RIGCAL_ICP_FLATNESS overrides the flatness test of target normals.
     if let Some(f) = std::env::var("RIGCAL_ICP_FLATNESS")
         .ok()

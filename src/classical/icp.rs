@@ -179,6 +179,17 @@ impl KdTree {
     }
 }
 
+/// `|cos|` of 75° of incidence. Grazing returns (the ground tens of metres ahead) carry the
+/// range bias of an elongated footprint and, at long range, each beam's elevation error as a
+/// height error: on the real PandaSet drive they alone tilt the PandarGT by 0.3° against the
+/// Pandar64, while the returns above the ground agree with the reference within 0.03° of
+/// pitch (BENCHMARKS.md, "Grazing returns").
+pub const MIN_INCIDENCE_COS: f64 = 0.26;
+
+/// The least share of the information, in every direction, the steep correspondences must
+/// hold for the grazing ones to be left out ([`IcpProblem::new`]).
+pub const MIN_STEEP_INFORMATION: f64 = 0.2;
+
 #[derive(Clone, Debug, PartialEq)]
 pub struct IcpConfig {
     /// Per level, coarse to fine: (source voxel size, correspondence distance), metres.
@@ -191,6 +202,10 @@ pub struct IcpConfig {
     /// surfaces (car bodies, poles) that pin the translation, and drops corners and clutter;
     /// the evaluation metric is stricter ([`crate::eval::registration::MAX_FLATNESS`]).
     pub max_flatness: f64,
+    /// A correspondence is used only where the source ray meets the target plane at least this
+    /// steeply: `|cos|` of the angle between the ray and the plane's normal (0: every one;
+    /// default [`MIN_INCIDENCE_COS`]).
+    pub min_incidence_cos: f64,
 }
 
 impl Default for IcpConfig {
@@ -201,6 +216,7 @@ impl Default for IcpConfig {
             target_voxel_m: 0.1,
             huber_m: 0.1,
             max_flatness: 0.15,
+            min_incidence_cos: MIN_INCIDENCE_COS,
         }
     }
 }
@@ -261,6 +277,8 @@ pub struct IcpProblem {
     pub iteration: usize,
     pub done: bool,
     pub last: IcpStats,
+    /// The grazing correspondences were kept: without them a direction was hardly observed.
+    pub grazing_kept: bool,
 }
 
 /// One point per occupied voxel (the first one seen: deterministic, and a real point).
@@ -394,7 +412,7 @@ impl IcpProblem {
                 (0..level.len()).map(|_| AtomicU32::new(u32::MAX)).collect()
             })
             .collect();
-        Self {
+        let mut problem = Self {
             tree,
             hints,
             normals: with_normals.iter().map(|(_, n)| *n).collect(),
@@ -406,6 +424,40 @@ impl IcpProblem {
             iteration: 0,
             done: false,
             last: IcpStats::default(),
+            grazing_kept: false,
+        };
+        problem.keep_grazing_where_needed();
+        problem
+    }
+
+    /// Leave the grazing correspondences out only where the steeper ones still observe every
+    /// direction of the extrinsic: along each eigenvector of the information of all
+    /// correspondences (first level, at the start), the steep ones must hold at least
+    /// [`MIN_STEEP_INFORMATION`] of it. A scene of flat ground and little else (a parking lot
+    /// of targets) keeps them; a street, with its walls, cars and poles, does not need them.
+    fn keep_grazing_where_needed(&mut self) {
+        if self.config.min_incidence_cos <= 0.0 || self.sources.is_empty() {
+            return;
+        }
+        let (all, ..) = self.normal_equations_with(0, 0.0);
+        let (steep, ..) = self.normal_equations_with(0, self.config.min_incidence_cos);
+        let square = |h: [f64; 36]| {
+            std::array::from_fn::<_, 6, _>(|r| std::array::from_fn(|c| h[r * 6 + c]))
+        };
+        let (values, vectors) = crate::geometry::spd::symmetric_eigen(square(all));
+        let steep = square(steep);
+        let held = (0..6)
+            .map(|k| {
+                let e: [f64; 6] = std::array::from_fn(|r| vectors[r][k]);
+                let along: f64 = (0..6)
+                    .map(|r| (0..6).map(|c| e[r] * steep[r][c] * e[c]).sum::<f64>())
+                    .sum();
+                along / values[k].max(1e-12)
+            })
+            .fold(f64::INFINITY, f64::min);
+        if held < MIN_STEEP_INFORMATION {
+            self.config.min_incidence_cos = 0.0;
+            self.grazing_kept = true;
         }
     }
 
@@ -417,6 +469,15 @@ impl IcpProblem {
     /// The Huber-weighted normal equations at the current extrinsic on `level`'s points and
     /// correspondence distance: (JᵀWJ row-major, JᵀWr, Σ r², inliers).
     fn normal_equations(&self, level: usize) -> ([f64; 36], [f64; 6], f64, usize) {
+        self.normal_equations_with(level, self.config.min_incidence_cos)
+    }
+
+    /// [`Self::normal_equations`] with incidence limit `min_cos`.
+    fn normal_equations_with(
+        &self,
+        level: usize,
+        min_cos: f64,
+    ) -> ([f64; 36], [f64; 6], f64, usize) {
         let max_d = self.config.levels[level].1;
         let tree = &self.tree;
         let x = self.vehicle_from_source;
@@ -435,6 +496,11 @@ impl IcpProblem {
                     let w = s.world_from_vehicle.transform_point(v);
                     if let Some(i) = tree.nearest_hinted(w, max_d, hint) {
                         let (q, normal) = (target[i as usize], normals[i as usize]);
+                        let ray = (w - s.world_from_vehicle.transform_point(x.translation))
+                            .normalize_or_zero();
+                        if ray.dot(normal).abs() < min_cos {
+                            return (h, g, sq, n);
+                        }
                         let r = normal.dot(w - q);
                         let m = s.world_from_vehicle.rotation.inverse() * normal;
                         let a = v.cross(m);
@@ -518,6 +584,20 @@ mod tests {
     use super::*;
     use glam::DQuat;
 
+    /// A 3 m pole of radius 0.3 m standing at (cx, cy).
+    fn pole(pts: &mut Vec<DVec3>, cx: f64, cy: f64) {
+        for h in 0..30 {
+            for t in 0..12 {
+                let ang = t as f64 * std::f64::consts::TAU / 12.0;
+                pts.push(DVec3::new(
+                    cx + 0.3 * ang.cos(),
+                    cy + 0.3 * ang.sin(),
+                    h as f64 * 0.1,
+                ));
+            }
+        }
+    }
+
     /// A street-like scene: ground, two façades, a few poles and boxes, sampled densely.
     fn scene() -> Vec<DVec3> {
         let mut pts = Vec::new();
@@ -531,16 +611,7 @@ mod tests {
         }
         for k in 0..8 {
             let (cx, cy) = (-8.0 + k as f64 * 2.3, if k % 2 == 0 { 3.0 } else { -3.5 });
-            for h in 0..30 {
-                for t in 0..12 {
-                    let ang = t as f64 * std::f64::consts::TAU / 12.0;
-                    pts.push(DVec3::new(
-                        cx + 0.3 * ang.cos(),
-                        cy + 0.3 * ang.sin(),
-                        h as f64 * 0.1,
-                    ));
-                }
-            }
+            pole(&mut pts, cx, cy);
             // A box face facing the road.
             for u in 0..10 {
                 for w in 0..10 {
@@ -558,6 +629,18 @@ mod tests {
     /// The target sees the scene from the vehicle; the source LiDAR's points are the same
     /// scene expressed in its own frame (true extrinsic `truth`), vehicle moving along x.
     fn problem(truth: Rigid, start: Rigid) -> IcpProblem {
+        problem_with(truth, start, 0.0, IcpConfig::default())
+    }
+
+    /// As [`problem`], with the source LiDAR's ground returns farther than 8 m (horizontally)
+    /// raised as a beam-elevation error of `elevation_error_deg` would raise them: by the
+    /// horizontal distance times its tangent.
+    fn problem_with(
+        truth: Rigid,
+        start: Rigid,
+        elevation_error_deg: f64,
+        config: IcpConfig,
+    ) -> IcpProblem {
         let world = scene();
         let poses: Vec<Rigid> = (0..4)
             .map(|k| {
@@ -572,16 +655,90 @@ mod tests {
             .enumerate()
             .map(|(i, p)| {
                 let wv = poses[i % poses.len()];
+                let lidar = (wv * truth).translation;
+                let distance = (*p - lidar).truncate().length();
+                let measured = if p.z == 0.0 && distance > 8.0 {
+                    *p + DVec3::Z * distance * elevation_error_deg.to_radians().tan()
+                } else {
+                    *p
+                };
                 let in_sensor = truth
                     .inverse()
-                    .transform_point(wv.inverse().transform_point(*p));
+                    .transform_point(wv.inverse().transform_point(measured));
                 SourcePoint {
                     in_sensor,
                     world_from_vehicle: wv,
                 }
             })
             .collect();
-        IcpProblem::new(&world, &source, start, IcpConfig::default())
+        IcpProblem::new(&world, &source, start, config)
+    }
+
+    /// Far ground returns raised by a 0.5° beam-elevation error (7–11 cm at 8–12.7 m) meet the
+    /// ground at 77–82° from 1.8 m up: with every correspondence they tilt the answer by
+    /// 0.24° / 1.7 cm, with the default incidence limit they are left out and the walls, poles
+    /// and near ground hold it ten times closer (0.023° / 0.23 cm: what is left comes through
+    /// the few target normals at the feet of walls, which mix ground and wall).
+    #[test]
+    fn grazing_returns_do_not_tilt_the_answer() {
+        let truth = Rigid::new(
+            DQuat::from_euler(glam::EulerRot::ZYX, 0.4, 0.02, -0.01),
+            DVec3::new(1.2, -0.3, 1.8),
+        );
+        let start = Rigid::new(
+            so3::exp(DVec3::new(0.3, -0.5, 0.8).normalize_or_zero() * 1f64.to_radians()),
+            DVec3::new(0.06, 0.07, -0.04),
+        ) * truth;
+        let error = |config: IcpConfig| {
+            let mut p = problem_with(truth, start, 0.5, config);
+            p.run();
+            let (rot, trans) = truth.difference(p.vehicle_from_source);
+            (rot.to_degrees(), trans * 100.0)
+        };
+        let every = error(IcpConfig {
+            min_incidence_cos: 0.0,
+            ..IcpConfig::default()
+        });
+        let steep = error(IcpConfig::default());
+        assert!(every.0 > 0.05, "every correspondence: {every:?}");
+        assert!(
+            steep.0 < every.0 / 5.0 && steep.1 < every.1 / 5.0,
+            "steep only: {steep:?}, every: {every:?}"
+        );
+    }
+
+    /// A street leaves the grazing returns out (walls, poles and near ground observe every
+    /// direction); a wide flat lot with a few poles keeps them: there the far ground holds most
+    /// of what is known about the LiDAR's pitch.
+    #[test]
+    fn grazing_returns_are_kept_only_where_the_rest_leaves_a_direction_open() {
+        let truth = Rigid::new(
+            DQuat::from_euler(glam::EulerRot::ZYX, 0.4, 0.02, -0.01),
+            DVec3::new(1.2, -0.3, 1.8),
+        );
+        assert!(!problem(truth, truth).grazing_kept);
+        let mut lot = Vec::new();
+        for i in 0..400 {
+            for j in 0..200 {
+                lot.push(DVec3::new(
+                    i as f64 * 0.1 - 20.0,
+                    j as f64 * 0.1 - 10.0,
+                    0.0,
+                ));
+            }
+        }
+        for (cx, cy) in [(-6.0, 3.0), (5.0, -4.0), (9.0, 5.0)] {
+            pole(&mut lot, cx, cy);
+        }
+        let source: Vec<SourcePoint> = lot
+            .iter()
+            .map(|p| SourcePoint {
+                in_sensor: truth.inverse().transform_point(*p),
+                world_from_vehicle: Rigid::IDENTITY,
+            })
+            .collect();
+        let p = IcpProblem::new(&lot, &source, truth, IcpConfig::default());
+        assert!(p.grazing_kept);
     }
 
     #[test]
