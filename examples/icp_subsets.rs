@@ -16,9 +16,8 @@ use std::path::PathBuf;
 use glam::DVec3;
 use rigcal::calib::dataset_json::load_reference;
 use rigcal::classical::icp::{IcpConfig, IcpProblem, SourcePoint};
-use rigcal::classical::icp_calibrator::source_points;
+use rigcal::classical::icp_calibrator::{reference_points_near, source_points};
 use rigcal::geometry::Rigid;
-use rigcal::geometry::projection::world_points;
 use rigcal::log::{Drive, spread_evenly};
 
 fn main() {
@@ -29,7 +28,6 @@ fn main() {
     let lidars: Vec<_> = reference.lidars().collect();
     let (fixed, moving) = (lidars[0], lidars[1]);
     let target_frames = drive.frames_within(&fixed.name, &[]);
-    let target_stream = drive.stream(&fixed.name).unwrap();
     let source_stream = drive.stream(&moving.name).unwrap();
     // (source point, its sweep's place in the drive 0..1), and the target.
     let mut source: Vec<(SourcePoint, f64)> = Vec::new();
@@ -43,16 +41,16 @@ fn main() {
                 .into_iter()
                 .map(|p| (p, place)),
         );
-        let stamp = source_stream.frames[i].stamp_nanos;
-        let k = (0..target_frames.len())
-            .min_by_key(|&k| (target_stream.frames[target_frames[k]].stamp_nanos - stamp).abs())
-            .unwrap();
-        for &j in &target_frames[k.saturating_sub(1)..(k + 2).min(target_frames.len())] {
-            let t = drive.load_sweep(&fixed.name, j).unwrap();
-            target.extend(
-                world_points(&t.view(), &drive.trajectory, fixed.vehicle_from_sensor, 1).unwrap(),
-            );
-        }
+        target.extend(
+            reference_points_near(
+                &drive,
+                &fixed.name,
+                fixed.vehicle_from_sensor,
+                &target_frames,
+                source_stream.frames[i].stamp_nanos,
+            )
+            .unwrap(),
+        );
     }
     let truth = moving.vehicle_from_sensor;
     // Height above the ground in the vehicle frame: the ground is the 5th percentile of the

@@ -496,10 +496,12 @@ impl IcpProblem {
                     let w = s.world_from_vehicle.transform_point(v);
                     if let Some(i) = tree.nearest_hinted(w, max_d, hint) {
                         let (q, normal) = (target[i as usize], normals[i as usize]);
-                        let ray = (w - s.world_from_vehicle.transform_point(x.translation))
-                            .normalize_or_zero();
-                        if ray.dot(normal).abs() < min_cos {
-                            return (h, g, sq, n);
+                        if min_cos > 0.0 {
+                            let ray = (w - s.world_from_vehicle.transform_point(x.translation))
+                                .normalize_or_zero();
+                            if ray.dot(normal).abs() < min_cos {
+                                return (h, g, sq, n);
+                            }
                         }
                         let r = normal.dot(w - q);
                         let m = s.world_from_vehicle.rotation.inverse() * normal;

@@ -8,6 +8,7 @@ use glam::DVec3;
 
 use super::icp::{IcpConfig, IcpProblem, SourcePoint};
 use crate::calib::Rig;
+use crate::geometry::Rigid;
 use crate::geometry::projection::world_points;
 use crate::log::{Drive, LidarSweep, spread_evenly};
 use crate::optim::runner::{Calibrator, StepReport};
@@ -43,6 +44,35 @@ pub fn source_points(
         .collect()
 }
 
+/// The target of one source sweep stamped `stamp_nanos`: the `reference` LiDAR's sweep among
+/// `frames` nearest in time and its two neighbours, in the world (each return at its firing
+/// time, the reference at `vehicle_from_reference`). Empty without such sweeps.
+pub fn reference_points_near(
+    drive: &Drive,
+    reference: &str,
+    vehicle_from_reference: Rigid,
+    frames: &[usize],
+    stamp_nanos: i64,
+) -> Result<Vec<DVec3>, String> {
+    let Some(stream) = drive.stream(reference) else {
+        return Ok(Vec::new());
+    };
+    let Some(nearest) = (0..frames.len())
+        .min_by_key(|&k| (stream.frames[frames[k]].stamp_nanos - stamp_nanos).abs())
+    else {
+        return Ok(Vec::new());
+    };
+    let mut out = Vec::new();
+    for &j in &frames[nearest.saturating_sub(1)..(nearest + 2).min(frames.len())] {
+        let t = drive.load_sweep(reference, j).map_err(|e| e.to_string())?;
+        out.extend(
+            world_points(&t.view(), &drive.trajectory, vehicle_from_reference, 1)
+                .map_err(|e| format!("{reference}: {e}"))?,
+        );
+    }
+    Ok(out)
+}
+
 impl IcpCalibrator {
     /// Register every LiDAR of `rig` but `reference` against it on `frames` sweeps each.
     pub fn from_drive(
@@ -58,9 +88,12 @@ impl IcpCalibrator {
             .ok_or_else(|| format!("no LiDAR '{reference}' in the rig"))?
             .vehicle_from_sensor;
         let targets = drive.frames_within(reference, segments_nanos);
-        let target_stream = drive
-            .stream(reference)
-            .ok_or_else(|| format!("no sweeps of '{reference}' in {}", drive.path().display()))?;
+        if drive.stream(reference).is_none() {
+            return Err(format!(
+                "no sweeps of '{reference}' in {}",
+                drive.path().display()
+            ));
+        }
         let mut problems = Vec::new();
         for lidar in rig.lidars().filter(|l| l.name != reference) {
             let Some(stream) = drive.stream(&lidar.name) else {
@@ -73,19 +106,13 @@ impl IcpCalibrator {
                     .load_sweep(&lidar.name, i)
                     .map_err(|e| e.to_string())?;
                 source.extend(source_points(&sweep, &drive.trajectory, 1));
-                let stamp = stream.frames[i].stamp_nanos;
-                let Some(position) = (0..targets.len())
-                    .min_by_key(|&k| (target_stream.frames[targets[k]].stamp_nanos - stamp).abs())
-                else {
-                    continue;
-                };
-                for &j in &targets[position.saturating_sub(1)..(position + 2).min(targets.len())] {
-                    let t = drive.load_sweep(reference, j).map_err(|e| e.to_string())?;
-                    target.extend(
-                        world_points(&t.view(), &drive.trajectory, fixed, 1)
-                            .map_err(|e| format!("{reference}: {e}"))?,
-                    );
-                }
+                target.extend(reference_points_near(
+                    drive,
+                    reference,
+                    fixed,
+                    &targets,
+                    stream.frames[i].stamp_nanos,
+                )?);
             }
             if source.is_empty() || target.is_empty() {
                 continue;

@@ -39,7 +39,7 @@ use super::surface_align::{
 use super::transient::TransientSettings;
 use crate::features::orb::Keypoint;
 use crate::geometry::camera::CameraIntrinsics;
-use crate::geometry::projection::{SweepView, world_points};
+use crate::geometry::projection::world_points;
 use crate::geometry::{Rigid, Trajectory};
 use crate::log::LidarSweep;
 
@@ -822,13 +822,7 @@ fn deskewed_points(
     vehicle_from_lidar: Rigid,
     every: usize,
 ) -> Vec<DVec3> {
-    let view = SweepView {
-        points_in_lidar: &sweep.points_in_sensor,
-        intensity: &sweep.intensity,
-        time_offset_secs: sweep.time_offset_secs.as_deref(),
-        stamp_nanos: sweep.stamp_nanos,
-    };
-    world_points(&view, trajectory, vehicle_from_lidar, every).unwrap_or_default()
+    world_points(&sweep.view(), trajectory, vehicle_from_lidar, every).unwrap_or_default()
 }
 
 impl DepthCalibration {
