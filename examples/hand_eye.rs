@@ -1,11 +1,16 @@
 //! Fit every camera of a drive to its own motion (hand-eye against the trajectory), then its
 //! translation to the LiDAR map (the LiDARs at the truth), from the ground truth and from
-//! perturbed starts, and print how far each ends from the truth after each fit.
+//! perturbed starts, and print how far each ends from the truth after each fit; then, from the
+//! same start, the camera's whole pose fitted to the map (`lidar_translation::fit_pose`, which
+//! needs no turns: it runs on a straight drive too).
 //!
-//! `cargo run --release --no-default-features --example hand_eye -- LOG.mcap GT.yaml [DEG CM SEEDS]`
+//! `cargo run --release --no-default-features --example hand_eye -- LOG.mcap GT [DEG CM SEEDS]`,
+//! `GT` a native calibration file or a dataset's ground_truth.json.
 
 use rigcal::calib::CalibrationFile;
-use rigcal::classical::camera_motion::{DEFAULT_FRAMES, fit_rig_cameras, lidar_map};
+use rigcal::calib::dataset_json::load_reference;
+use rigcal::classical::camera_motion::{DEFAULT_FRAMES, camera_pairs, fit_rig_cameras, lidar_map};
+use rigcal::classical::lidar_translation::fit_pose;
 use rigcal::log::Drive;
 use rigcal::sim::synth::perturb_rig;
 
@@ -22,7 +27,19 @@ fn main() -> Result<(), String> {
     };
     let (deg, cm, seeds) = (number(2, 10.0), number(3, 100.0), number(4, 1.0) as u64);
     let drive = Drive::open(std::path::Path::new(log)).map_err(|e| e.to_string())?;
-    let truth = CalibrationFile::load_rig(std::path::Path::new(gt)).map_err(|e| e.to_string())?;
+    let gt = std::path::Path::new(gt);
+    let reference = if gt.extension().is_some_and(|e| e == "json") {
+        load_reference(gt)
+    } else {
+        CalibrationFile::load_rig(gt)
+    }
+    .map_err(|e| e.to_string())?;
+    let mut truth = drive.rig.clone();
+    for s in &mut truth.sensors {
+        if let Some(r) = reference.sensor(&s.name) {
+            s.vehicle_from_sensor = r.vehicle_from_sensor;
+        }
+    }
     let frames = std::env::var("RIGCAL_FRAMES")
         .ok()
         .and_then(|s| s.parse().ok())
@@ -53,9 +70,7 @@ fn main() -> Result<(), String> {
             &|_, _, _| {},
         );
         for o in outcomes {
-            let t = truth.sensor(&o.name).map(|s| s.vehicle_from_sensor);
-            let (Some(t), Ok(fit)) = (t, &o.fit) else {
-                println!("  {}", o.summary());
+            let Some(t) = truth.sensor(&o.name).map(|s| s.vehicle_from_sensor) else {
                 continue;
             };
             let row = |f: rigcal::geometry::Rigid| {
@@ -67,6 +82,31 @@ fn main() -> Result<(), String> {
                     d.y,
                     d.z
                 )
+            };
+            let pose = camera_pairs(&drive, &start, &o.name, frames, &[], false, &|_, _, _| {})
+                .and_then(|found| {
+                    fit_pose(&map, &found.pairs, &found.world_from_vehicle, found.start)
+                        .map_err(|e| e.to_string())
+                });
+            let began = start.sensor(&o.name).map(|s| s.vehicle_from_sensor);
+            println!(
+                "  {:20} start {}  | pose on the LiDAR map {}",
+                o.name,
+                began.map(row).unwrap_or_default(),
+                match &pose {
+                    Ok(p) => format!(
+                        "{}  {} points, median {:.1} cm, unobserved {:?}",
+                        row(p.vehicle_from_camera),
+                        p.points,
+                        p.median_residual_m * 100.0,
+                        p.unobserved
+                    ),
+                    Err(e) => e.clone(),
+                }
+            );
+            let Ok(fit) = &o.fit else {
+                println!("  {:20} {}", "", o.summary());
+                continue;
             };
             let end = fitted.sensor(&o.name).map(|s| s.vehicle_from_sensor);
             println!(

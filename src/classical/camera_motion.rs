@@ -11,7 +11,7 @@ use glam::{DVec2, DVec3};
 use rayon::prelude::*;
 
 use super::hand_eye::{HandEyeFit, MotionPair, candidate_pairs, check_turns, motion_pairs, solve};
-use super::lidar_translation::{LidarMap, TranslationFit, fit_translation};
+use super::lidar_translation::{LidarMap, MapFit, fit_translation};
 use crate::calib::Rig;
 use crate::geometry::Rigid;
 use crate::log::{Drive, spread_evenly};
@@ -40,14 +40,16 @@ pub struct CameraPairs {
 }
 
 /// The motion pairs of camera `name` of `rig` over `frames` images of `drive` within
-/// `segments_nanos`, reporting `(done, total)` per phase name. A drive too straight for the
-/// hand-eye is refused before any image is decoded.
+/// `segments_nanos`, reporting `(done, total)` per phase name. With `require_turns`, a drive too
+/// straight for the hand-eye is refused before any image is decoded (the map fits of
+/// [`super::lidar_translation`] need no turns).
 pub fn camera_pairs(
     drive: &Drive,
     rig: &Rig,
     name: &str,
     frames: usize,
     segments_nanos: &[(i64, i64)],
+    require_turns: bool,
     report: &(dyn Fn(&str, usize, usize) + Sync),
 ) -> Result<CameraPairs, String> {
     let sensor = rig
@@ -66,7 +68,9 @@ pub fn camera_pairs(
         .map(|&i| stream.frames[i].stamp_nanos)
         .collect();
     let candidates = candidate_pairs(&drive.trajectory, &stamps);
-    check_turns(&candidates).map_err(|e| e.to_string())?;
+    if require_turns {
+        check_turns(&candidates).map_err(|e| e.to_string())?;
+    }
     let done = std::sync::atomic::AtomicUsize::new(0);
     let keypoints = picked
         .par_iter()
@@ -103,7 +107,7 @@ pub fn fit_camera(
     segments_nanos: &[(i64, i64)],
     report: &(dyn Fn(&str, usize, usize) + Sync),
 ) -> Result<HandEyeFit, String> {
-    let found = camera_pairs(drive, rig, name, frames, segments_nanos, report)?;
+    let found = camera_pairs(drive, rig, name, frames, segments_nanos, true, report)?;
     solve(&found.pairs, found.start).map_err(|e| e.to_string())
 }
 
@@ -115,7 +119,7 @@ pub struct CameraOutcome {
     pub fit: Result<HandEyeFit, String>,
     /// The translation then measured against the LiDAR map ([`super::lidar_translation`]),
     /// or why not; `None` without a map or a fit.
-    pub translation: Option<Result<TranslationFit, String>>,
+    pub translation: Option<Result<MapFit, String>>,
     /// How far the fits moved the camera (rad, m); zero when it was kept.
     pub moved: (f64, f64),
 }
@@ -183,9 +187,15 @@ pub fn fit_rig_cameras(
     let mut out = rig.clone();
     let mut outcomes = Vec::with_capacity(names.len());
     for name in names {
-        let found = camera_pairs(drive, rig, name, frames, segments_nanos, &|phase, d, t| {
-            report(&format!("{name}: {phase}"), d, t)
-        });
+        let found = camera_pairs(
+            drive,
+            rig,
+            name,
+            frames,
+            segments_nanos,
+            true,
+            &|phase, d, t| report(&format!("{name}: {phase}"), d, t),
+        );
         let fit = match &found {
             Ok(found) => solve(&found.pairs, found.start).map_err(|e| e.to_string()),
             Err(e) => Err(e.clone()),

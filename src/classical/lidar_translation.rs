@@ -1,5 +1,6 @@
-//! A camera's translation measured against the LiDAR map: the metric part a hand-eye fit
-//! cannot observe on a level drive (the height, mostly the sideways offset).
+//! A camera's translation, or its whole pose, measured against the LiDAR map: the metric part a
+//! hand-eye fit cannot observe on a level drive (the height, mostly the sideways offset), and on
+//! a drive too straight for a hand-eye, the rotation too.
 //!
 //! How it works. The hand-eye fit ([`super::hand_eye`]) leaves a camera's rotation within a
 //! few tenths of a degree but its translation only partly fixed. Its verified matches say more:
@@ -7,16 +8,23 @@
 //! `C = X⁻¹ V X` is metric, so each match triangulates to a point at its true distance
 //! (midpoint of the two rays; matches with little parallax, far points or rays that miss each
 //! other are dropped). Placed in the world through the vehicle pose of the first image,
-//! `P = W_i X p`, those points sit on the LiDAR map when the camera's translation is right, and
-//! a translation error `Δ` (vehicle frame) shifts every point of image `i` by `R_{W_i} Δ`. So
-//! the translation is registered to the map by point-to-plane ICP with three unknowns: the
-//! residual of a point with map neighbour `q` and normal `n` is `n·(P − q)`, its Jacobian
-//! `(R_{W_i}ᵀ n)ᵀ`, Huber weights, and correspondence distances shrinking from 2 m to 0.25 m, so
-//! a start a metre off still finds the ground and the façades. After each step the points are
-//! triangulated again (a pair that turns moves with the translation too). The ground pins the
-//! height; façades and poles the horizontal directions. A direction the points do not observe
-//! (an eigenvalue of the 3 × 3 normal equations below about 30 points' worth) stays where it
-//! started.
+//! `P = W_i X p`, those points sit on the LiDAR map when the camera's extrinsic is right. A
+//! translation error `Δ` (vehicle frame) shifts every point of image `i` by `R_{W_i} Δ`; a turn
+//! `ω` of the camera about its centre (vehicle frame) moves it by `R_{W_i} (ω × o)`, `o` the
+//! point's offset from the camera. So the extrinsic is registered to the map by point-to-plane
+//! ICP: the residual of a point with map neighbour `q` and normal `n` is `n·(P − q)`, its
+//! Jacobian `(R_{W_i}ᵀ n)ᵀ` in `Δ` and `(o × R_{W_i}ᵀ n)ᵀ` in `ω` ([`fit_translation`] keeps
+//! the rotation; [`fit_pose`] frees it), Huber weights, and correspondence distances shrinking
+//! from 2 m to 0.25 m, so a start a metre off still finds the ground and the façades. After
+//! each step the points are triangulated again (a pair that turns moves with the translation
+//! too). The ground pins the height; façades and poles the horizontal directions. A direction
+//! the points do not observe (an eigenvalue of the normal equations below about 30 points'
+//! worth, rotations counted in metres at 5 m) stays where it started.
+//!
+//! What the pose fit is worth (BENCHMARKS.md): side cameras of the simulator's figure-8 drive
+//! come to the same pose from every start up to 2° / 20 cm, 0.14–0.25° and ≤ 3.4 cm from the
+//! truth; the front and back cameras, whose matches have little parallax, do not; on PandaSet's
+//! straight drive (16 images per camera) it is not accurate enough to start UniCal from.
 
 use glam::{DMat3, DVec3};
 use rayon::prelude::*;
@@ -25,7 +33,7 @@ use super::hand_eye::MotionPair;
 use super::icp::{KdTree, NORMAL_RADIUS_M};
 use crate::eval::registration::plane_normal_from_moments;
 use crate::geometry::Rigid;
-use crate::geometry::so3::outer;
+use crate::geometry::so3;
 
 /// Correspondence distances, coarse to fine (m).
 const LEVELS_M: [f64; 4] = [2.0, 1.0, 0.5, 0.25];
@@ -83,34 +91,46 @@ impl LidarMap {
     }
 }
 
-/// The translation fitted to the map, and how.
+/// The extrinsic fitted to the map, and how.
 #[derive(Clone, Debug, PartialEq)]
-pub struct TranslationFit {
+pub struct MapFit {
     pub vehicle_from_camera: Rigid,
     /// Triangulated points used at the last step, and their median |point-to-plane| distance
     /// (m).
     pub points: usize,
     pub median_residual_m: f64,
-    /// Directions of the vehicle frame left at the start (weakly observed by the points).
+    /// What the fit moved but the points do not observe, left at the start: translations along
+    /// the vehicle's "x", "y", "z", rotations about them ("roll", "pitch", "yaw").
     pub unobserved: Vec<&'static str>,
 }
 
-/// Why no translation was fitted.
+/// Why no fit was made.
 #[derive(Debug, thiserror::Error, PartialEq)]
-pub enum TranslationError {
+pub enum MapFitError {
     #[error("only {found} triangulated points lie near the LiDAR map (at least {needed} needed)")]
     TooFewPoints { found: usize, needed: usize },
 }
 
-/// The matches of `pairs` triangulated with the camera at `vehicle_from_camera`, in the world:
-/// `(point, world_from_vehicle rotation of the pair's first image)`. `world_from_vehicle[i]` is
-/// the vehicle pose of image `i` ([`MotionPair::first_image`]); a pair whose first image has
-/// none is skipped.
+/// A match triangulated with the camera at some extrinsic, placed in the world.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Triangulated {
+    /// The point in the world (m).
+    pub world: DVec3,
+    /// `world_from_vehicle`'s rotation at the pair's first image.
+    pub world_rotation: DMat3,
+    /// From the camera's centre to the point, in the vehicle frame of that image (m): the lever
+    /// arm a rotation of the camera moves the point by.
+    pub from_camera: DVec3,
+}
+
+/// The matches of `pairs` triangulated with the camera at `vehicle_from_camera`, in the world.
+/// `world_from_vehicle[i]` is the vehicle pose of image `i` ([`MotionPair::first_image`]); a
+/// pair whose first image has none is skipped.
 pub fn triangulate(
     pairs: &[MotionPair],
     world_from_vehicle: &[Option<Rigid>],
     vehicle_from_camera: Rigid,
-) -> Vec<(DVec3, DMat3)> {
+) -> Vec<Triangulated> {
     let camera_from_vehicle = vehicle_from_camera.inverse();
     pairs
         .par_iter()
@@ -121,12 +141,16 @@ pub fn triangulate(
                 .flatten()?;
             let world_from_camera = w * vehicle_from_camera;
             let i_from_j = camera_from_vehicle * pair.vehicle_motion * vehicle_from_camera;
-            let rotation = DMat3::from_quat(w.rotation);
+            let world_rotation = DMat3::from_quat(w.rotation);
             Some(
                 pair.rays
                     .iter()
                     .filter_map(|&(a, b)| midpoint(i_from_j, a, b))
-                    .map(|p| (world_from_camera.transform_point(p), rotation))
+                    .map(|p| Triangulated {
+                        world: world_from_camera.transform_point(p),
+                        world_rotation,
+                        from_camera: vehicle_from_camera.rotation * p,
+                    })
                     .collect::<Vec<_>>(),
             )
         })
@@ -162,79 +186,131 @@ pub fn fit_translation(
     pairs: &[MotionPair],
     world_from_vehicle: &[Option<Rigid>],
     start: Rigid,
-) -> Result<TranslationFit, TranslationError> {
-    let mut translation = start.translation;
-    let mut last = (0, 0.0, DMat3::ZERO);
+) -> Result<MapFit, MapFitError> {
+    fit(map, pairs, world_from_vehicle, start, false)
+}
+
+/// Register the whole extrinsic of `start` to `map`: its translation and its rotation about
+/// the camera's centre (module docs), for a camera no hand-eye fit could turn.
+pub fn fit_pose(
+    map: &LidarMap,
+    pairs: &[MotionPair],
+    world_from_vehicle: &[Option<Rigid>],
+    start: Rigid,
+) -> Result<MapFit, MapFitError> {
+    fit(map, pairs, world_from_vehicle, start, true)
+}
+
+/// A rotation's unknowns are scaled by this lever (m), so that each of the six counts, as a
+/// translation does, in metres a point moves: a camera turned by `ω` moves a point 5 m away (a
+/// typical depth of the triangulated points) by about `5 ω`. [`MIN_INFORMATION`] then means the same for all six.
+const LEVER_M: f64 = 5.0;
+
+/// Names of the six unknowns: translations along the vehicle's axes, then rotations about them.
+const UNKNOWNS: [&str; 6] = ["x", "y", "z", "roll", "pitch", "yaw"];
+
+/// The Gauss–Newton loop behind [`fit_translation`] and [`fit_pose`] (`rotate` frees the
+/// rotation): the unknowns are the translation step `Δ` and the rotation `ω` about the camera's
+/// centre (vehicle frame, `R ← exp(ω) R`), scaled by [`LEVER_M`].
+fn fit(
+    map: &LidarMap,
+    pairs: &[MotionPair],
+    world_from_vehicle: &[Option<Rigid>],
+    start: Rigid,
+    rotate: bool,
+) -> Result<MapFit, MapFitError> {
+    let mut camera = start;
+    let mut last = (0, 0.0, [[0.0; 6]; 6]);
     for &radius in &LEVELS_M {
         for _ in 0..ITERATIONS_PER_LEVEL {
-            let camera = Rigid::new(start.rotation, translation);
             let points = triangulate(pairs, world_from_vehicle, camera);
-            let (h, information, g, used, median) = normal_equations(map, &points, radius);
+            let (h, information, g, used, median) = normal_equations(map, &points, radius, rotate);
             last = (used, median, information);
             if used < MIN_POINTS {
                 break;
             }
-            let step = solve_observed(h, information, -g);
-            translation += step;
-            if step.length() < 1e-4 {
+            let step = solve_observed(h, information, g.map(|v| -v));
+            camera = Rigid::new(
+                so3::exp(DVec3::new(step[3], step[4], step[5]) / LEVER_M) * camera.rotation,
+                camera.translation + DVec3::new(step[0], step[1], step[2]),
+            );
+            if step.iter().map(|v| v * v).sum::<f64>().sqrt() < 1e-4 {
                 break;
             }
         }
     }
     let (used, median, information) = last;
     if used < MIN_POINTS {
-        return Err(TranslationError::TooFewPoints {
+        return Err(MapFitError::TooFewPoints {
             found: used,
             needed: MIN_POINTS,
         });
     }
-    let weak = weak_directions(information);
     // A weak direction keeps the start: undo whatever the steps did along it.
-    for &axis in &weak {
-        translation -= axis * axis.dot(translation - start.translation);
+    let weak = weak_directions(information);
+    let turned = so3::log(camera.rotation * start.rotation.inverse()) * LEVER_M;
+    let moved = camera.translation - start.translation;
+    let mut total = [moved.x, moved.y, moved.z, turned.x, turned.y, turned.z];
+    for w in &weak {
+        let along: f64 = (0..6).map(|k| w[k] * total[k]).sum();
+        (0..6).for_each(|k| total[k] -= w[k] * along);
     }
-    let unobserved = ["x", "y", "z"]
-        .into_iter()
-        .zip([DVec3::X, DVec3::Y, DVec3::Z])
-        .filter(|(_, e)| weak.iter().any(|w| w.dot(*e).abs() > 0.7))
-        .map(|(n, _)| n)
+    let unobserved = (0..if rotate { 6 } else { 3 })
+        .filter(|&k| weak.iter().any(|w| w[k].abs() > 0.7))
+        .map(|k| UNKNOWNS[k])
         .collect();
-    Ok(TranslationFit {
-        vehicle_from_camera: Rigid::new(start.rotation, translation),
+    Ok(MapFit {
+        vehicle_from_camera: Rigid::new(
+            so3::exp(DVec3::new(total[3], total[4], total[5]) / LEVER_M) * start.rotation,
+            start.translation + DVec3::new(total[0], total[1], total[2]),
+        ),
         points: used,
         median_residual_m: median,
         unobserved,
     })
 }
 
+type Mat6 = [[f64; 6]; 6];
+
 /// Huber-weighted point-to-plane normal equations `(H, g)` over `points` with map neighbours
-/// within `radius_m`, the unweighted information `Σ m mᵀ` (what decides which directions are
+/// within `radius_m`, the unweighted information `Σ J Jᵀ` (what decides which directions are
 /// observed: Huber weights would count a start a metre off as unobserved), the number used and
-/// their median |residual|.
+/// their median |residual|. Without `rotate` the rotation's rows are zero.
 fn normal_equations(
     map: &LidarMap,
-    points: &[(DVec3, DMat3)],
+    points: &[Triangulated],
     radius_m: f64,
-) -> (DMat3, DMat3, DVec3, usize, f64) {
-    let terms: Vec<(DVec3, f64)> = points
+    rotate: bool,
+) -> (Mat6, Mat6, [f64; 6], usize, f64) {
+    let terms: Vec<([f64; 6], f64)> = points
         .par_iter()
-        .filter_map(|&(p, world_rotation)| {
-            let (q, n) = map.plane_near(p, radius_m)?;
-            // d(P)/dΔ = R_W, so d r / dΔ = (R_Wᵀ n)ᵀ.
-            Some((world_rotation.transpose() * n, n.dot(p - q)))
+        .filter_map(|t| {
+            let (q, n) = map.plane_near(t.world, radius_m)?;
+            // d P / dΔ = R_W and d P / dω = −R_W [o]×, so d r / dΔ = (R_Wᵀ n)ᵀ and
+            // d r / dω = (o × R_Wᵀ n)ᵀ.
+            let m = t.world_rotation.transpose() * n;
+            let turn = if rotate {
+                t.from_camera.cross(m) / LEVER_M
+            } else {
+                DVec3::ZERO
+            };
+            Some(([m.x, m.y, m.z, turn.x, turn.y, turn.z], n.dot(t.world - q)))
         })
         .collect();
-    let (mut h, mut information, mut g) = (DMat3::ZERO, DMat3::ZERO, DVec3::ZERO);
-    for &(m, r) in &terms {
+    let (mut h, mut information, mut g) = ([[0.0; 6]; 6], [[0.0; 6]; 6], [0.0; 6]);
+    for (j, r) in &terms {
         let w = if r.abs() <= HUBER_M {
             1.0
         } else {
             HUBER_M / r.abs()
         };
-        let m_mt = outer(m, m);
-        h += m_mt * w;
-        information += m_mt;
-        g += m * (w * r);
+        for a in 0..6 {
+            for b in 0..6 {
+                h[a][b] += w * j[a] * j[b];
+                information[a][b] += j[a] * j[b];
+            }
+            g[a] += w * r * j[a];
+        }
     }
     let mut residuals: Vec<f64> = terms.iter().map(|t| t.1.abs()).collect();
     residuals.sort_by(f64::total_cmp);
@@ -242,36 +318,47 @@ fn normal_equations(
     (h, information, g, terms.len(), median)
 }
 
-/// Unit eigen-directions of `information` whose eigenvalue is below [`MIN_INFORMATION`].
-fn weak_directions(information: DMat3) -> Vec<DVec3> {
-    let (values, vectors) = eigen(information);
-    (0..3)
+/// Unit eigen-directions of `information` whose eigenvalue is below [`MIN_INFORMATION`] (a
+/// fixed rotation's, with zero rows, among them).
+fn weak_directions(information: Mat6) -> Vec<[f64; 6]> {
+    let (values, v) = crate::geometry::spd::symmetric_eigen(information);
+    (0..6)
         .filter(|&k| values[k] < MIN_INFORMATION)
-        .map(|k| vectors[k])
+        .map(|k| std::array::from_fn(|i| v[i][k]))
         .collect()
 }
 
 /// `h⁻¹ b` within the directions `information` observes (nothing along the weak ones): `h`
 /// restricted to the observed subspace, the identity on the weak one.
-fn solve_observed(h: DMat3, information: DMat3, b: DVec3) -> DVec3 {
+fn solve_observed(h: Mat6, information: Mat6, b: [f64; 6]) -> [f64; 6] {
     let weak = weak_directions(information);
-    let weak_part: DMat3 = weak
-        .iter()
-        .map(|&w| outer(w, w))
-        .fold(DMat3::ZERO, |a, m| a + m);
-    let observed = DMat3::IDENTITY - weak_part;
-    let a = observed * h * observed + weak_part;
-    if a.determinant().abs() < 1e-12 {
-        return DVec3::ZERO;
+    let mut weak_part = [[0.0; 6]; 6];
+    for w in &weak {
+        for i in 0..6 {
+            for j in 0..6 {
+                weak_part[i][j] += w[i] * w[j];
+            }
+        }
     }
-    observed * (a.inverse() * (observed * b))
-}
-
-/// Eigenvalues and unit eigenvectors of the symmetric `h`.
-fn eigen(h: DMat3) -> ([f64; 3], [DVec3; 3]) {
-    let (values, v) = crate::geometry::spd::symmetric_eigen(h.to_cols_array_2d());
-    let column = |k: usize| DVec3::new(v[0][k], v[1][k], v[2][k]);
-    (values, [column(0), column(1), column(2)])
+    let observed: Mat6 =
+        std::array::from_fn(|i| std::array::from_fn(|j| f64::from(i == j) - weak_part[i][j]));
+    let product = |x: &Mat6, y: &Mat6| -> Mat6 {
+        std::array::from_fn(|i| std::array::from_fn(|j| (0..6).map(|k| x[i][k] * y[k][j]).sum()))
+    };
+    let apply = |x: &Mat6, v: &[f64; 6]| -> [f64; 6] {
+        std::array::from_fn(|i| (0..6).map(|k| x[i][k] * v[k]).sum())
+    };
+    let restricted = product(&product(&observed, &h), &observed);
+    let mut a = [0.0; 36];
+    for i in 0..6 {
+        for j in 0..6 {
+            a[i * 6 + j] = restricted[i][j] + weak_part[i][j];
+        }
+    }
+    match crate::geometry::spd::solve6(a, apply(&observed, &b)) {
+        Some(x) => apply(&observed, &x),
+        None => [0.0; 6],
+    }
 }
 
 #[cfg(test)]
@@ -373,9 +460,9 @@ mod tests {
         let lidar = LidarMap::new(map);
         let worst = points
             .iter()
-            .map(|(p, _)| {
-                let k = lidar.tree.nearest(*p, 1.0).unwrap() as usize;
-                lidar.points[k].distance(*p)
+            .map(|t| {
+                let k = lidar.tree.nearest(t.world, 1.0).unwrap() as usize;
+                lidar.points[k].distance(t.world)
             })
             .fold(0.0, f64::max);
         assert!(worst < 0.08, "{worst}");
@@ -410,16 +497,120 @@ mod tests {
     }
 
     #[test]
+    fn a_pose_a_degree_and_ten_centimetres_off_comes_back() {
+        let (map, poses, camera) = (street(), drive(), left_camera());
+        let pairs = pairs(camera, &poses, &map);
+        let lidar = LidarMap::new(map);
+        for (axis, offset) in [
+            (DVec3::X, DVec3::new(0.0, 0.0, 0.1)),
+            (DVec3::Y, DVec3::new(0.06, -0.06, 0.05)),
+            (DVec3::Z, DVec3::new(-0.05, 0.07, -0.04)),
+            (
+                DVec3::new(0.2, -1.0, 1.0).normalize_or_zero(),
+                DVec3::new(0.1, 0.0, 0.0),
+            ),
+        ] {
+            let start = Rigid::new(
+                so3::exp(axis * 1f64.to_radians()) * camera.rotation,
+                camera.translation + offset,
+            );
+            let fit = fit_pose(&lidar, &pairs, &known(&poses), start).unwrap();
+            let (rotation, translation) = fit.vehicle_from_camera.difference(camera);
+            assert!(
+                rotation.to_degrees() < 0.05 && translation < 0.02,
+                "{axis} {offset}: {:.3}° / {:.1} cm ({fit:?})",
+                rotation.to_degrees(),
+                translation * 100.0
+            );
+            assert!(fit.unobserved.is_empty(), "{fit:?}");
+        }
+    }
+
+    #[test]
+    fn on_the_ground_alone_the_pose_fit_names_and_keeps_what_it_cannot_see() {
+        // Nothing in the ground fixes the position along it or the turn about its normal, so
+        // those stay exactly where they started (the height, the roll and the pitch are
+        // observed by it, more or less well depending on how far the points spread).
+        let (poses, camera) = (drive(), left_camera());
+        let ground: Vec<DVec3> = street()
+            .into_iter()
+            .filter(|p| p.z == 0.0 && p.y < 7.0)
+            .collect();
+        let pairs = pairs(camera, &poses, &ground);
+        let lidar = LidarMap::new(ground);
+        let turn = so3::exp(DVec3::new(1.0, 0.0, 1.0) * 1f64.to_radians());
+        let offset = DVec3::new(0.1, 0.1, 0.1);
+        let start = Rigid::new(turn * camera.rotation, camera.translation + offset);
+        let fit = fit_pose(&lidar, &pairs, &known(&poses), start).unwrap();
+        for name in ["x", "y", "yaw"] {
+            assert!(fit.unobserved.contains(&name), "{name}: {fit:?}");
+        }
+        let end = fit.vehicle_from_camera;
+        let moved = end.translation - camera.translation;
+        assert!(
+            (moved.x - 0.1).abs() < 1e-6 && (moved.y - 0.1).abs() < 1e-6,
+            "{moved}"
+        );
+        let yaw = so3::log(end.rotation * camera.rotation.inverse()).z;
+        assert!(
+            (yaw.to_degrees() - 1.0).abs() < 0.01,
+            "{}",
+            yaw.to_degrees()
+        );
+        assert!(end.difference(camera).0 <= start.difference(camera).0 + 1e-9);
+    }
+
+    #[test]
+    fn a_translation_fit_leaves_the_rotation_and_a_pose_fit_does_not() {
+        // The same start, 1° off in yaw: the translation fit keeps the rotation exactly (and
+        // moves the translation to make up for it as best it can); the pose fit turns it back.
+        let (map, poses, camera) = (street(), drive(), left_camera());
+        let pairs = pairs(camera, &poses, &map);
+        let lidar = LidarMap::new(map);
+        let start = Rigid::new(
+            so3::exp(DVec3::Z * 1f64.to_radians()) * camera.rotation,
+            camera.translation,
+        );
+        let kept = fit_translation(&lidar, &pairs, &known(&poses), start).unwrap();
+        assert_eq!(kept.vehicle_from_camera.rotation, start.rotation);
+        let turned = fit_pose(&lidar, &pairs, &known(&poses), start).unwrap();
+        let error = |f: &MapFit| f.vehicle_from_camera.difference(camera).0.to_degrees();
+        assert!(error(&turned) < 0.05, "{}", error(&turned));
+        assert!(error(&kept) > 0.99, "{}", error(&kept));
+    }
+
+    /// The 6 × 6 diagonal information of points observing x, y, yaw well and the height
+    /// `ground` times; roll and pitch `tilt` times.
+    fn diagonal(ground: f64, tilt: f64) -> Mat6 {
+        let d = [800.0, 5000.0, ground, tilt, tilt, 3000.0];
+        std::array::from_fn(|i| std::array::from_fn(|j| if i == j { d[i] } else { 0.0 }))
+    }
+
+    #[test]
     fn a_direction_is_observed_by_enough_points_however_many_see_the_others() {
         // Thousands of points on a façade across the drive, sixty on the ground: the height is
         // observed; five are not enough.
-        let h = |ground: f64| DMat3::from_diagonal(DVec3::new(800.0, 5000.0, ground));
-        assert!(weak_directions(h(60.0)).is_empty());
-        let weak = weak_directions(h(5.0));
+        assert!(weak_directions(diagonal(60.0, 400.0)).is_empty());
+        let weak = weak_directions(diagonal(5.0, 400.0));
         assert_eq!(weak.len(), 1);
-        assert!(weak[0].z.abs() > 0.99, "{weak:?}");
-        let step = solve_observed(h(5.0), h(5.0), DVec3::new(800.0, 5000.0, 5.0));
-        assert!((step - DVec3::new(1.0, 1.0, 0.0)).length() < 1e-9, "{step}");
+        assert!(weak[0][2].abs() > 0.99, "{weak:?}");
+        let h = diagonal(5.0, 400.0);
+        let step = solve_observed(h, h, [800.0, 5000.0, 5.0, 400.0, 400.0, 3000.0]);
+        let expected = [1.0, 1.0, 0.0, 1.0, 1.0, 1.0];
+        assert!(
+            (0..6).all(|k| (step[k] - expected[k]).abs() < 1e-9),
+            "{step:?}"
+        );
+        // A fixed rotation (zero rows) moves nothing but the translation.
+        let fixed = diagonal(60.0, 0.0);
+        let mut fixed = fixed;
+        fixed[5][5] = 0.0;
+        let step = solve_observed(fixed, fixed, [800.0, 5000.0, 60.0, 0.0, 0.0, 0.0]);
+        let expected = [1.0, 1.0, 1.0, 0.0, 0.0, 0.0];
+        assert!(
+            (0..6).all(|k| (step[k] - expected[k]).abs() < 1e-9),
+            "{step:?}"
+        );
     }
 
     #[test]
@@ -432,9 +623,6 @@ mod tests {
             .collect();
         let lidar = LidarMap::new(far);
         let err = fit_translation(&lidar, &pairs, &known(&poses), camera).unwrap_err();
-        assert!(
-            matches!(err, TranslationError::TooFewPoints { .. }),
-            "{err}"
-        );
+        assert!(matches!(err, MapFitError::TooFewPoints { .. }), "{err}");
     }
 }
