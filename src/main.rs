@@ -108,8 +108,9 @@ enum Command {
         /// the geometry initialisation, on the correspondence term alone, at RATE (default
         /// 0.1) times their rate, so the first extrinsic update comes seconds into the run
         /// instead of after the warm-up; --camera-hand-eye sets it at 30, and then only the
-        /// translations of the cameras it fitted move until the warm-up ends
-        #[arg(long, value_name = "ITER[,RATE]")]
+        /// translations of the cameras it fitted move until the warm-up ends; ",translations"
+        /// moves only the translations whatever the start
+        #[arg(long, value_name = "ITER[,RATE[,translations]]")]
         camera_early_release: Option<String>,
         /// unical: run in ROUNDS rounds of --iterations each, every one with a fresh scene
         /// formed at the extrinsics the previous round reached (a scene formed around the

@@ -108,7 +108,14 @@ fn bad_arguments_fail_with_one_line() {
     assert!(!ok && err.contains("--camera-translation-rate -1"), "{err}");
     let (ok, err) = run(&["--method", "unical", "--camera-translation-final", "2"]);
     assert!(!ok && err.contains("--camera-translation-final 2"), "{err}");
-    for bad in ["x", "30,0", "30,2", "-1"] {
+    for bad in [
+        "x",
+        "30,0",
+        "30,2",
+        "-1",
+        "30,0.1,rotations",
+        "30,0.1,translations,x",
+    ] {
         let option = format!("--camera-early-release={bad}");
         let (ok, err) = run(&["--method", "unical", &option]);
         assert!(

@@ -306,19 +306,20 @@ fn checked(
     }
 }
 
-/// `ITER[,RATE]` of `--camera-early-release`: the iteration and the fraction of the cameras'
-/// rate, in (0, 1] (default 0.1, [`DepthCalibConfig::alignment_release_rate`]).
-fn parse_early_release(s: &str) -> Result<(usize, f32), String> {
+/// `ITER[,RATE[,translations]]` of `--camera-early-release`: the iteration, the fraction of the
+/// cameras' rate, in (0, 1] (default 0.1, [`DepthCalibConfig::alignment_release_rate`]), and
+/// whether only the translations move before the warm-up's end
+/// ([`DepthCalibConfig::alignment_release_rotates`] off).
+fn parse_early_release(s: &str) -> Result<(usize, f32, bool), String> {
     let bad = |why: &str| format!("--camera-early-release '{s}': {why}");
-    let (iter, rate) = match s.split_once(',') {
-        Some((i, r)) => (i, Some(r)),
-        None => (s, None),
-    };
-    let iter = iter
+    let mut parts = s.split(',');
+    let iter = parts
+        .next()
+        .unwrap_or_default()
         .trim()
         .parse::<usize>()
-        .map_err(|_| bad("expected ITER[,RATE] with ITER an iteration"))?;
-    let rate = match rate {
+        .map_err(|_| bad("expected ITER[,RATE[,translations]] with ITER an iteration"))?;
+    let rate = match parts.next() {
         None => DepthCalibConfig::default().alignment_release_rate,
         Some(r) => r
             .trim()
@@ -327,7 +328,15 @@ fn parse_early_release(s: &str) -> Result<(usize, f32), String> {
             .filter(|r| r.is_finite() && *r > 0.0 && *r <= 1.0)
             .ok_or_else(|| bad("RATE must be a fraction in (0, 1]"))?,
     };
-    Ok((iter, rate))
+    let translations_only = match parts.next().map(str::trim) {
+        None => false,
+        Some("translations") => true,
+        Some(other) => return Err(bad(&format!("'{other}': expected 'translations'"))),
+    };
+    if parts.next().is_some() {
+        return Err(bad("expected at most ITER,RATE,translations"));
+    }
+    Ok((iter, rate, translations_only))
 }
 
 /// Parse `--coarse-to-fine LEVELS,FRACTION` or `off` ([`CoarseToFine::parse_setting`]).
@@ -460,9 +469,15 @@ pub fn calibrate(
                     .unwrap_or(preset.camera_translation_rate),
                 camera_translation_final_fraction: camera_translation_final
                     .or(preset.camera_translation_final_fraction),
-                alignment_release: early_release.map(|(i, _)| i).or(preset.alignment_release),
+                alignment_release: early_release
+                    .map(|(i, _, _)| i)
+                    .or(preset.alignment_release),
                 alignment_release_rate: early_release
-                    .map_or(preset.alignment_release_rate, |(_, r)| r),
+                    .map_or(preset.alignment_release_rate, |(_, r, _)| r),
+                alignment_release_rotates: match early_release {
+                    Some((_, _, true)) => false,
+                    _ => preset.alignment_release_rotates,
+                },
                 coarse_to_fine: match args.coarse_to_fine.as_deref() {
                     Some(s) => parse_coarse_to_fine(s)?,
                     None => preset.coarse_to_fine,
@@ -728,6 +743,21 @@ mod tests {
         assert!(parse_segment("4..1", 0).unwrap_err().contains("after"));
         assert!(parse_segment("a..1", 0).unwrap_err().contains("'a'"));
         assert!(parse_segment("3", 0).unwrap_err().contains("START..END"));
+    }
+
+    #[test]
+    fn an_early_release_parses_its_iteration_rate_and_what_moves() {
+        let rate = DepthCalibConfig::default().alignment_release_rate;
+        assert_eq!(parse_early_release("30"), Ok((30, rate, false)));
+        assert_eq!(parse_early_release("30,0.2"), Ok((30, 0.2, false)));
+        assert_eq!(
+            parse_early_release("30, 0.05, translations"),
+            Ok((30, 0.05, true))
+        );
+        for bad in ["", "x", "30,0", "30,0.1,rotations", "30,0.1,translations,1"] {
+            let err = parse_early_release(bad).unwrap_err();
+            assert!(err.contains(&format!("'{bad}'")), "{err}");
+        }
     }
 
     #[test]
