@@ -22,7 +22,7 @@
 //! worth, rotations counted in metres at 5 m) stays where it started.
 //!
 //! What the pose fit is worth (BENCHMARKS.md): side cameras of the simulator's figure-8 drive
-//! come to the same pose from every start up to 2° / 20 cm, 0.14–0.25° and ≤ 3.4 cm from the
+//! come to the same pose from every start up to 2° / 20 cm, 0.14–0.25° and ≤ 3.6 cm from the
 //! truth; the front and back cameras, whose matches have little parallax, do not; on PandaSet's
 //! straight drive (16 images per camera) it is not accurate enough to start UniCal from.
 
@@ -203,7 +203,8 @@ pub fn fit_pose(
 
 /// A rotation's unknowns are scaled by this lever (m), so that each of the six counts, as a
 /// translation does, in metres a point moves: a camera turned by `ω` moves a point 5 m away (a
-/// typical depth of the triangulated points) by about `5 ω`. [`MIN_INFORMATION`] then means the same for all six.
+/// typical depth of the triangulated points) by about `5 ω`. [`MIN_INFORMATION`] then means the
+/// same for all six.
 const LEVER_M: f64 = 5.0;
 
 /// Names of the six unknowns: translations along the vehicle's axes, then rotations about them.
