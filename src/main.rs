@@ -139,6 +139,11 @@ enum Command {
         /// (BENCHMARKS.md)
         #[arg(long)]
         camera_rays_below_lidar_top: bool,
+        /// unical with cameras: solution remapping: each camera step keeps only the directions
+        /// of its pose that the correspondence term observes at least RATIO times as well as
+        /// its best one (e.g. 0.02); the rest stay at the initial guess (BENCHMARKS.md)
+        #[arg(long, value_name = "RATIO")]
+        camera_hold_unobserved: Option<f64>,
         /// unical: drop LiDAR returns that other sweeps saw through (moving traffic), and mask
         /// the pixels near them and the vehicle's own body in the images (BENCHMARKS.md,
         /// "Moving traffic")
@@ -318,6 +323,7 @@ fn run() -> Result<()> {
             shared_camera_translation,
             grouped_camera_translation,
             camera_rays_below_lidar_top,
+            camera_hold_unobserved,
             drop_moving,
             camera_time_offset_ms,
             perturb_deg,
@@ -349,6 +355,7 @@ fn run() -> Result<()> {
                 shared_camera_translation,
                 grouped_camera_translation,
                 camera_rays_below_lidar_top,
+                camera_hold_unobserved,
                 drop_moving,
                 camera_time_offset_ms,
                 perturb: (perturb_deg, perturb_cm),

@@ -123,6 +123,14 @@ fn bad_arguments_fail_with_one_line() {
             "{err}"
         );
     }
+    for bad in ["0", "1", "-0.5", "nan"] {
+        let option = format!("--camera-hold-unobserved={bad}");
+        let (ok, err) = run(&["--method", "unical", &option]);
+        assert!(
+            !ok && err.contains("--camera-hold-unobserved") && err.contains("(0, 1)"),
+            "{err}"
+        );
+    }
     let (ok, err) = run(&["--method", "unical", "--rounds", "0"]);
     assert!(!ok && err.contains("--rounds 0"), "{err}");
     // A valid run with an unwritable output fails before calibrating, naming the path.

@@ -91,6 +91,9 @@ pub struct CalibrateArgs {
     /// unical with cameras: camera rays only up to the LiDARs' highest beam
     /// ([`DepthCalibConfig::camera_rays_below_lidar_top`]).
     pub camera_rays_below_lidar_top: bool,
+    /// unical with cameras: hold the directions the correspondence term hardly observes
+    /// ([`DepthCalibConfig::camera_hold_unobserved`]); in (0, 1).
+    pub camera_hold_unobserved: Option<f64>,
     /// unical: drop moving traffic and mask the vehicle's own body
     /// ([`DepthCalibConfig::transient_returns`], [`DepthCalibConfig::mask_own_vehicle`]).
     pub drop_moving: bool,
@@ -438,6 +441,13 @@ pub fn calibrate(
                 "a fraction in (0, 1]",
                 |f| f > 0.0 && f <= 1.0,
             )?;
+            let camera_hold_unobserved = checked(
+                args.camera_hold_unobserved.map(|r| r as f32),
+                "--camera-hold-unobserved",
+                "a fraction in (0, 1)",
+                |r| r > 0.0 && r < 1.0,
+            )?
+            .map(f64::from);
             let early_release = args
                 .camera_early_release
                 .as_deref()
@@ -486,6 +496,7 @@ pub fn calibrate(
                 shared_camera_translation: args.shared_camera_translation,
                 grouped_camera_translation: args.grouped_camera_translation,
                 camera_rays_below_lidar_top: args.camera_rays_below_lidar_top,
+                camera_hold_unobserved,
                 transient_returns: args
                     .drop_moving
                     .then(crate::unical::transient::TransientSettings::default),

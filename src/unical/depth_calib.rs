@@ -28,6 +28,7 @@ use super::field::{FieldConfig, SceneField};
 use super::hash_grid::{GradAccumulator, HashGridConfig, Scaled};
 use super::intensity::{IntensityDecoder, IntensityMap, normaliser};
 use super::lidar_terms::{DepthRay, LidarModel, LidarWeights, lidar_step};
+use super::observability::PoseInformation;
 use super::occupancy::OccupancyGrid;
 use super::pose::PoseParams;
 use super::pose_newton::{NewtonConfig, NewtonState, PoseUpdate, TangentSystem, robust_system};
@@ -197,6 +198,11 @@ pub struct DepthCalibConfig {
     /// ([`super::coverage`]): above it the scene has no geometry, so what the cameras see
     /// there can only be painted on the sky, which pulls their pitch.
     pub camera_rays_below_lidar_top: bool,
+    /// Solution remapping ([`super::observability`]): each camera step keeps only the
+    /// directions the correspondence term observes at least this fraction as well as the
+    /// camera's best observed one, so a direction the drive hardly sees stays where the initial
+    /// guess put it. `None`: every direction moves (the paper).
+    pub camera_hold_unobserved: Option<f64>,
 }
 
 /// The iteration of the geometry initialisation from which cameras fitted by the hand-eye
@@ -291,6 +297,7 @@ impl Default for DepthCalibConfig {
             // 0.41–0.49° off the reference but their translations from 9.6 to 11.6–13.2 cm
             // (BENCHMARKS.md, "… the cameras' pitch against the LiDARs' highest beam").
             camera_rays_below_lidar_top: false,
+            camera_hold_unobserved: None,
         }
     }
 }
@@ -520,6 +527,8 @@ struct CameraStage {
     /// Camera rays above this vehicle-frame elevation are not drawn
     /// ([`DepthCalibConfig::camera_rays_below_lidar_top`]).
     ray_top_elevation_rad: Option<f64>,
+    /// What the correspondence term observes of each camera's pose, with forgetting.
+    information: Vec<PoseInformation>,
 }
 
 /// The background field and its optimisers.
@@ -714,6 +723,25 @@ fn pose_step(
     }
 }
 
+/// Reprojections a camera's information must hold before its poorly observed directions are
+/// held ([`DepthCalibConfig::camera_hold_unobserved`]).
+const INFORMATION_MIN_COUNT: f64 = 200.0;
+/// Per step, what the information keeps of what it held (about 30 steps' memory).
+const INFORMATION_FORGETTING: f64 = 0.97;
+
+/// Undo the part of the step from `before` to `pose` along the directions the correspondence
+/// term observes less than `ratio` times its best ([`super::observability`]).
+fn hold_unobserved(pose: &mut PoseParams, before: &PoseParams, info: &PoseInformation, ratio: f64) {
+    let (r0, r1) = (before.rotation(), pose.rotation());
+    let omega =
+        crate::geometry::so3::log(glam::DQuat::from_mat3(&(r1 * r0.transpose())).normalize());
+    let v = pose.translation_m - before.translation_m;
+    let (omega, v) = info.observed_step((omega, v), ratio, INFORMATION_MIN_COUNT);
+    let rotation = crate::geometry::so3::exp_mat(omega) * r0;
+    pose.r6 = crate::geometry::rot6d::from_matrix(rotation);
+    pose.translation_m = before.translation_m + v;
+}
+
 /// Keep `pose`'s rotation within `bound_rad` of `start`: a rotation further off is turned back
 /// along the geodesic to the bound (its translation is left as it is).
 fn bound_rotation(pose: &mut PoseParams, start: glam::DQuat, bound_rad: f64) {
@@ -744,6 +772,7 @@ impl CameraStage {
             .filter(|&k| !frozen.get(k).copied().unwrap_or(true))
             .collect();
         for &k in &free {
+            let before = self.poses[k];
             pose_step(
                 &mut self.pose_opt[k],
                 &mut self.poses[k],
@@ -752,6 +781,11 @@ impl CameraStage {
                 translation_scale,
                 config.grouped_camera_translation,
             );
+            if let (Some(ratio), Some(info)) =
+                (config.camera_hold_unobserved, self.information.get(k))
+            {
+                hold_unobserved(&mut self.poses[k], &before, info, ratio);
+            }
             let name = &self.cameras[k].name;
             if let Some((_, bound_deg)) = config
                 .camera_rotation_bounds_deg
@@ -1025,6 +1059,7 @@ impl DepthCalibration {
                 .collect(),
             shared_translation_opt: DenseAdam::new(3, AdamConfig::STANDARD),
             exposure: vec![ExposureMap::default(); cameras.len()],
+            information: vec![PoseInformation::default(); cameras.len()],
             exposure_opt: cameras
                 .iter()
                 .map(|_| DenseAdam::new(6, AdamConfig::STANDARD))
@@ -1328,7 +1363,10 @@ impl DepthCalibration {
                     .collect()
             })
             .collect();
+        let mut information = vec![PoseInformation::default(); cameras];
         for (a, b, step) in steps.into_iter().flatten() {
+            information[a].merge(&step.info_a);
+            information[b].merge(&step.info_b);
             let (ga, gb) = (
                 pose_grad_flat(&step.pose_a, w),
                 pose_grad_flat(&step.pose_b, w),
@@ -1339,6 +1377,12 @@ impl DepthCalibration {
             out.beta_grad += step.beta_grad * w;
             out.loss += step.loss / batch_count;
             out.kept += step.kept;
+        }
+        if let Some(stage) = self.camera.as_mut() {
+            for (held, new) in stage.information.iter_mut().zip(&information) {
+                held.decay(INFORMATION_FORGETTING);
+                held.merge(new);
+            }
         }
         out
     }
@@ -2223,6 +2267,52 @@ mod tests {
         );
         assert!(offset.normalize_or_zero().dot(axis) > 1.0 - 1e-9);
         assert_eq!(got.translation, DVec3::X);
+    }
+
+    /// A camera looking at a far wall: a step along the turn-and-shift it cannot tell apart is
+    /// undone, the step's observed part is applied, and a pose with nothing held moves freely.
+    #[test]
+    fn holding_unobserved_directions_undoes_only_their_part_of_a_step() {
+        use crate::geometry::so3;
+        // The camera looks along vehicle +x (optical z → vehicle x).
+        let rotation = glam::DMat3::from_cols(
+            DVec3::new(0.0, -1.0, 0.0),
+            DVec3::new(0.0, 0.0, -1.0),
+            DVec3::X,
+        );
+        let camera = Rigid::new(glam::DQuat::from_mat3(&rotation), DVec3::new(1.0, 0.0, 1.5));
+        let mut info = PoseInformation::default();
+        for i in -10..=10 {
+            for j in -10..=10 {
+                let offset = DVec3::new(40.0, 0.4 * i as f64, 0.4 * j as f64);
+                let q = rotation.transpose() * offset;
+                let f = 1000.0 / q.z;
+                let jac = [[f, 0.0, -f * q.x / q.z], [0.0, f, -f * q.y / q.z]];
+                info.add_reprojection(jac, rotation, offset);
+            }
+        }
+        let before = PoseParams::from_rigid(camera);
+        // Shift 10 cm sideways (+y) while turning so the wall's centre stays put.
+        let turn = so3::exp(DVec3::new(0.0, 0.0, -0.1 / 40.0));
+        let moved = Rigid::new(turn * camera.rotation, camera.translation + DVec3::Y * 0.1);
+        let mut p = PoseParams::from_rigid(moved);
+        hold_unobserved(&mut p, &before, &info, 0.05);
+        let got = p.to_rigid();
+        assert!(
+            (got.translation - camera.translation).length() < 0.02,
+            "{got:?}"
+        );
+        assert!(so3::log(camera.rotation.inverse() * got.rotation).length() < 0.02 / 40.0);
+        // A pan alone is observed: most of it is kept.
+        let pan = so3::exp(DVec3::new(0.0, 0.0, 0.01));
+        let mut p = PoseParams::from_rigid(Rigid::new(pan * camera.rotation, camera.translation));
+        hold_unobserved(&mut p, &before, &info, 0.05);
+        let kept = so3::log(p.to_rigid().rotation * camera.rotation.inverse());
+        assert!(kept.z > 0.009, "{kept:?}");
+        // Nothing held yet: the step passes whole.
+        let mut p = PoseParams::from_rigid(moved);
+        hold_unobserved(&mut p, &before, &PoseInformation::default(), 0.05);
+        assert!((p.to_rigid().translation - moved.translation).length() < 1e-12);
     }
 
     #[test]

@@ -41,6 +41,7 @@ pub mod intensity;
 pub mod lidar_terms;
 pub mod masks;
 pub mod mlp;
+pub mod observability;
 pub mod occupancy;
 pub mod pose;
 pub mod pose_newton;

@@ -21,6 +21,7 @@ use super::composite::{Composite, Opacity, Upstream, composite, composite_backwa
 use super::field::{FieldSample, SceneField};
 use super::hash_grid::GradSink;
 use super::mlp::MlpGrad;
+use super::observability::PoseInformation;
 use super::pose::{PoseGrad, PoseParams, rot6d_backward};
 use crate::geometry::camera::CameraIntrinsics;
 use crate::geometry::{Rigid, so3};
@@ -111,6 +112,10 @@ pub struct AlignStep {
     pub beta_grad: f64,
     pub pose_a: PoseGrad,
     pub pose_b: PoseGrad,
+    /// What the kept reprojections into each camera observe of its pose
+    /// ([`super::observability`]).
+    pub info_a: PoseInformation,
+    pub info_b: PoseInformation,
 }
 
 /// A rendered ray: its samples, composite and surface point.
@@ -222,6 +227,8 @@ pub fn surface_alignment_step(
     let w = 0.5 / kept.len() as f64;
     for (ray_a, ray_b, ra, rb, ab, ba) in &kept {
         out.loss += w * (ab.error_px + ba.error_px);
+        add_information(&mut out.info_b, cam_b, ab);
+        add_information(&mut out.info_a, cam_a, ba);
         // e_ab: a's surface into b; e_ba: b's surface into a.
         let (ga, gb) = backward_direction(
             field,
@@ -252,6 +259,17 @@ pub fn surface_alignment_step(
     }
     out.kept = kept.len();
     out
+}
+
+/// One reprojection's information about the pose of the camera it lands in.
+fn add_information(info: &mut PoseInformation, to: AlignCamera, reprojection: &Reprojection) {
+    let scale = to.pixel_scale;
+    let jacobian = reprojection.jacobian.map(|row| row.map(|x| x * scale));
+    info.add_reprojection(
+        jacobian,
+        to.pose.rotation(),
+        reprojection.in_vehicle - to.pose.translation_m,
+    );
 }
 
 /// Backward of `weight · e` for the reprojection of `from`'s surface point into `to`:
