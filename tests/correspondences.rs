@@ -207,6 +207,7 @@ fn the_alignment_term_alone_moves_the_cameras() {
             alignment_settings: AlignSettings {
                 max_error_px: f64::INFINITY,
                 min_accumulation: 0.0,
+                information: false,
             },
             ..DepthCalibConfig::default()
         };
@@ -260,6 +261,7 @@ fn an_alignment_release_moves_only_the_cameras_during_the_geometry_initialisatio
             alignment_settings: AlignSettings {
                 max_error_px: f64::INFINITY,
                 min_accumulation: 0.0,
+                information: false,
             },
             ..DepthCalibConfig::default()
         };

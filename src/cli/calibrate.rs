@@ -297,14 +297,16 @@ fn selected_cameras(args: &CalibrateArgs, rig: &Rig) -> Vec<String> {
 
 /// An optional numeric option, checked: finite and `ok`, else an error naming the option and
 /// what it expects.
-fn checked(
-    value: Option<f32>,
+fn checked<T: Copy + std::fmt::Display + Into<f64>>(
+    value: Option<T>,
     option: &str,
     expected: &str,
-    ok: impl Fn(f32) -> bool,
-) -> Result<Option<f32>, String> {
+    ok: impl Fn(T) -> bool,
+) -> Result<Option<T>, String> {
     match value {
-        Some(v) if !(v.is_finite() && ok(v)) => Err(format!("{option} {v}: expected {expected}")),
+        Some(v) if !(v.into().is_finite() && ok(v)) => {
+            Err(format!("{option} {v}: expected {expected}"))
+        }
         v => Ok(v),
     }
 }
@@ -442,12 +444,11 @@ pub fn calibrate(
                 |f| f > 0.0 && f <= 1.0,
             )?;
             let camera_hold_unobserved = checked(
-                args.camera_hold_unobserved.map(|r| r as f32),
+                args.camera_hold_unobserved,
                 "--camera-hold-unobserved",
                 "a fraction in (0, 1)",
                 |r| r > 0.0 && r < 1.0,
-            )?
-            .map(f64::from);
+            )?;
             let early_release = args
                 .camera_early_release
                 .as_deref()

@@ -1319,7 +1319,11 @@ impl DepthCalibration {
         };
         let opacity = self.opacity();
         let w = self.config.alignment_weight as f64 / cameras.max(1) as f64;
-        let settings = self.config.alignment_settings;
+        let track_information = self.config.camera_hold_unobserved.is_some();
+        let settings = AlignSettings {
+            information: track_information,
+            ..self.config.alignment_settings
+        };
         let alignment = self.config.alignment;
         let batch_count = batches.len().max(1) as f64;
         let field = &self.field;
@@ -1378,7 +1382,7 @@ impl DepthCalibration {
             out.loss += step.loss / batch_count;
             out.kept += step.kept;
         }
-        if let Some(stage) = self.camera.as_mut() {
+        if let Some(stage) = self.camera.as_mut().filter(|_| track_information) {
             for (held, new) in stage.information.iter_mut().zip(&information) {
                 held.decay(INFORMATION_FORGETTING);
                 held.merge(new);
@@ -2274,23 +2278,10 @@ mod tests {
     #[test]
     fn holding_unobserved_directions_undoes_only_their_part_of_a_step() {
         use crate::geometry::so3;
-        // The camera looks along vehicle +x (optical z → vehicle x).
-        let rotation = glam::DMat3::from_cols(
-            DVec3::new(0.0, -1.0, 0.0),
-            DVec3::new(0.0, 0.0, -1.0),
-            DVec3::X,
-        );
+        use crate::unical::observability::fixtures::{camera_rotation, information_of, wall};
+        let rotation = camera_rotation();
         let camera = Rigid::new(glam::DQuat::from_mat3(&rotation), DVec3::new(1.0, 0.0, 1.5));
-        let mut info = PoseInformation::default();
-        for i in -10..=10 {
-            for j in -10..=10 {
-                let offset = DVec3::new(40.0, 0.4 * i as f64, 0.4 * j as f64);
-                let q = rotation.transpose() * offset;
-                let f = 1000.0 / q.z;
-                let jac = [[f, 0.0, -f * q.x / q.z], [0.0, f, -f * q.y / q.z]];
-                info.add_reprojection(jac, rotation, offset);
-            }
-        }
+        let info = information_of(&wall(40.0, 4.0, 10));
         let before = PoseParams::from_rigid(camera);
         // Shift 10 cm sideways (+y) while turning so the wall's centre stays put.
         let turn = so3::exp(DVec3::new(0.0, 0.0, -0.1 / 40.0));

@@ -126,24 +126,16 @@ impl PoseInformation {
             DVec3::new(kept[3], kept[4], kept[5]),
         )
     }
-
-    /// How many of the six directions are held at `ratio` (0 before `min_count`).
-    pub fn held(&self, ratio: f64, min_count: f64) -> usize {
-        if self.count < min_count {
-            return 0;
-        }
-        let directions = self.directions();
-        let largest = directions.last().map_or(0.0, |d| d.0);
-        directions.iter().filter(|d| d.0 < ratio * largest).count()
-    }
 }
 
+/// Scenes with a known information, shared by this module's tests and the hold's in
+/// `depth_calib`.
 #[cfg(test)]
-mod tests {
+pub(crate) mod fixtures {
     use super::*;
 
-    /// A camera looking along vehicle +x (optical z → vehicle x), unit focal length.
-    fn camera_rotation() -> DMat3 {
+    /// A camera looking along vehicle +x (optical z → vehicle x).
+    pub fn camera_rotation() -> DMat3 {
         DMat3::from_cols(
             DVec3::new(0.0, -1.0, 0.0),
             DVec3::new(0.0, 0.0, -1.0),
@@ -151,7 +143,8 @@ mod tests {
         )
     }
 
-    fn pinhole_jacobian(q: DVec3, focal_px: f64) -> [[f64; 3]; 2] {
+    /// `∂π/∂q` of a pinhole with focal length `focal_px` at the camera-frame point `q`.
+    pub fn pinhole_jacobian(q: DVec3, focal_px: f64) -> [[f64; 3]; 2] {
         let z = q.z;
         [
             [focal_px / z, 0.0, -focal_px * q.x / (z * z)],
@@ -159,31 +152,50 @@ mod tests {
         ]
     }
 
-    fn information_of(points: &[DVec3]) -> PoseInformation {
+    /// The information of [`camera_rotation`]'s camera (focal length 1000 px) from points at
+    /// these offsets from its centre, in the vehicle frame.
+    pub fn information_of(offsets: &[DVec3]) -> PoseInformation {
         let rotation = camera_rotation();
         let mut info = PoseInformation::default();
-        for p in points {
+        for p in offsets {
             let q = rotation.transpose() * *p;
             info.add_reprojection(pinhole_jacobian(q, 1000.0), rotation, *p);
         }
         info
     }
 
-    /// Points on a wall `depth_m` ahead, spread over ±`half_m` sideways and up.
-    fn wall(depth_m: f64, half_m: f64) -> Vec<DVec3> {
+    /// Points on a wall `depth_m` ahead, spread over ±`half_m` sideways and up on a
+    /// `(2n + 1)²` grid.
+    pub fn wall(depth_m: f64, half_m: f64, n: i32) -> Vec<DVec3> {
         let mut out = Vec::new();
-        for i in -4..=4 {
-            for j in -4..=4 {
-                let (y, z) = (half_m * i as f64 / 4.0, half_m * j as f64 / 4.0);
+        for i in -n..=n {
+            for j in -n..=n {
+                let (y, z) = (half_m * i as f64 / n as f64, half_m * j as f64 / n as f64);
                 out.push(DVec3::new(depth_m, y, z));
             }
         }
         out
     }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::fixtures::*;
+    use super::*;
+
+    /// How many of the six directions are held at `ratio` (0 before `min_count`).
+    fn held(info: &PoseInformation, ratio: f64, min_count: f64) -> usize {
+        if info.count < min_count {
+            return 0;
+        }
+        let directions = info.directions();
+        let largest = directions.last().map_or(0.0, |d| d.0);
+        directions.iter().filter(|d| d.0 < ratio * largest).count()
+    }
 
     #[test]
     fn a_far_wall_leaves_the_turn_and_the_sideways_shift_one_direction() {
-        let info = information_of(&wall(40.0, 4.0));
+        let info = information_of(&wall(40.0, 4.0, 4));
         // A sideways shift v and the turn about the vertical that moves the wall's centre as
         // much (ω = v / depth) nearly cancel: that step is dropped, its opposite kept.
         let v = DVec3::new(0.0, 0.1, 0.0);
@@ -203,16 +215,16 @@ mod tests {
         assert!(once != (omega * 3.0, v));
         let twice = info.observed_step(once, 0.05, 10.0);
         assert!((twice.0 - once.0).length() < 1e-12 && (twice.1 - once.1).length() < 1e-12);
-        assert!(info.held(0.05, 10.0) >= 1);
+        assert!(held(&info, 0.05, 10.0) >= 1);
     }
 
     #[test]
     fn a_deep_scene_observes_every_direction_and_steps_pass_unchanged() {
-        let mut points = wall(5.0, 3.0);
-        points.extend(wall(12.0, 6.0));
-        points.extend(wall(30.0, 12.0));
+        let mut points = wall(5.0, 3.0, 4);
+        points.extend(wall(12.0, 6.0, 4));
+        points.extend(wall(30.0, 12.0, 4));
         let info = information_of(&points);
-        assert_eq!(info.held(1e-3, 10.0), 0);
+        assert_eq!(held(&info, 1e-3, 10.0), 0);
         let step = (
             DVec3::new(0.001, -0.002, 0.0005),
             DVec3::new(0.03, -0.01, 0.02),
@@ -223,11 +235,11 @@ mod tests {
 
     #[test]
     fn too_few_reprojections_hold_nothing_and_forgetting_keeps_the_directions() {
-        let mut info = information_of(&wall(40.0, 4.0)[..5]);
+        let mut info = information_of(&wall(40.0, 4.0, 4)[..5]);
         let step = (DVec3::new(0.0, 0.0, 0.01), DVec3::new(0.0, 0.1, 0.0));
         assert_eq!(info.observed_step(step, 0.05, 10.0), step);
-        assert_eq!(info.held(0.05, 10.0), 0);
-        let full = information_of(&wall(40.0, 4.0));
+        assert_eq!(held(&info, 0.05, 10.0), 0);
+        let full = information_of(&wall(40.0, 4.0, 4));
         let before = full.directions();
         let mut scaled = full.clone();
         scaled.decay(0.5);

@@ -65,6 +65,9 @@ pub struct AlignSettings {
     pub max_error_px: f64,
     /// Rays with less accumulated opacity are left out.
     pub min_accumulation: f32,
+    /// Whether [`AlignStep::info_a`] and [`AlignStep::info_b`] are filled (only the hold of
+    /// poorly observed directions reads them).
+    pub information: bool,
 }
 
 impl AlignmentLoss {
@@ -98,6 +101,7 @@ impl Default for AlignSettings {
         Self {
             max_error_px: 50.0,
             min_accumulation: 0.5,
+            information: false,
         }
     }
 }
@@ -113,7 +117,7 @@ pub struct AlignStep {
     pub pose_a: PoseGrad,
     pub pose_b: PoseGrad,
     /// What the kept reprojections into each camera observe of its pose
-    /// ([`super::observability`]).
+    /// ([`super::observability`]); empty unless [`AlignSettings::information`] is set.
     pub info_a: PoseInformation,
     pub info_b: PoseInformation,
 }
@@ -227,8 +231,10 @@ pub fn surface_alignment_step(
     let w = 0.5 / kept.len() as f64;
     for (ray_a, ray_b, ra, rb, ab, ba) in &kept {
         out.loss += w * (ab.error_px + ba.error_px);
-        add_information(&mut out.info_b, cam_b, ab);
-        add_information(&mut out.info_a, cam_a, ba);
+        if settings.information {
+            add_information(&mut out.info_b, cam_b, ab);
+            add_information(&mut out.info_a, cam_a, ba);
+        }
         // e_ab: a's surface into b; e_ba: b's surface into a.
         let (ga, gb) = backward_direction(
             field,
@@ -509,7 +515,47 @@ mod tests {
         AlignSettings {
             max_error_px: f64::INFINITY,
             min_accumulation: 0.0,
+            information: false,
         }
+    }
+
+    /// The information is gathered only when asked, one reprojection per kept match into
+    /// each camera, and asking changes nothing else of the step.
+    #[test]
+    fn information_is_gathered_only_when_asked() {
+        let (field, pose_a, pose_b, k, matches) = setup();
+        let cam = |pose| AlignCamera {
+            pose,
+            intrinsics: &k,
+            pixel_scale: 6.0,
+        };
+        let opacity = Opacity {
+            model: OpacityModel::PerSample,
+            beta: 0.5,
+        };
+        let run = |information: bool| {
+            surface_alignment_step(
+                &field,
+                opacity,
+                (cam(&pose_a), cam(&pose_b)),
+                &matches,
+                &AlignSettings {
+                    information,
+                    ..settings()
+                },
+                &mut SparseGrad::default(),
+            )
+        };
+        let (off, on) = (run(false), run(true));
+        assert_eq!(off.info_a, PoseInformation::default());
+        assert_eq!(off.info_b, PoseInformation::default());
+        assert_eq!(on.kept, matches.len());
+        assert_eq!(on.info_a.count, on.kept as f64);
+        assert_eq!(on.info_b.count, on.kept as f64);
+        let strongest = |info: &PoseInformation| info.directions()[5].0;
+        assert!(strongest(&on.info_a) > 0.0 && strongest(&on.info_b) > 0.0);
+        assert_eq!((on.loss, on.kept), (off.loss, off.kept));
+        assert_eq!((on.pose_a.r6, on.pose_b.r6), (off.pose_a.r6, off.pose_b.r6));
     }
 
     #[test]
@@ -633,6 +679,7 @@ mod tests {
         let strict = AlignSettings {
             max_error_px: 1e-3,
             min_accumulation: 0.0,
+            information: false,
         };
         let none = surface_alignment_step(
             &field,
@@ -649,6 +696,7 @@ mod tests {
         let opaque_only = AlignSettings {
             max_error_px: f64::INFINITY,
             min_accumulation: 1.01,
+            information: false,
         };
         let none = surface_alignment_step(
             &field,
