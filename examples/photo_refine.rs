@@ -5,7 +5,8 @@
 //! the errors against the reference before and after.
 //! `cargo run --release --no-default-features --example photo_refine -- LOG CALIB REFERENCE [OUT]`
 //! Environment: `RIGCAL_PHOTO_IMAGES` (16), `RIGCAL_PHOTO_WIDTH` (480), `RIGCAL_PHOTO_ROTATE_ONLY`,
-//! `RIGCAL_PHOTO_FROM_REFERENCE` (start at the reference instead).
+//! `RIGCAL_PHOTO_FROM_REFERENCE` (start at the reference instead), `RIGCAL_PHOTO_SCALE_SWEEP`
+//! (the cost at the reference with the focal length scaled, and moved along the optical axis).
 
 use rigcal::calib::CalibrationFile;
 use rigcal::calib::dataset_json::load_reference;
@@ -134,6 +135,45 @@ fn main() {
                 line += &format!(" {ms:+}:{:.5}", shifted.cost(truth_here));
             }
             println!("{camera} time offset (ms) at the reference:{line}");
+            continue;
+        }
+        if std::env::var("RIGCAL_PHOTO_SCALE_SWEEP").is_ok() {
+            // The focal length scaled (an intrinsic error) and the camera moved along its
+            // own optical axis, both from the reference: the two look alike to one image.
+            let mut line = String::new();
+            for k in -6..=6 {
+                let s = 1.0 + k as f64 * 0.0025;
+                let mut scaled = problem.clone();
+                scaled.intrinsics.fx *= s;
+                scaled.intrinsics.fy *= s;
+                line += &format!(" {s:.4}:{:.5}", scaled.cost(truth_here));
+            }
+            println!("{camera} focal scale at the reference:{line}");
+            let axis = truth_here.rotation * glam::DVec3::Z;
+            let mut line = String::new();
+            for k in -6..=6 {
+                let d = k as f64 * 0.05;
+                let pose = Rigid::new(truth_here.rotation, truth_here.translation + axis * d);
+                line += &format!(" {:+.0}:{:.5}", d * 100.0, problem.cost(pose));
+            }
+            println!("{camera} along its optical axis (cm) from the reference:{line}");
+            if std::env::var("RIGCAL_PHOTO_SCALE_GRID").is_ok() {
+                // Both at once: the best axial shift at each focal scale.
+                for k in -8..=2 {
+                    let s = 1.0 + k as f64 * 0.0025;
+                    let mut scaled = problem.clone();
+                    scaled.intrinsics.fx *= s;
+                    scaled.intrinsics.fy *= s;
+                    let mut line = String::new();
+                    for j in -6..=4 {
+                        let d = j as f64 * 0.05;
+                        let pose =
+                            Rigid::new(truth_here.rotation, truth_here.translation + axis * d);
+                        line += &format!(" {:+.0}:{:.5}", d * 100.0, scaled.cost(pose));
+                    }
+                    println!("  scale {s:.4}:{line}");
+                }
+            }
             continue;
         }
         if let Ok(axis) = std::env::var("RIGCAL_PHOTO_SWEEP") {

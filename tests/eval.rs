@@ -209,7 +209,13 @@ fn a_turned_camera_agrees_less_with_the_lidar_map_photometrically() {
         let d = m.reference.unwrap();
         assert!((-60.0..=60.0).contains(&d) && d % 10.0 == 0.0, "{m:?}");
     }
-    assert!(report.to_markdown().contains("photometric inconsistency"));
+    assert_eq!(report.photo_focal_scale.len(), 6);
+    for m in &report.photo_focal_scale {
+        let s = m.reference.unwrap();
+        assert!((0.98..=1.02).contains(&s), "{m:?}");
+    }
+    let text = report.to_markdown();
+    assert!(text.contains("photometric inconsistency") && text.contains("focal-length scale"));
 }
 
 #[test]

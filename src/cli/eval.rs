@@ -13,7 +13,9 @@
 //! over the images that see it, ×1000) and the delay of the images (ms, −60 to +60 in 10 ms
 //! steps) at which that consistency is best: a delay far from 0 says the images are stamped
 //! late or early, or (the same thing while the vehicle drives at one speed) that the camera
-//! sits off along the drive.
+//! sits off along the drive; and the focal-length scale (0.98 to 1.02) at which it is best: a
+//! scale away from 1 says the intrinsics' focal length is off, or (the same thing to one
+//! camera's images) that the camera sits off along its optical axis.
 
 use std::path::PathBuf;
 
@@ -73,6 +75,9 @@ pub struct EvalReport {
     pub photo_inconsistency: Vec<PairMetric>,
     /// Camera × LiDAR map: the image delay (ms) at which the images agree best.
     pub photo_delay_ms: Vec<PairMetric>,
+    /// Camera × LiDAR map: the focal-length scale at which the images agree best
+    /// ([`PhotoProblem::best_focal_scale`]).
+    pub photo_focal_scale: Vec<PairMetric>,
 }
 
 /// Run the evaluation; `progress(done, total)` after each data metric.
@@ -124,6 +129,7 @@ pub fn evaluate(
         corners_px: Vec::new(),
         photo_inconsistency: Vec::new(),
         photo_delay_ms: Vec::new(),
+        photo_focal_scale: Vec::new(),
     };
     if let Some(log) = &args.log {
         let drive = Drive::open(log).map_err(|e| e.to_string())?;
@@ -223,16 +229,19 @@ fn measure_on_data(
                 Err(e) => Err(e.clone()),
             };
             let (c, r) = (measure(0), measure(1));
-            let split = |v: &Result<(f64, f64), String>| {
-                (v.clone().map(|v| Some(v.0)), v.clone().map(|v| Some(v.1)))
+            let part = |v: &Result<PhotoMetrics, String>, f: fn(&PhotoMetrics) -> Option<f64>| {
+                v.as_ref().map(f).map_err(Clone::clone)
             };
-            let ((c_cost, c_delay), (r_cost, r_delay)) = (split(&c), split(&r));
-            report
-                .photo_inconsistency
-                .push(metric(cam, "LiDAR map", c_cost, r_cost, ""));
-            report
-                .photo_delay_ms
-                .push(metric(cam, "LiDAR map", c_delay, r_delay, ""));
+            for (rows, f) in [
+                (
+                    &mut report.photo_inconsistency,
+                    (|m| Some(m.inconsistency)) as fn(&PhotoMetrics) -> Option<f64>,
+                ),
+                (&mut report.photo_delay_ms, |m| Some(m.delay_ms)),
+                (&mut report.photo_focal_scale, |m| m.focal_scale),
+            ] {
+                rows.push(metric(cam, "LiDAR map", part(&c, f), part(&r, f), ""));
+            }
             done += 1;
             progress(done, total);
         }
@@ -265,15 +274,25 @@ fn measure_on_data(
 /// Delays tried for [`photo_metrics`] (ms).
 const PHOTO_DELAYS_MS: [i64; 13] = [-60, -50, -40, -30, -20, -10, 0, 10, 20, 30, 40, 50, 60];
 
-/// The photometric inconsistency (×1000) of `camera`'s images over `map` (the LiDAR map of `rig`), and
-/// the image delay (ms) that minimises it.
+/// What [`photo_metrics`] measures of one camera over the LiDAR map.
+struct PhotoMetrics {
+    /// Photometric inconsistency (×1000).
+    inconsistency: f64,
+    /// The image delay (ms) that minimises it.
+    delay_ms: f64,
+    /// The focal-length scale that minimises it ([`PhotoProblem::best_focal_scale`]).
+    focal_scale: Option<f64>,
+}
+
+/// The photometric inconsistency of `camera`'s images over `map` (the LiDAR map of `rig`),
+/// and the image delay and focal-length scale that minimise it.
 fn photo_metrics(
     drive: &Drive,
     rig: &Rig,
     camera: &str,
     map: &[glam::DVec3],
     config: &PhotoConfig,
-) -> Result<(f64, f64), String> {
+) -> Result<PhotoMetrics, String> {
     let problem =
         PhotoProblem::from_drive(drive, rig, camera, map, config).map_err(|e| e.to_string())?;
     let Some(vehicle_from_camera) = rig.sensor(camera).map(|s| s.vehicle_from_sensor) else {
@@ -293,7 +312,11 @@ fn photo_metrics(
             best = (cost, delay_ms as f64);
         }
     }
-    Ok((at * 1000.0, best.1))
+    Ok(PhotoMetrics {
+        inconsistency: at * 1000.0,
+        delay_ms: best.1,
+        focal_scale: problem.best_focal_scale(vehicle_from_camera),
+    })
 }
 
 fn metric(
@@ -374,6 +397,11 @@ impl EvalReport {
                 "ms",
                 &self.photo_delay_ms,
             ),
+            (
+                "Camera focal-length scale at which the images agree best over the LiDAR map (or the camera sits off along its optical axis: 0.99 ≈ 10 cm back at 10 m)",
+                "×",
+                &self.photo_focal_scale,
+            ),
         ] {
             if rows.is_empty() {
                 continue;
@@ -381,7 +409,8 @@ impl EvalReport {
             out += &format!(
                 "\n{title}:\n\n| pair | calibration ({unit}) | reference ({unit}) | note |\n|---|---:|---:|---|\n"
             );
-            let cell = |v: Option<f64>| v.map_or("–".to_string(), |v| format!("{v:.2}"));
+            let digits = if unit == "×" { 4 } else { 2 };
+            let cell = |v: Option<f64>| v.map_or("–".to_string(), |v| format!("{v:.digits$}"));
             for m in rows {
                 out += &format!(
                     "| {} × {} | {} | {} | {} |\n",

@@ -112,6 +112,11 @@ impl PhotoImage {
     }
 }
 
+/// How far [`PhotoProblem::best_focal_scale`] looks from 1 (±2 %).
+pub const FOCAL_SCALE_RANGE: f64 = 0.02;
+/// Its scan's step (0.5 %).
+pub const FOCAL_SCALE_STEP: f64 = 0.005;
+
 /// The photo-consistency problem of one camera.
 #[derive(Clone, Debug)]
 pub struct PhotoProblem {
@@ -364,6 +369,52 @@ impl PhotoProblem {
         Some(out)
     }
 
+    /// The same problem with both focal lengths scaled by `scale` (principal point kept).
+    pub fn with_focal_scale(&self, scale: f64) -> Self {
+        let mut out = self.clone();
+        out.intrinsics.fx *= scale;
+        out.intrinsics.fy *= scale;
+        out
+    }
+
+    /// The focal-length scale, within ±[`FOCAL_SCALE_RANGE`], at which the images agree best
+    /// at `vehicle_from_camera`: scanned in [`FOCAL_SCALE_STEP`] steps, then the vertex of the
+    /// parabola through the best scale and its two neighbours. `None` when no scale has a
+    /// finite cost.
+    ///
+    /// One camera's images tell a scale apart from a move along the optical axis only through
+    /// the spread of depths they see: a scene at depth `d` looks the same with the camera
+    /// `δ` further back or the focal length scaled by about `1 − δ / d`. So a scale away from
+    /// 1 says the intrinsics are off, or the camera sits off along its axis.
+    pub fn best_focal_scale(&self, vehicle_from_camera: Rigid) -> Option<f64> {
+        let n = (FOCAL_SCALE_RANGE / FOCAL_SCALE_STEP).round() as i32;
+        let costs: Vec<(f64, f64)> = (-n..=n)
+            .map(|k| {
+                let scale = 1.0 + k as f64 * FOCAL_SCALE_STEP;
+                (
+                    scale,
+                    self.with_focal_scale(scale).cost(vehicle_from_camera),
+                )
+            })
+            .collect();
+        let (i, &(scale, cost)) = costs
+            .iter()
+            .enumerate()
+            .filter(|(_, c)| c.1.is_finite())
+            .min_by(|a, b| a.1.1.total_cmp(&b.1.1))?;
+        let (Some(left), Some(right)) = (i.checked_sub(1).map(|j| costs[j]), costs.get(i + 1))
+        else {
+            return Some(scale);
+        };
+        // Vertex of the parabola through three equally spaced costs.
+        let curvature = left.1 - 2.0 * cost + right.1;
+        if !(curvature.is_finite() && curvature > 0.0) {
+            return Some(scale);
+        }
+        let offset = 0.5 * (left.1 - right.1) / curvature;
+        Some(scale + offset.clamp(-0.5, 0.5) * FOCAL_SCALE_STEP)
+    }
+
     /// Points used (seen by enough images).
     pub fn point_count(&self) -> usize {
         self.points_in_world.len()
@@ -555,6 +606,23 @@ mod tests {
                     problem.cost(turned)
                 );
             }
+        }
+    }
+
+    /// Intrinsics 1 % too long or too short are found as the scale that undoes them, and the
+    /// true ones as 1.
+    #[test]
+    fn the_best_focal_scale_undoes_a_wrong_focal_length() {
+        let problem = problem();
+        let truth = vehicle_from_camera();
+        let found = problem.best_focal_scale(truth).unwrap();
+        assert!((found - 1.0).abs() < 1e-3, "{found}");
+        for wrong in [1.01, 0.99] {
+            let found = problem
+                .with_focal_scale(wrong)
+                .best_focal_scale(truth)
+                .unwrap();
+            assert!((found * wrong - 1.0).abs() < 1.5e-3, "{wrong}: {found}");
         }
     }
 
