@@ -143,9 +143,7 @@ fn main() {
             let mut line = String::new();
             for k in -6..=6 {
                 let s = 1.0 + k as f64 * 0.0025;
-                let mut scaled = problem.clone();
-                scaled.intrinsics.fx *= s;
-                scaled.intrinsics.fy *= s;
+                let scaled = problem.with_focal_scale(s);
                 line += &format!(" {s:.4}:{:.5}", scaled.cost(truth_here));
             }
             println!("{camera} focal scale at the reference:{line}");
@@ -161,9 +159,7 @@ fn main() {
                 // Both at once: the best axial shift at each focal scale.
                 for k in -8..=2 {
                     let s = 1.0 + k as f64 * 0.0025;
-                    let mut scaled = problem.clone();
-                    scaled.intrinsics.fx *= s;
-                    scaled.intrinsics.fy *= s;
+                    let scaled = problem.with_focal_scale(s);
                     let mut line = String::new();
                     for j in -6..=4 {
                         let d = j as f64 * 0.05;

@@ -371,10 +371,10 @@ impl PhotoProblem {
 
     /// The same problem with both focal lengths scaled by `scale` (principal point kept).
     pub fn with_focal_scale(&self, scale: f64) -> Self {
-        let mut out = self.clone();
-        out.intrinsics.fx *= scale;
-        out.intrinsics.fy *= scale;
-        out
+        Self {
+            intrinsics: focal_scaled(&self.intrinsics, scale),
+            ..self.clone()
+        }
     }
 
     /// The focal-length scale, within ±[`FOCAL_SCALE_RANGE`], at which the images agree best
@@ -391,10 +391,8 @@ impl PhotoProblem {
         let costs: Vec<(f64, f64)> = (-n..=n)
             .map(|k| {
                 let scale = 1.0 + k as f64 * FOCAL_SCALE_STEP;
-                (
-                    scale,
-                    self.with_focal_scale(scale).cost(vehicle_from_camera),
-                )
+                let intrinsics = focal_scaled(&self.intrinsics, scale);
+                (scale, self.cost_with(&intrinsics, vehicle_from_camera))
             })
             .collect();
         let (i, &(scale, cost)) = costs
@@ -428,6 +426,11 @@ impl PhotoProblem {
     /// Mean truncated squared deviation of each point's grey values from their mean, over the
     /// points still seen twice at `vehicle_from_camera`.
     pub fn cost(&self, vehicle_from_camera: Rigid) -> f64 {
+        self.cost_with(&self.intrinsics, vehicle_from_camera)
+    }
+
+    /// [`Self::cost`] with the images projected through `intrinsics` instead of the problem's.
+    fn cost_with(&self, intrinsics: &CameraIntrinsics, vehicle_from_camera: Rigid) -> f64 {
         let camera_from_world: Vec<Rigid> = self
             .images
             .iter()
@@ -443,7 +446,7 @@ impl PhotoProblem {
                 for &image in &self.view_images[range] {
                     let image = image as usize;
                     let q = camera_from_world[image].transform_point(self.points_in_world[p]);
-                    let Some(px) = self.intrinsics.project(q) else {
+                    let Some(px) = intrinsics.project(q) else {
                         continue;
                     };
                     if let Some(v) = self.images[image].sample(px)
@@ -470,6 +473,15 @@ impl PhotoProblem {
         } else {
             sum / count as f64
         }
+    }
+}
+
+/// `intrinsics` with both focal lengths scaled by `scale`.
+fn focal_scaled(intrinsics: &CameraIntrinsics, scale: f64) -> CameraIntrinsics {
+    CameraIntrinsics {
+        fx: intrinsics.fx * scale,
+        fy: intrinsics.fy * scale,
+        ..intrinsics.clone()
     }
 }
 

@@ -1369,8 +1369,10 @@ impl DepthCalibration {
             .collect();
         let mut information = vec![PoseInformation::default(); cameras];
         for (a, b, step) in steps.into_iter().flatten() {
-            information[a].merge(&step.info_a);
-            information[b].merge(&step.info_b);
+            if track_information {
+                information[a].merge(&step.info_a);
+                information[b].merge(&step.info_b);
+            }
             let (ga, gb) = (
                 pose_grad_flat(&step.pose_a, w),
                 pose_grad_flat(&step.pose_b, w),
