@@ -17,6 +17,8 @@ struct Cli {
     command: Option<Command>,
 }
 
+// Parsed once at start-up: the calibrate variant's many options cost nothing worth boxing.
+#[allow(clippy::large_enum_variant)]
 #[derive(Subcommand)]
 enum Command {
     /// The studio (the default when no command is given).
@@ -144,6 +146,11 @@ enum Command {
         /// its best one (e.g. 0.02); the rest stay at the initial guess (BENCHMARKS.md)
         #[arg(long, value_name = "RATIO")]
         camera_hold_unobserved: Option<f64>,
+        /// unical with cameras: blur the images by a Gaussian of this σ (pixels at
+        /// --camera-scale) before they become the colour term's target, to meet the scene's
+        /// blurrier colour field halfway (0: sharp)
+        #[arg(long, value_name = "PX")]
+        camera_blur: Option<f64>,
         /// unical: drop LiDAR returns that other sweeps saw through (moving traffic), and mask
         /// the pixels near them and the vehicle's own body in the images (BENCHMARKS.md,
         /// "Moving traffic")
@@ -324,6 +331,7 @@ fn run() -> Result<()> {
             grouped_camera_translation,
             camera_rays_below_lidar_top,
             camera_hold_unobserved,
+            camera_blur,
             drop_moving,
             camera_time_offset_ms,
             perturb_deg,
@@ -356,6 +364,7 @@ fn run() -> Result<()> {
                 grouped_camera_translation,
                 camera_rays_below_lidar_top,
                 camera_hold_unobserved,
+                camera_blur,
                 drop_moving,
                 camera_time_offset_ms,
                 perturb: (perturb_deg, perturb_cm),

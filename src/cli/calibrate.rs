@@ -94,6 +94,10 @@ pub struct CalibrateArgs {
     /// unical with cameras: hold the directions the correspondence term hardly observes
     /// ([`DepthCalibConfig::camera_hold_unobserved`]); in (0, 1).
     pub camera_hold_unobserved: Option<f64>,
+    /// unical with cameras: σ (working pixels) the images are blurred by before they become
+    /// the colour term's target ([`DepthCalibConfig::camera_target_blur_px`]; default the
+    /// preset's).
+    pub camera_blur: Option<f64>,
     /// unical: drop moving traffic and mask the vehicle's own body
     /// ([`DepthCalibConfig::transient_returns`], [`DepthCalibConfig::mask_own_vehicle`]).
     pub drop_moving: bool,
@@ -449,6 +453,12 @@ pub fn calibrate(
                 "a fraction in (0, 1)",
                 |r| r > 0.0 && r < 1.0,
             )?;
+            let camera_blur = checked(
+                args.camera_blur,
+                "--camera-blur",
+                "a σ in pixels from 0 to 10",
+                |b| (0.0..=10.0).contains(&b),
+            )?;
             let early_release = args
                 .camera_early_release
                 .as_deref()
@@ -498,6 +508,7 @@ pub fn calibrate(
                 grouped_camera_translation: args.grouped_camera_translation,
                 camera_rays_below_lidar_top: args.camera_rays_below_lidar_top,
                 camera_hold_unobserved,
+                camera_target_blur_px: camera_blur.unwrap_or(preset.camera_target_blur_px),
                 transient_returns: args
                     .drop_moving
                     .then(crate::unical::transient::TransientSettings::default),

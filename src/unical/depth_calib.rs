@@ -203,6 +203,12 @@ pub struct DepthCalibConfig {
     /// camera's best observed one, so a direction the drive hardly sees stays where the initial
     /// guess put it. `None`: every direction moves (the paper).
     pub camera_hold_unobserved: Option<f64>,
+    /// Gaussian σ (pixels of the working image) the camera images are blurred by before
+    /// their colour becomes the colour term's target. The scene's colour field is blurrier
+    /// than a sharp image; against sharp edges a camera lowers that mismatch by backing away
+    /// from what it sees (the edges' blur then covers fewer pixels), a bias along its axis.
+    /// Blurred targets meet the field halfway. 0 uses the images as they are (the paper).
+    pub camera_target_blur_px: f64,
 }
 
 /// The iteration of the geometry initialisation from which cameras fitted by the hand-eye
@@ -298,6 +304,7 @@ impl Default for DepthCalibConfig {
             // (BENCHMARKS.md, "… the cameras' pitch against the LiDARs' highest beam").
             camera_rays_below_lidar_top: false,
             camera_hold_unobserved: None,
+            camera_target_blur_px: 0.0,
         }
     }
 }
