@@ -131,6 +131,14 @@ fn bad_arguments_fail_with_one_line() {
             "{err}"
         );
     }
+    for bad in ["-1", "11", "nan"] {
+        let option = format!("--camera-blur={bad}");
+        let (ok, err) = run(&["--method", "unical", &option]);
+        assert!(
+            !ok && err.contains("--camera-blur") && err.contains("0 to 10"),
+            "{err}"
+        );
+    }
     let (ok, err) = run(&["--method", "unical", "--rounds", "0"]);
     assert!(!ok && err.contains("--rounds 0"), "{err}");
     // A valid run with an unwritable output fails before calibrating, naming the path.
