@@ -205,9 +205,9 @@ pub struct DepthCalibConfig {
     pub camera_hold_unobserved: Option<f64>,
     /// Gaussian σ (pixels of the working image) the camera images are blurred by before
     /// their colour becomes the colour term's target. The scene's colour field is blurrier
-    /// than a sharp image; against sharp edges a camera lowers that mismatch by backing away
-    /// from what it sees (the edges' blur then covers fewer pixels), a bias along its axis.
-    /// Blurred targets meet the field halfway. 0 uses the images as they are (the paper).
+    /// than a sharp image; against sharp edges a camera may lower that mismatch by backing
+    /// away from what it sees (the edges' blur then covers fewer pixels), a bias along its
+    /// axis. Blurred targets meet the field halfway. 0 uses the images as they are (the paper).
     pub camera_target_blur_px: f64,
 }
 
@@ -304,6 +304,10 @@ impl Default for DepthCalibConfig {
             // (BENCHMARKS.md, "… the cameras' pitch against the LiDARs' highest beam").
             camera_rays_below_lidar_top: false,
             camera_hold_unobserved: None,
+            // Off: with σ = 1 px the simulator's cameras move along their axes towards what
+            // they see, but drive 7 has no backing away left to undo (0.068° / 1.54 cm against
+            // 0.040° / 1.29 cm), and on PandaSet the left pair jumped 500 steps sooner
+            // (BENCHMARKS.md, "Blurred colour targets").
             camera_target_blur_px: 0.0,
         }
     }
