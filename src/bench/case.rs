@@ -413,13 +413,9 @@ pub fn held_out_photometric(
         let Ok(img) = drive.load_image(&name, frame) else {
             continue;
         };
-        let observed = image::imageops::resize(
-            img.as_ref(),
-            intrinsics.width.max(1),
-            intrinsics.height.max(1),
-            image::imageops::FilterType::Triangle,
-        )
-        .into_raw();
+        // Against the sharp image, whatever blur the run's targets had.
+        let observed =
+            crate::unical::calibrator::working_image(img.as_ref(), &intrinsics).into_raw();
         return Some(Photometric {
             camera: name,
             frame,

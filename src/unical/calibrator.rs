@@ -355,20 +355,25 @@ impl Calibrator for UnicalLidarStage {
     }
 }
 
-/// A camera image as the colour term uses it: resized to the working `intrinsics`, then
-/// blurred by a Gaussian of σ `blur_px` working pixels when above 0
-/// ([`DepthCalibConfig::camera_target_blur_px`]).
-pub fn training_image(
-    img: &image::RgbImage,
-    intrinsics: &CameraIntrinsics,
-    blur_px: f64,
-) -> image::RgbImage {
-    let resized = image::imageops::resize(
+/// A camera image resized to the working `intrinsics` (triangle filter), as the colour term
+/// and the held-out check compare rendered images with it.
+pub fn working_image(img: &image::RgbImage, intrinsics: &CameraIntrinsics) -> image::RgbImage {
+    image::imageops::resize(
         img,
         intrinsics.width.max(1),
         intrinsics.height.max(1),
         image::imageops::FilterType::Triangle,
-    );
+    )
+}
+
+/// A camera image as the colour term fits it: [`working_image`], then blurred by a Gaussian
+/// of σ `blur_px` working pixels when above 0 ([`DepthCalibConfig::camera_target_blur_px`]).
+fn training_image(
+    img: &image::RgbImage,
+    intrinsics: &CameraIntrinsics,
+    blur_px: f64,
+) -> image::RgbImage {
+    let resized = working_image(img, intrinsics);
     if blur_px > 0.0 {
         image::imageops::blur(&resized, blur_px as f32)
     } else {
