@@ -151,6 +151,11 @@ enum Command {
         /// blurrier colour field halfway (0: sharp)
         #[arg(long, value_name = "PX")]
         camera_blur: Option<f64>,
+        /// unical with cameras: the colour term moves the cameras through the hash grid's
+        /// LEVELS coarsest levels only (fractions open a level partly); the scene still learns
+        /// from every open level (BARF; BENCHMARKS.md)
+        #[arg(long, value_name = "LEVELS")]
+        colour_pose_levels: Option<f64>,
         /// unical: drop LiDAR returns that other sweeps saw through (moving traffic), and mask
         /// the pixels near them and the vehicle's own body in the images (BENCHMARKS.md,
         /// "Moving traffic")
@@ -332,6 +337,7 @@ fn run() -> Result<()> {
             camera_rays_below_lidar_top,
             camera_hold_unobserved,
             camera_blur,
+            colour_pose_levels,
             drop_moving,
             camera_time_offset_ms,
             perturb_deg,
@@ -365,6 +371,7 @@ fn run() -> Result<()> {
                 camera_rays_below_lidar_top,
                 camera_hold_unobserved,
                 camera_blur,
+                colour_pose_levels,
                 drop_moving,
                 camera_time_offset_ms,
                 perturb: (perturb_deg, perturb_cm),

@@ -131,13 +131,14 @@ fn bad_arguments_fail_with_one_line() {
             "{err}"
         );
     }
-    for bad in ["-1", "11", "nan"] {
-        let option = format!("--camera-blur={bad}");
-        let (ok, err) = run(&["--method", "unical", &option]);
-        assert!(
-            !ok && err.contains("--camera-blur") && err.contains("0 to 10"),
-            "{err}"
-        );
+    for (name, bads, range) in [
+        ("--camera-blur", ["-1", "11", "nan"], "0 to 10"),
+        ("--colour-pose-levels", ["-1", "65", "nan"], "0 to 64"),
+    ] {
+        for bad in bads {
+            let (ok, err) = run(&["--method", "unical", &format!("{name}={bad}")]);
+            assert!(!ok && err.contains(name) && err.contains(range), "{err}");
+        }
     }
     let (ok, err) = run(&["--method", "unical", "--rounds", "0"]);
     assert!(!ok && err.contains("--rounds 0"), "{err}");

@@ -98,6 +98,9 @@ pub struct CalibrateArgs {
     /// the colour term's target ([`DepthCalibConfig::camera_target_blur_px`]; default the
     /// preset's).
     pub camera_blur: Option<f64>,
+    /// unical with cameras: the hash grids' coarsest levels the colour term's camera-pose
+    /// gradient flows through ([`DepthCalibConfig::colour_pose_levels`]; default the preset's).
+    pub colour_pose_levels: Option<f64>,
     /// unical: drop moving traffic and mask the vehicle's own body
     /// ([`DepthCalibConfig::transient_returns`], [`DepthCalibConfig::mask_own_vehicle`]).
     pub drop_moving: bool,
@@ -459,6 +462,12 @@ pub fn calibrate(
                 "a σ in pixels from 0 to 10",
                 |b| (0.0..=10.0).contains(&b),
             )?;
+            let colour_pose_levels = checked(
+                args.colour_pose_levels,
+                "--colour-pose-levels",
+                "a number of levels from 0 to 64",
+                |l| (0.0..=64.0).contains(&l),
+            )?;
             let early_release = args
                 .camera_early_release
                 .as_deref()
@@ -509,6 +518,9 @@ pub fn calibrate(
                 camera_rays_below_lidar_top: args.camera_rays_below_lidar_top,
                 camera_hold_unobserved,
                 camera_target_blur_px: camera_blur.unwrap_or(preset.camera_target_blur_px),
+                colour_pose_levels: colour_pose_levels
+                    .map(|l| l as f32)
+                    .or(preset.colour_pose_levels),
                 transient_returns: args
                     .drop_moving
                     .then(crate::unical::transient::TransientSettings::default),

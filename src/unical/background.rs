@@ -119,7 +119,9 @@ impl Background {
         }
     }
 
-    /// Accumulate gradients for one sample at `x` given ∂L/∂s and ∂L/∂f; returns ∂L/∂x.
+    /// Accumulate gradients for one sample at `x` given ∂L/∂s and ∂L/∂f; returns ∂L/∂x,
+    /// through the grid's `spatial_levels` coarsest levels (`None`: all).
+    #[allow(clippy::too_many_arguments)]
     pub fn backward(
         &self,
         x: DVec3,
@@ -128,6 +130,7 @@ impl Background {
         d_feature: &[f32],
         grid_grad: &mut impl GradSink,
         mlp_grad: &mut MlpGrad,
+        spatial_levels: Option<f32>,
     ) -> DVec3 {
         let mut d_out = Vec::with_capacity(1 + d_feature.len());
         d_out.push(d_sdf);
@@ -135,7 +138,7 @@ impl Background {
         let d_h = self.geo.backward(&sample.trace, &d_out, mlp_grad);
         let g = self
             .grid
-            .backward_and_grad_x(sample.unit, &d_h, Some(grid_grad));
+            .backward_and_grad_x(sample.unit, &d_h, Some(grid_grad), spatial_levels);
         let d_unit = DVec3::new(g[0] as f64, g[1] as f64, g[2] as f64);
         // Jᵀ·d_unit = ∇_x (d_unit · unit(x)), by central differences.
         let h = 1e-6 * (x - self.centre).length().max(1.0);
@@ -149,7 +152,8 @@ impl Background {
     }
 
     /// Backward through a ray's background samples given the compositing's `∂L/∂α_i` and
-    /// `∂L/∂f_i` (row per sample): returns `(∂L/∂o, ∂L/∂d, ∂L/∂β)`.
+    /// `∂L/∂f_i` (row per sample): returns `(∂L/∂o, ∂L/∂d, ∂L/∂β)`, the first two through the
+    /// grid's `spatial_levels` coarsest levels (`None`: all).
     #[allow(clippy::too_many_arguments)]
     pub fn ray_backward(
         &self,
@@ -160,6 +164,7 @@ impl Background {
         (d_alpha, d_features): (&[f32], &[f32]),
         grid_grad: &mut impl GradSink,
         mlp_grad: &mut MlpGrad,
+        spatial_levels: Option<f32>,
     ) -> (DVec3, DVec3, f64) {
         let dim = self.geo.output_dim().saturating_sub(1);
         samples_backward(
@@ -170,7 +175,7 @@ impl Background {
             dim,
             |i, s, d_s, d_f| {
                 let x = origin + dir * taus_m[i] as f64;
-                self.backward(x, s, d_s, d_f, grid_grad, mlp_grad)
+                self.backward(x, s, d_s, d_f, grid_grad, mlp_grad, spatial_levels)
             },
         )
     }
@@ -233,7 +238,7 @@ mod tests {
         ] {
             let s = bg.query(x);
             let (mut g, mut m) = (SparseGrad::default(), bg.geo.zero_grad());
-            let an = bg.backward(x, &s, 1.5, &d_feature, &mut g, &mut m);
+            let an = bg.backward(x, &s, 1.5, &d_feature, &mut g, &mut m, None);
             // A step well inside one grid cell of the finest level at this distance.
             let h = 5e-3 * (x - bg.centre).length() / 100.0;
             for axis in 0..3 {

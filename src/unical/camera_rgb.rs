@@ -178,6 +178,10 @@ pub struct CameraModel<'a> {
     pub appearance: &'a Appearance,
     /// The scene's opacity model and β (the background's samples are per-sample at that β).
     pub opacity: Opacity,
+    /// How many of the hash grids' coarsest levels the colour term's pose gradient sees
+    /// (`None`: all; [`crate::unical::hash_grid::HashGrid::backward_and_grad_x`]). The scene
+    /// still learns from every open level.
+    pub pose_levels: Option<f32>,
 }
 
 impl CameraModel<'_> {
@@ -378,6 +382,7 @@ pub fn colour_step(
             (&d_alpha[..split.0], &d_features[..split.1]),
             grid,
             &mut out.geo,
+            model.pose_levels,
         );
         out.beta_grad += d_beta;
         if let Some(bg) = background.filter(|_| !far_samples.is_empty()) {
@@ -389,6 +394,7 @@ pub fn colour_step(
                 (&d_alpha[split.0..], &d_features[split.1..]),
                 background_grid,
                 &mut out.background_mlp,
+                model.pose_levels,
             );
             d_o += far_o;
             d_d += far_d;
@@ -409,6 +415,25 @@ mod tests {
     use super::*;
     use crate::unical::hash_grid::SparseGrad;
     use glam::DQuat;
+
+    /// The colour term's model over the test scene at β = 3, every level in the pose gradient.
+    fn model_of<'a>(
+        field: &'a SceneField,
+        background: &'a Background,
+        appearance: &'a Appearance,
+        opacity: OpacityModel,
+    ) -> CameraModel<'a> {
+        CameraModel {
+            field,
+            background: Some(background),
+            appearance,
+            opacity: Opacity {
+                model: opacity,
+                beta: 3.0,
+            },
+            pose_levels: None,
+        }
+    }
 
     fn setup() -> (
         SceneField,
@@ -493,15 +518,7 @@ mod tests {
         // The training loss is the mean squared difference between render_colour and the
         // targets (no clamping at this exposure: the decoder's sigmoid stays inside (0, 1)).
         let (field, background, appearance, pose, rays) = setup();
-        let model = CameraModel {
-            field: &field,
-            background: Some(&background),
-            appearance: &appearance,
-            opacity: Opacity {
-                model: OpacityModel::Interval,
-                beta: 3.0,
-            },
-        };
+        let model = model_of(&field, &background, &appearance, OpacityModel::Interval);
         let exposure = ExposureMap {
             scale: [0.9, 0.8, 0.85],
             offset: [0.02, 0.01, 0.0],
@@ -531,6 +548,40 @@ mod tests {
         );
     }
 
+    /// Limiting the pose gradient to the coarse levels changes the pose's gradient alone: the
+    /// scene's and background's table gradients and the loss stay as they were, and with every
+    /// level counted the pose gradient is the unlimited one.
+    #[test]
+    fn pose_levels_change_only_the_pose_gradient() {
+        let (field, background, appearance, pose, rays) = setup();
+        let model = model_of(&field, &background, &appearance, OpacityModel::PerSample);
+        let run = |pose_levels| {
+            let (mut grid, mut far) = (SparseGrad::default(), SparseGrad::default());
+            let m = CameraModel {
+                pose_levels,
+                ..model
+            };
+            let step = colour_step(
+                m,
+                &pose,
+                &ExposureMap::default(),
+                &rays,
+                &mut grid,
+                &mut far,
+            );
+            (step, grid.entries, far.entries)
+        };
+        let (all, grid, far) = run(None);
+        let (every, _, _) = run(Some(100.0));
+        assert_eq!(every.pose.r6, all.pose.r6);
+        assert_eq!(every.pose.translation_m, all.pose.translation_m);
+        let (coarse, coarse_grid, coarse_far) = run(Some(1.0));
+        assert_eq!(coarse.loss, all.loss);
+        assert_eq!((coarse_grid, coarse_far), (grid, far));
+        let moved = (coarse.pose.translation_m - all.pose.translation_m).length();
+        assert!(moved > 1e-6 * all.pose.translation_m.length(), "{moved}");
+    }
+
     #[test]
     fn pose_and_exposure_gradients_match_finite_differences() {
         for opacity in [OpacityModel::PerSample, OpacityModel::Interval] {
@@ -546,15 +597,7 @@ mod tests {
             view_dependent,
             ..appearance
         };
-        let model = CameraModel {
-            field: &field,
-            background: Some(&background),
-            appearance: &appearance,
-            opacity: Opacity {
-                model: opacity,
-                beta: 3.0,
-            },
-        };
+        let model = model_of(&field, &background, &appearance, opacity);
         let exposure = ExposureMap {
             scale: [0.9, 1.1, 1.0],
             offset: [0.02, -0.01, 0.0],

@@ -100,19 +100,34 @@ impl SceneField {
         grid_grad: &mut impl GradSink,
         mlp_grad: &mut MlpGrad,
     ) -> DVec3 {
+        self.backward_spatial(sample, (d_sdf, d_feature), grid_grad, mlp_grad, None)
+    }
+
+    /// [`SceneField::backward`] with ∂L/∂x through the grid's `spatial_levels` coarsest levels
+    /// only ([`HashGrid::backward_and_grad_x`]; `None`: all of them).
+    pub fn backward_spatial(
+        &self,
+        sample: &FieldSample,
+        (d_sdf, d_feature): (f32, &[f32]),
+        grid_grad: &mut impl GradSink,
+        mlp_grad: &mut MlpGrad,
+        spatial_levels: Option<f32>,
+    ) -> DVec3 {
         let mut d_out = Vec::with_capacity(1 + d_feature.len());
         d_out.push(d_sdf);
         d_out.extend_from_slice(d_feature);
         let d_h = self.geo.backward(&sample.trace, &d_out, mlp_grad);
         let g = self
             .grid
-            .backward_and_grad_x(sample.unit, &d_h, Some(grid_grad));
+            .backward_and_grad_x(sample.unit, &d_h, Some(grid_grad), spatial_levels);
         DVec3::new(g[0] as f64, g[1] as f64, g[2] as f64) / self.box_size
     }
 
     /// Backward through the samples `x_i = o + τ_i d` of one ray, given the compositing's
     /// `(∂L/∂α_i, ∂L/∂f_i)` (features row per sample; empty for depth-only terms): accumulates
-    /// the field's gradients and returns `(∂L/∂o, ∂L/∂d, ∂L/∂β)`.
+    /// the field's gradients and returns `(∂L/∂o, ∂L/∂d, ∂L/∂β)`, the first two through the
+    /// grid's `spatial_levels` coarsest levels ([`SceneField::backward_spatial`]; `None`: all).
+    #[allow(clippy::too_many_arguments)]
     pub fn ray_backward(
         &self,
         samples: &[FieldSample],
@@ -121,6 +136,7 @@ impl SceneField {
         (d_alpha, d_features): (&[f32], &[f32]),
         grid_grad: &mut impl GradSink,
         mlp_grad: &mut MlpGrad,
+        spatial_levels: Option<f32>,
     ) -> (DVec3, DVec3, f64) {
         let dim = self.geo.output_dim().saturating_sub(1);
         samples_backward(
@@ -129,7 +145,9 @@ impl SceneField {
             opacity,
             (d_alpha, d_features),
             dim,
-            |_, s, d_s, d_f| self.backward(s, d_s, d_f, grid_grad, mlp_grad),
+            |_, s, d_s, d_f| {
+                self.backward_spatial(s, (d_s, d_f), grid_grad, mlp_grad, spatial_levels)
+            },
         )
     }
 }

@@ -287,6 +287,20 @@ impl HashGrid {
         }
     }
 
+    /// The weight of level `l` in the spatial gradient ∂L/∂x when only `levels` of them are to
+    /// count (`None`: all): the same cosine ramp as [`HashGrid::set_active_levels`], so level
+    /// `l` counts fully once `levels ≥ l + 1` and not at all while `levels ≤ l`.
+    #[inline]
+    pub fn spatial_weight(levels: Option<f32>, l: usize) -> f32 {
+        match levels {
+            None => 1.0,
+            Some(a) => {
+                let t = (a - l as f32).clamp(0.0, 1.0);
+                (1.0 - (std::f32::consts::PI * t).cos()) * 0.5
+            }
+        }
+    }
+
     /// Level `l`'s gradient scaled by its weight, `None` when nothing flows through it.
     #[inline]
     fn level_grad(&self, l: usize, d_out: &[f32]) -> Option<[f32; F]> {
@@ -420,16 +434,20 @@ impl HashGrid {
     /// d(loss)/dx for one point given d(loss)/d(encoding): the spatial gradient through the
     /// trilinear weights (zero across cell boundaries' kinks, as for any trilinear field).
     pub fn grad_x(&self, x: [f32; 3], d_out: &[f32]) -> [f32; 3] {
-        self.backward_and_grad_x(x, d_out, None::<&mut SparseGrad>)
+        self.backward_and_grad_x(x, d_out, None::<&mut SparseGrad>, None)
     }
 
     /// [`HashGrid::backward`] and [`HashGrid::grad_x`] in one pass over the corners (the hot
     /// path of every ray sample's backward pass); corners first, as in [`HashGrid::encode`].
+    /// `spatial_levels` limits the spatial gradient to the coarsest levels
+    /// ([`HashGrid::spatial_weight`]; `None`: all) while the table gradient takes every open
+    /// level: a pose then follows the scene's coarse shape while the scene learns its detail.
     pub fn backward_and_grad_x(
         &self,
         x: [f32; 3],
         d_out: &[f32],
         mut grad: Option<&mut impl GradSink>,
+        spatial_levels: Option<f32>,
     ) -> [f32; 3] {
         let mut gx = [0f32; 3];
         for (chunk, levels) in self.levels.chunks(LEVEL_CHUNK).enumerate() {
@@ -438,7 +456,8 @@ impl HashGrid {
             let mut n = 0;
             for (j, level) in levels.iter().enumerate() {
                 if let Some(g) = self.level_grad(first + j, d_out) {
-                    work[n] = (self.corners(level, x), g, level.scale);
+                    let spatial = Self::spatial_weight(spatial_levels, first + j);
+                    work[n] = (self.corners(level, x), g, level.scale * spatial);
                     n += 1;
                 }
             }
@@ -456,6 +475,9 @@ impl HashGrid {
                 }
             }
             for (c, g, scale) in &work[..n] {
+                if *scale == 0.0 {
+                    continue;
+                }
                 for k in 0..8 {
                     let base = c.entry[k] as usize * F;
                     let mut dot = 0.0;
@@ -641,5 +663,40 @@ mod tests {
                 );
             }
         }
+    }
+
+    /// A spatial gradient over the coarsest levels only is the sum of those levels' own
+    /// spatial gradients (each from a `d_out` that is zero elsewhere), a half-counted level
+    /// adding half of its own; the table gradient is the same whatever the spatial levels.
+    #[test]
+    fn spatial_levels_limit_the_spatial_gradient_alone() {
+        let g = small();
+        let x = [0.41, 0.27, 0.66];
+        let w: Vec<f32> = (0..g.output_dim()).map(|i| 0.5 + 0.11 * i as f32).collect();
+        let per_level: Vec<[f32; 3]> = (0..g.levels.len())
+            .map(|l| {
+                let mut only = vec![0.0; w.len()];
+                only[l * F..(l + 1) * F].copy_from_slice(&w[l * F..(l + 1) * F]);
+                g.grad_x(x, &only)
+            })
+            .collect();
+        let mut full = SparseGrad::default();
+        let all = g.backward_and_grad_x(x, &w, Some(&mut full), None);
+        for (levels, expected_weights) in [(0.0, [0.0; 4]), (1.5, [1.0, 0.5, 0.0, 0.0])] {
+            let mut table = SparseGrad::default();
+            let gx = g.backward_and_grad_x(x, &w, Some(&mut table), Some(levels));
+            assert_eq!(table.entries, full.entries);
+            for d in 0..3 {
+                let expected: f32 = per_level
+                    .iter()
+                    .zip(expected_weights)
+                    .map(|(p, k)| k * p[d])
+                    .sum();
+                assert!((gx[d] - expected).abs() < 1e-5 * (1.0 + expected.abs()));
+            }
+        }
+        let capped = g.backward_and_grad_x(x, &w, None::<&mut SparseGrad>, Some(100.0));
+        assert_eq!(capped, all);
+        assert!(all.iter().any(|v| v.abs() > 1e-3));
     }
 }

@@ -232,6 +232,7 @@ pub fn lidar_step(
             (&upstream.0, &upstream.1),
             grid,
             &mut out.mlp,
+            None,
         );
         out.beta_grad += d_beta;
         out.pose.add(&pose.ray_backward(

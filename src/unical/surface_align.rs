@@ -328,8 +328,15 @@ fn backward_direction(
         &rendered.composite,
         &up,
     );
-    let (d_o, d_d, d_beta) =
-        field.ray_backward(&rendered.samples, taus, opacity, (&d_alpha, &[]), grid, geo);
+    let (d_o, d_d, d_beta) = field.ray_backward(
+        &rendered.samples,
+        taus,
+        opacity,
+        (&d_alpha, &[]),
+        grid,
+        geo,
+        None,
+    );
     let from_grad = from_cam.pose.ray_backward(
         from_ray.world_from_vehicle,
         from_ray.dir_in_sensor,
