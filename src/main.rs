@@ -156,6 +156,10 @@ enum Command {
         /// from every open level (BARF; BENCHMARKS.md)
         #[arg(long, value_name = "LEVELS")]
         colour_pose_levels: Option<f64>,
+        /// unical: entries per level of the scene's hash table, as a power of two (the CPU
+        /// preset's 19, the paper's 21; 12 to 24): a larger table for a larger scene
+        #[arg(long, value_name = "BITS")]
+        hash_table_log2: Option<u32>,
         /// unical: drop LiDAR returns that other sweeps saw through (moving traffic), and mask
         /// the pixels near them and the vehicle's own body in the images (BENCHMARKS.md,
         /// "Moving traffic")
@@ -338,6 +342,7 @@ fn run() -> Result<()> {
             camera_hold_unobserved,
             camera_blur,
             colour_pose_levels,
+            hash_table_log2,
             drop_moving,
             camera_time_offset_ms,
             perturb_deg,
@@ -372,6 +377,7 @@ fn run() -> Result<()> {
                 camera_hold_unobserved,
                 camera_blur,
                 colour_pose_levels,
+                hash_table_log2,
                 drop_moving,
                 camera_time_offset_ms,
                 perturb: (perturb_deg, perturb_cm),

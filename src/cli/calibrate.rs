@@ -29,6 +29,8 @@ use crate::optim::edge_refine::EdgeRefiner;
 use crate::optim::runner::Calibrator;
 use crate::unical::calibrator::UnicalLidarStage;
 use crate::unical::depth_calib::{CoarseToFine, DepthCalibConfig};
+use crate::unical::field::FieldConfig;
+use crate::unical::hash_grid::HashGridConfig;
 use crate::unical::surface_align::AlignmentLoss;
 
 /// What `rigcal calibrate` was asked to do.
@@ -101,6 +103,9 @@ pub struct CalibrateArgs {
     /// unical with cameras: the hash grids' coarsest levels the colour term's camera-pose
     /// gradient flows through ([`DepthCalibConfig::colour_pose_levels`]; default the preset's).
     pub colour_pose_levels: Option<f64>,
+    /// unical: entries per level of the scene's hash table as a power of two
+    /// ([`crate::unical::hash_grid::HashGridConfig::log2_table_size`]; default the preset's).
+    pub hash_table_log2: Option<u32>,
     /// unical: drop moving traffic and mask the vehicle's own body
     /// ([`DepthCalibConfig::transient_returns`], [`DepthCalibConfig::mask_own_vehicle`]).
     pub drop_moving: bool,
@@ -468,6 +473,12 @@ pub fn calibrate(
                 "a number of levels from 0 to 64",
                 |l| (0.0..=64.0).contains(&l),
             )?;
+            let hash_table_log2 = checked(
+                args.hash_table_log2,
+                "--hash-table-log2",
+                "a power of two from 12 to 24",
+                |b| (12..=24).contains(&b),
+            )?;
             let early_release = args
                 .camera_early_release
                 .as_deref()
@@ -521,6 +532,14 @@ pub fn calibrate(
                 colour_pose_levels: colour_pose_levels
                     .map(|l| l as f32)
                     .or(preset.colour_pose_levels),
+                field: FieldConfig {
+                    grid: HashGridConfig {
+                        log2_table_size: hash_table_log2
+                            .unwrap_or(preset.field.grid.log2_table_size),
+                        ..preset.field.grid.clone()
+                    },
+                    ..preset.field.clone()
+                },
                 transient_returns: args
                     .drop_moving
                     .then(crate::unical::transient::TransientSettings::default),
