@@ -160,6 +160,11 @@ enum Command {
         /// preset's 19, the paper's 21; 12 to 24): a larger table for a larger scene
         #[arg(long, value_name = "BITS")]
         hash_table_log2: Option<u32>,
+        /// unical: map the scene box to the hash grid's unit cube by its largest extent, so
+        /// cells are as tall as they are wide (default: each axis by its own extent, which on a
+        /// street scene makes them about ten times finer vertically)
+        #[arg(long)]
+        cubic_scene_box: bool,
         /// unical: drop LiDAR returns that other sweeps saw through (moving traffic), and mask
         /// the pixels near them and the vehicle's own body in the images (BENCHMARKS.md,
         /// "Moving traffic")
@@ -343,6 +348,7 @@ fn run() -> Result<()> {
             camera_blur,
             colour_pose_levels,
             hash_table_log2,
+            cubic_scene_box,
             drop_moving,
             camera_time_offset_ms,
             perturb_deg,
@@ -378,6 +384,7 @@ fn run() -> Result<()> {
                 camera_blur,
                 colour_pose_levels,
                 hash_table_log2,
+                cubic_scene_box,
                 drop_moving,
                 camera_time_offset_ms,
                 perturb: (perturb_deg, perturb_cm),

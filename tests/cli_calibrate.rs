@@ -188,6 +188,11 @@ fn unical_with_lidar_icp_registers_the_lidars_first_and_holds_them() {
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(o.status.success(), "{err}");
     assert!(err.contains("lidar icp: pandar_gt moved"), "{err}");
+    // The scene says how crowded its hash tables are.
+    assert!(
+        err.contains("occupied voxels of 0.5 m; hash grid: 2^19 slots per level; lattice points"),
+        "{err}"
+    );
     // ICP moved it before the optimisation, which held everything.
     assert!(!err.contains("first extrinsic update"), "{err}");
     // This drive is straight: the reference LiDAR is not fitted to its trajectory.

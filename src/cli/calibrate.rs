@@ -106,6 +106,9 @@ pub struct CalibrateArgs {
     /// unical: entries per level of the scene's hash table as a power of two
     /// ([`crate::unical::hash_grid::HashGridConfig::log2_table_size`]; default the preset's).
     pub hash_table_log2: Option<u32>,
+    /// unical: map the scene box to the hash grid's unit cube by its largest extent
+    /// ([`crate::unical::field::FieldConfig::cubic_box`]).
+    pub cubic_scene_box: bool,
     /// unical: drop moving traffic and mask the vehicle's own body
     /// ([`DepthCalibConfig::transient_returns`], [`DepthCalibConfig::mask_own_vehicle`]).
     pub drop_moving: bool,
@@ -538,6 +541,7 @@ pub fn calibrate(
                             .unwrap_or(preset.field.grid.log2_table_size),
                         ..preset.field.grid.clone()
                     },
+                    cubic_box: args.cubic_scene_box || preset.field.cubic_box,
                     ..preset.field.clone()
                 },
                 transient_returns: args
@@ -568,6 +572,20 @@ pub fn calibrate(
                     }
                 }
             }
+            let scene = stage.calibration();
+            let size = scene.field.box_size;
+            eprintln!(
+                "scene: {:.0} × {:.0} × {:.0} m, {} occupied voxels of {} m; hash grid: {}",
+                size.x,
+                size.y,
+                size.z,
+                scene.occupancy.occupied_boxes().count(),
+                scene.occupancy.voxel_m,
+                crate::unical::hash_load::summary(
+                    &scene.hash_loads(),
+                    scene.field.grid.config.log2_table_size
+                )
+            );
             if let Some(stats) = stage.transient_stats() {
                 eprintln!(
                     "moving traffic: {} of {} LiDAR returns seen through by other sweeps, dropped ({:.1} %)",

@@ -26,6 +26,7 @@ use super::composite::{Opacity, OpacityModel};
 use super::correspondences::Correspondences;
 use super::field::{FieldConfig, SceneField};
 use super::hash_grid::{GradAccumulator, HashGridConfig, Scaled};
+use super::hash_load::{LevelLoad, level_loads};
 use super::intensity::{IntensityDecoder, IntensityMap, normaliser};
 use super::lidar_terms::{DepthRay, LidarModel, LidarWeights, lidar_step};
 use super::observability::PoseInformation;
@@ -1037,6 +1038,23 @@ impl DepthCalibration {
             next.camera = Some(next.camera_stage(cameras));
         }
         *self = next;
+    }
+
+    /// How crowded the scene's hash tables are over its occupied voxels, level by level
+    /// ([`super::hash_load`]).
+    pub fn hash_loads(&self) -> Vec<LevelLoad> {
+        let (min, size) = (self.field.box_min, self.field.box_size);
+        let boxes: Vec<([f64; 3], [f64; 3])> = self
+            .occupancy
+            .occupied_boxes()
+            .map(|(lo, hi)| {
+                (
+                    ((lo - min) / size).to_array(),
+                    ((hi - min) / size).to_array(),
+                )
+            })
+            .collect();
+        level_loads(&self.field.grid, &boxes)
     }
 
     /// The vehicle-frame elevation (rad) above which no camera ray is drawn
@@ -2478,6 +2496,7 @@ mod tests {
                 hidden: 32,
                 feature_dim: 3,
                 initial_sdf_m: 0.5,
+                cubic_box: false,
             },
             rays_per_sensor: 128,
             rays_per_camera: 128,

@@ -2,7 +2,8 @@
 //! feature at a world point, from the hash encoding of the point's position in the scene box.
 //!
 //! World points map to [0,1]³ by the scene's axis-aligned box (from the aggregated LiDAR plus a
-//! margin, method.md §2). The geometry MLP is the paper's two layers of 64 (`L·F → 64 → 1 + d_f`);
+//! margin, method.md §2), each axis by its own extent; with [`FieldConfig::cubic_box`] all by the
+//! largest, so a street scene tens of metres high and hundreds long gets cells as tall as wide. The geometry MLP is the paper's two layers of 64 (`L·F → 64 → 1 + d_f`);
 //! its SDF output starts at +`initial_sdf_m` (free space everywhere) so the first renders see
 //! through the scene instead of stopping at the first sample.
 
@@ -18,6 +19,9 @@ pub struct FieldConfig {
     pub hidden: usize,
     pub feature_dim: usize,
     pub initial_sdf_m: f32,
+    /// Map the box to [0,1]³ by its largest extent on every axis (cubic cells) instead of each
+    /// axis by its own (cells as many times finer vertically as the box is flatter).
+    pub cubic_box: bool,
 }
 
 impl Default for FieldConfig {
@@ -27,6 +31,7 @@ impl Default for FieldConfig {
             hidden: 64,
             feature_dim: 15,
             initial_sdf_m: 0.5,
+            cubic_box: false,
         }
     }
 }
@@ -68,7 +73,14 @@ impl SceneField {
         }
         Self {
             box_min,
-            box_size: (box_max - box_min).max(DVec3::splat(1e-6)),
+            box_size: {
+                let size = (box_max - box_min).max(DVec3::splat(1e-6));
+                if config.cubic_box {
+                    DVec3::splat(size.max_element())
+                } else {
+                    size
+                }
+            },
             grid,
             geo,
         }
@@ -191,6 +203,7 @@ pub(crate) fn tiny_config(feature_dim: usize) -> FieldConfig {
         hidden: 16,
         feature_dim,
         initial_sdf_m: 0.2,
+        cubic_box: false,
     }
 }
 
@@ -239,6 +252,49 @@ mod tests {
             .collect()
     }
 
+    #[test]
+    fn a_cubic_box_maps_every_axis_by_the_largest_extent() {
+        let (lo, hi) = (DVec3::new(-50.0, 0.0, -2.0), DVec3::new(50.0, 40.0, 8.0));
+        let corner = DVec3::new(50.0, 40.0, 8.0);
+        let per_axis = SceneField::new(lo, hi, &tiny_config(3), 1);
+        assert_eq!(per_axis.unit(corner), [1.0, 1.0, 1.0]);
+        let mut cubic = SceneField::new(
+            lo,
+            hi,
+            &FieldConfig {
+                cubic_box: true,
+                ..tiny_config(3)
+            },
+            1,
+        );
+        for (i, p) in cubic.grid.params.iter_mut().enumerate() {
+            *p = ((i as f32 * 0.7548).fract() - 0.5) * 2.0;
+        }
+        assert_eq!(cubic.box_size, DVec3::splat(100.0));
+        assert_eq!(cubic.unit(corner), [1.0, 0.4, 0.1]);
+        assert_eq!(cubic.unit(lo), [0.0, 0.0, 0.0]);
+        // The spatial gradient is in world units either way: the same scale on every axis.
+        let sample = cubic.query(DVec3::new(3.0, 7.0, 1.0));
+        let mut grad = cubic.geo.zero_grad();
+        let g = cubic.backward(
+            &sample,
+            1.0,
+            &[0.0; 3],
+            &mut SparseGrad::default(),
+            &mut grad,
+        );
+        let h = 1e-2;
+        let sdf = |p: DVec3| cubic.query(p).sdf() as f64;
+        let p = DVec3::new(3.0, 7.0, 1.0);
+        let fd = DVec3::new(
+            sdf(p + DVec3::X * h) - sdf(p - DVec3::X * h),
+            sdf(p + DVec3::Y * h) - sdf(p - DVec3::Y * h),
+            sdf(p + DVec3::Z * h) - sdf(p - DVec3::Z * h),
+        ) / (2.0 * h);
+        assert!(fd.length() > 1e-3, "{fd}");
+        assert!((g - fd).length() <= 0.05 * fd.length(), "{g} {fd}");
+    }
+
     /// Depth-only fit of a ground plane (z = 0) seen by a LiDAR 2 m above it: the rendered
     /// range error must drop by an order of magnitude. Exercises encoding, MLP, compositing and
     /// both Adams together.
@@ -254,6 +310,7 @@ mod tests {
             hidden: 32,
             feature_dim: 3,
             initial_sdf_m: 0.5,
+            cubic_box: false,
         };
         let mut field = SceneField::new(
             DVec3::new(-10.0, -10.0, -1.0),

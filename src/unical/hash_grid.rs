@@ -325,6 +325,28 @@ impl HashGrid {
         self.params.len() / F
     }
 
+    /// Level `l`'s lattice: (`scale_l`, points per axis, table slots, whether it is dense).
+    pub fn level_layout(&self, l: usize) -> (f32, u32, usize, bool) {
+        let level = &self.levels[l];
+        (level.scale, level.resolution, level.size, level.dense)
+    }
+
+    /// The slot (within level `l`, not offset) that lattice point `c` is stored in: the same
+    /// index [`HashGrid::encode`] reads for that corner.
+    pub fn lattice_slot(&self, l: usize, c: [u32; 3]) -> usize {
+        let level = &self.levels[l];
+        let r = level.resolution;
+        let index = if level.dense {
+            c[0].wrapping_add(c[1].wrapping_mul(r))
+                .wrapping_add(c[2].wrapping_mul(r.wrapping_mul(r)))
+        } else {
+            c[0].wrapping_mul(PRIMES[0])
+                ^ c[1].wrapping_mul(PRIMES[1])
+                ^ c[2].wrapping_mul(PRIMES[2])
+        } as usize;
+        index % level.size
+    }
+
     fn corners(&self, level: &Level, x: [f32; 3]) -> Corners {
         let mut cell = [0u32; 3];
         let mut frac = [0f32; 3];
@@ -542,6 +564,29 @@ mod tests {
             assert!((x.1[0] - 0.5 * y.1[0]).abs() < 1e-3 && (x.1[1] - 0.5 * y.1[1]).abs() < 1e-6);
         }
         assert!(acc.drain().entries.is_empty());
+    }
+
+    #[test]
+    fn lattice_slots_are_the_entries_encode_reads() {
+        let g = small();
+        for l in 0..g.levels.len() {
+            let level = &g.levels[l];
+            for x in [[0.1f32, 0.7, 0.3], [0.93, 0.02, 0.5], [0.5, 0.5, 0.999]] {
+                let c = g.corners(level, x);
+                let cell = x.map(|v| (v * level.scale + 0.5) as u32);
+                for k in 0..8 {
+                    let corner = [
+                        cell[0] + (k & 1),
+                        cell[1] + ((k >> 1) & 1),
+                        cell[2] + ((k >> 2) & 1),
+                    ];
+                    assert_eq!(
+                        c.entry[k as usize] as usize,
+                        level.offset + g.lattice_slot(l, corner)
+                    );
+                }
+            }
+        }
     }
 
     #[test]

@@ -37,6 +37,7 @@ pub mod coverage;
 pub mod depth_calib;
 pub mod field;
 pub mod hash_grid;
+pub mod hash_load;
 pub mod intensity;
 pub mod lidar_terms;
 pub mod masks;

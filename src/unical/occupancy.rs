@@ -98,6 +98,20 @@ impl OccupancyGrid {
         self.voxel_index(p).is_some_and(|i| self.occupied[i])
     }
 
+    /// The occupied voxels as disjoint `[min, max)` boxes in world metres.
+    pub fn occupied_boxes(&self) -> impl Iterator<Item = (DVec3, DVec3)> + '_ {
+        let [nx, ny, _] = self.dims;
+        self.occupied
+            .iter()
+            .enumerate()
+            .filter(|(_, o)| **o)
+            .map(move |(i, _)| {
+                let (x, y, z) = (i % nx, (i / nx) % ny, i / (nx * ny));
+                let lo = self.box_min + DVec3::new(x as f64, y as f64, z as f64) * self.voxel_m;
+                (lo, lo + DVec3::splat(self.voxel_m))
+            })
+    }
+
     pub fn occupied_fraction(&self) -> f64 {
         self.occupied.iter().filter(|o| **o).count() as f64 / self.occupied.len().max(1) as f64
     }
@@ -181,6 +195,28 @@ mod tests {
             .collect();
         pts.push(DVec3::new(10.0, 0.0, 2.0));
         OccupancyGrid::from_points(&pts, 0.5, 1.0, 1)
+    }
+
+    #[test]
+    fn occupied_boxes_are_the_occupied_voxels() {
+        let g = grid();
+        let boxes: Vec<(DVec3, DVec3)> = g.occupied_boxes().collect();
+        let total = g.dims[0] * g.dims[1] * g.dims[2];
+        assert_eq!(
+            boxes.len(),
+            (g.occupied_fraction() * total as f64).round() as usize
+        );
+        for (lo, hi) in &boxes {
+            assert!(((*hi - *lo) - DVec3::splat(0.5)).abs().max_element() < 1e-9);
+            assert!(g.is_occupied((*lo + *hi) * 0.5));
+        }
+        // The wall point's voxel is one of them.
+        let wall = DVec3::new(10.0, 0.0, 2.0);
+        assert!(
+            boxes
+                .iter()
+                .any(|(lo, hi)| wall.cmpge(*lo).all() && wall.cmplt(*hi).all())
+        );
     }
 
     #[test]
