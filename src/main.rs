@@ -160,6 +160,10 @@ enum Command {
         /// preset's 19, the paper's 21; 12 to 24): a larger table for a larger scene
         #[arg(long, value_name = "BITS")]
         hash_table_log2: Option<u32>,
+        /// unical: report each pose averaged over the run's latest steps, this fraction of them
+        /// (default 0.1; 0: the last step's pose). Averaging takes out the steps' noise
+        #[arg(long, value_name = "FRACTION")]
+        pose_average: Option<f64>,
         /// unical: map the scene box to the hash grid's unit cube by its largest extent, so
         /// cells are as tall as they are wide (default: each axis by its own extent, which on a
         /// street scene makes them about ten times finer vertically)
@@ -348,6 +352,7 @@ fn run() -> Result<()> {
             camera_blur,
             colour_pose_levels,
             hash_table_log2,
+            pose_average,
             cubic_scene_box,
             drop_moving,
             camera_time_offset_ms,
@@ -384,6 +389,7 @@ fn run() -> Result<()> {
                 camera_blur,
                 colour_pose_levels,
                 hash_table_log2,
+                pose_average,
                 cubic_scene_box,
                 drop_moving,
                 camera_time_offset_ms,

@@ -135,6 +135,7 @@ fn bad_arguments_fail_with_one_line() {
         ("--camera-blur", ["-1", "11", "nan"], "0 to 10"),
         ("--colour-pose-levels", ["-1", "65", "nan"], "0 to 64"),
         ("--hash-table-log2", ["11", "25", "0"], "12 to 24"),
+        ("--pose-average", ["-0.1", "1.5", "nan"], "0 to 1"),
     ] {
         for bad in bads {
             let (ok, err) = run(&["--method", "unical", &format!("{name}={bad}")]);

@@ -69,6 +69,61 @@ fn the_lidar_stage_runs_as_a_calibrator_on_the_real_drive_with_a_frozen_root() {
     assert!(e.contains("segments"), "{e}");
 }
 
+/// The result is every pose averaged over the run's latest iterates: here the last two of four
+/// (a half of the run), so each LiDAR's reported translation is the mean of the last two
+/// iterates' and its rotation their midpoint; with averaging off it is the last iterate.
+#[test]
+fn the_result_averages_the_latest_iterates() {
+    let drive = Drive::open(&pandaset()).unwrap();
+    let root = drive.rig.lidars().next().unwrap().name.clone();
+    let config = DepthCalibConfig {
+        rays_per_sensor: 256,
+        iterations: 4,
+        pose_warmup: 0,
+        pose_ramp: 0,
+        geometry_init_steps: 0,
+        frozen_sensor: Some(root.clone()),
+        pose_average_fraction: 0.5,
+        ..DepthCalibConfig::default()
+    };
+    let mut stage =
+        UnicalLidarStage::from_drive(&drive, &drive.rig, 2, &[], config.clone()).unwrap();
+    let mut iterates = Vec::new();
+    for _ in 0..4 {
+        stage.step();
+        iterates.push(stage.current());
+    }
+    let best = stage.best();
+    let moving = drive
+        .rig
+        .lidars()
+        .find(|l| l.name != root)
+        .unwrap()
+        .name
+        .clone();
+    let pose = |rig: &rigcal::calib::Rig| rig.sensor(&moving).unwrap().vehicle_from_sensor;
+    let (a, b, m) = (pose(&iterates[2]), pose(&iterates[3]), pose(&best));
+    let (step_rad, step_m) = a.difference(b);
+    assert!(step_rad > 1e-7 && step_m > 1e-7, "the LiDAR did not move");
+    assert!((m.translation - (a.translation + b.translation) / 2.0).length() < 1e-12);
+    let (to_a, _) = m.difference(a);
+    let (to_b, _) = m.difference(b);
+    assert!((to_a - step_rad / 2.0).abs() < 1e-9 && (to_b - step_rad / 2.0).abs() < 1e-9);
+    // The live pose is the last iterate, untouched by the averaging.
+    assert!(pose(&stage.current()).difference(b).0 < 1e-15);
+
+    let off = DepthCalibConfig {
+        pose_average_fraction: 0.0,
+        ..config
+    };
+    let mut stage = UnicalLidarStage::from_drive(&drive, &drive.rig, 2, &[], off).unwrap();
+    for _ in 0..4 {
+        stage.step();
+    }
+    let (rot, trans) = pose(&stage.best()).difference(pose(&stage.current()));
+    assert!(rot + trans < 1e-15);
+}
+
 /// With cameras: every camera's images are loaded (downscaled), the colour loss is reported and
 /// finite, and camera extrinsics now move too; a bad scale is a clear error.
 #[test]

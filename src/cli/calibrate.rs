@@ -106,6 +106,9 @@ pub struct CalibrateArgs {
     /// unical: entries per level of the scene's hash table as a power of two
     /// ([`crate::unical::hash_grid::HashGridConfig::log2_table_size`]; default the preset's).
     pub hash_table_log2: Option<u32>,
+    /// unical: the fraction of the run, the latest steps, whose poses the result averages
+    /// ([`DepthCalibConfig::pose_average_fraction`]; default the preset's; 0: the last step's).
+    pub pose_average: Option<f64>,
     /// unical: map the scene box to the hash grid's unit cube by its largest extent
     /// ([`crate::unical::field::FieldConfig::cubic_box`]).
     pub cubic_scene_box: bool,
@@ -482,6 +485,12 @@ pub fn calibrate(
                 "a power of two from 12 to 24",
                 |b| (12..=24).contains(&b),
             )?;
+            let pose_average = checked(
+                args.pose_average,
+                "--pose-average",
+                "a fraction of the run from 0 to 1",
+                |f| (0.0..=1.0).contains(&f),
+            )?;
             let early_release = args
                 .camera_early_release
                 .as_deref()
@@ -544,6 +553,8 @@ pub fn calibrate(
                     cubic_box: args.cubic_scene_box || preset.field.cubic_box,
                     ..preset.field.clone()
                 },
+                pose_average_fraction: pose_average
+                    .map_or(preset.pose_average_fraction, |f| f as f32),
                 transient_returns: args
                     .drop_moving
                     .then(crate::unical::transient::TransientSettings::default),

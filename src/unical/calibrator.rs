@@ -5,11 +5,13 @@
 //! images downscaled, intrinsics scaled to match).
 //!
 //! The objective is stochastic (random rays per step) and the scene keeps improving, so the
-//! "best" rig is the latest one rather than the lowest single-step loss.
+//! "best" rig is not the one of the lowest single-step loss but the latest iterates' mean
+//! ([`super::pose_window`]; the latest iterate itself when averaging is off).
 
 use super::correspondences::training_keypoints;
 use super::depth_calib::{CameraData, CameraFrame, DepthCalibConfig, DepthCalibration, LidarData};
 use super::masks::{ego_mask, is_masked, mark_traffic};
+use super::pose_window::{PoseWindow, window_len};
 use super::surface_align::AlignmentLoss;
 use super::transient::{TransientStats, Witnesses, remove_transient};
 use crate::calib::Rig;
@@ -37,6 +39,9 @@ pub struct UnicalLidarStage {
     /// The sweeps as loaded, for finding moving traffic in camera images, with each LiDAR's
     /// name and extrinsic in their order; and what was dropped from the sweeps.
     transient: Option<(Witnesses, Vec<(String, Rigid)>, TransientStats)>,
+    /// The latest iterates the reported result averages (`None`: the result is the last
+    /// iterate; [`DepthCalibConfig::pose_average_fraction`]).
+    window: Option<PoseWindow>,
 }
 
 impl UnicalLidarStage {
@@ -74,12 +79,17 @@ impl UnicalLidarStage {
             let (stats, witnesses) = remove_transient(&mut lidars, &drive.trajectory, settings);
             (witnesses, sources, stats)
         });
+        let window = match window_len(config.iterations, config.pose_average_fraction) {
+            0 => None,
+            n => Some(PoseWindow::new(n)),
+        };
         Ok(Self {
             calib: DepthCalibration::new(config, drive.trajectory.clone(), lidars),
             rig: rig.clone(),
             rounds: 1,
             round: 0,
             transient,
+            window,
         })
     }
 
@@ -290,8 +300,13 @@ impl UnicalLidarStage {
     }
 
     fn rig_now(&self) -> Rig {
+        self.rig_with(self.calib.extrinsics())
+    }
+
+    /// The rig with `extrinsics` in place of the initial ones.
+    fn rig_with(&self, extrinsics: Vec<(String, Rigid)>) -> Rig {
         let mut rig = self.rig.clone();
-        for (name, t) in self.calib.extrinsics() {
+        for (name, t) in extrinsics {
             if let Some(s) = rig.sensor_mut(&name) {
                 s.vehicle_from_sensor = t;
             }
@@ -317,8 +332,14 @@ impl Calibrator for UnicalLidarStage {
         if self.calib.iteration >= self.calib.config.iterations && self.round + 1 < self.rounds {
             self.calib.restart();
             self.round += 1;
+            if let Some(w) = &mut self.window {
+                w.clear();
+            }
         }
         let r = self.calib.step();
+        if let Some(w) = &mut self.window {
+            w.push(self.calib.extrinsics());
+        }
         let done =
             self.calib.iteration >= self.calib.config.iterations && self.round + 1 >= self.rounds;
         if let Some(loss) = r.geometry_init_loss {
@@ -350,8 +371,13 @@ impl Calibrator for UnicalLidarStage {
         self.rig_now()
     }
 
+    /// The extrinsics averaged over the latest iterates ([`PoseWindow`]) once there are any,
+    /// else the current ones.
     fn best(&self) -> Rig {
-        self.rig_now()
+        match &self.window {
+            Some(w) if !w.is_empty() => self.rig_with(w.mean()),
+            _ => self.rig_now(),
+        }
     }
 }
 

@@ -46,6 +46,7 @@ pub mod observability;
 pub mod occupancy;
 pub mod pose;
 pub mod pose_newton;
+pub mod pose_window;
 pub mod regulariser;
 pub mod sdf_init;
 pub mod surface_align;
