@@ -328,9 +328,9 @@ impl Default for DepthCalibConfig {
             // through the hash grid's coarse levels only").
             colour_pose_levels: None,
             // Averaged over the last 10 % of the run (140 of 1400 steps): on the simulator's
-            // drive 7 mid-run the cameras' worst error over 30 s checkpoints stays within
-            // 0.2° / 5 cm from about step 500 instead of step 650, and the end result is the
-            // same within 0.1 cm (BENCHMARKS.md, "Poses averaged over the run's last steps").
+            // drives the reported poses hold issue 5's thresholds 100-200 s sooner (drive 7:
+            // from 240 s), and the end result is the same within a few millimetres
+            // (BENCHMARKS.md, "Issue 5's three drives on this machine, and poses averaged").
             pose_average_fraction: 0.1,
         }
     }
