@@ -65,6 +65,15 @@ enum Command {
         /// 0 = LiDAR depth stage only)
         #[arg(long, default_value_t = 0)]
         camera_frames: usize,
+        /// unical: LiDAR sweeps per LiDAR that shape the scene (spread over the drive or the
+        /// segments; more: denser geometry under the cameras' rays, a longer preparation)
+        #[arg(long, default_value_t = 4)]
+        lidar_sweeps: usize,
+        /// unical: drop LiDAR returns farther than this many metres (horizontally) from the
+        /// drive before the scene box is formed: the scene spans the drive's surroundings, not
+        /// the LiDARs' whole reach, and camera rays leave it into the background model
+        #[arg(long = "scene-radius")]
+        scene_radius_m: Option<f64>,
         /// unical: a sensor whose extrinsic stays fixed (the root); default: every sensor
         /// moves and the trajectory fixes the gauge
         #[arg(long)]
@@ -333,6 +342,8 @@ fn run() -> Result<()> {
             iterations,
             seed,
             camera_frames,
+            lidar_sweeps,
+            scene_radius_m,
             root,
             alignment,
             lidar_icp,
@@ -370,6 +381,8 @@ fn run() -> Result<()> {
                 iterations,
                 seed,
                 camera_frames,
+                lidar_sweeps,
+                scene_radius_m,
                 root,
                 alignment,
                 lidar_icp,

@@ -136,6 +136,7 @@ fn bad_arguments_fail_with_one_line() {
         ("--colour-pose-levels", ["-1", "65", "nan"], "0 to 64"),
         ("--hash-table-log2", ["11", "25", "0"], "12 to 24"),
         ("--pose-average", ["-0.1", "1.5", "nan"], "0 to 1"),
+        ("--scene-radius", ["4", "-60", "inf"], "5 m or more"),
     ] {
         for bad in bads {
             let (ok, err) = run(&["--method", "unical", &format!("{name}={bad}")]);
@@ -144,6 +145,8 @@ fn bad_arguments_fail_with_one_line() {
     }
     let (ok, err) = run(&["--method", "unical", "--rounds", "0"]);
     assert!(!ok && err.contains("--rounds 0"), "{err}");
+    let (ok, err) = run(&["--method", "unical", "--lidar-sweeps", "0"]);
+    assert!(!ok && err.contains("--lidar-sweeps 0"), "{err}");
     // A valid run with an unwritable output fails before calibrating, naming the path.
     let (ok, err) = run(&["--method", "edge", "--iterations", "1"]);
     assert!(!ok && err.contains("/nonexistent-dir/out.yaml"), "{err}");

@@ -47,6 +47,11 @@ pub struct CalibrateArgs {
     pub seed: u64,
     /// unical: images per camera for the colour term (0: LiDAR depth stage only).
     pub camera_frames: usize,
+    /// unical: sweeps per LiDAR that shape the scene (at least 1).
+    pub lidar_sweeps: usize,
+    /// unical: drop LiDAR returns farther than this (m) from the drive before the scene box
+    /// is formed.
+    pub scene_radius_m: Option<f64>,
     /// unical: the sensor whose extrinsic stays fixed (default: none; the trajectory fixes the
     /// gauge).
     pub root: Option<String>,
@@ -491,6 +496,15 @@ pub fn calibrate(
                 "a fraction of the run from 0 to 1",
                 |f| (0.0..=1.0).contains(&f),
             )?;
+            let scene_radius_m = checked(
+                args.scene_radius_m,
+                "--scene-radius",
+                "a distance of 5 m or more",
+                |r| r >= 5.0,
+            )?;
+            if args.lidar_sweeps == 0 {
+                return Err("--lidar-sweeps 0: expected at least one sweep per LiDAR".into());
+            }
             let early_release = args
                 .camera_early_release
                 .as_deref()
@@ -559,12 +573,14 @@ pub fn calibrate(
                     .drop_moving
                     .then(crate::unical::transient::TransientSettings::default),
                 mask_own_vehicle: args.drop_moving,
+                scene_radius_m,
                 correspondence_cache: Some(crate::session::state_dir().join("matches")),
                 ..preset
             };
             let bars = super::progress::PhasedProgress::default();
-            let stage = UnicalLidarStage::from_drive(&drive, &rig, 4, &segments, config)?
-                .with_cameras_reporting(
+            let stage =
+                UnicalLidarStage::from_drive(&drive, &rig, args.lidar_sweeps, &segments, config)?
+                    .with_cameras_reporting(
                     &drive,
                     args.camera_frames,
                     &segments,
@@ -597,6 +613,12 @@ pub fn calibrate(
                     scene.field.grid.config.log2_table_size
                 )
             );
+            if let (Some(kept), Some(r)) = (stage.scene_bounds(), scene_radius_m) {
+                eprintln!(
+                    "scene radius {r} m: {} LiDAR returns beyond it left to the background, {} kept",
+                    kept.dropped, kept.kept
+                );
+            }
             if let Some(stats) = stage.transient_stats() {
                 eprintln!(
                     "moving traffic: {} of {} LiDAR returns seen through by other sweeps, dropped ({:.1} %)",

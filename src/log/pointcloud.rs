@@ -31,6 +31,22 @@ impl LidarSweep {
         self.points_in_sensor.is_empty()
     }
 
+    /// Keep the points whose flag in `keep` (one per point) is true, with their intensity and
+    /// firing time; points beyond `keep`'s length are kept.
+    pub fn retain(&mut self, keep: &[bool]) {
+        retain_flagged(&mut self.points_in_sensor, keep);
+        if self.intensity.len() == keep.len() {
+            retain_flagged(&mut self.intensity, keep);
+        }
+        if let Some(t) = self
+            .time_offset_secs
+            .as_mut()
+            .filter(|t| t.len() == keep.len())
+        {
+            retain_flagged(t, keep);
+        }
+    }
+
     /// What projections need of this sweep.
     pub fn view(&self) -> crate::geometry::projection::SweepView<'_> {
         crate::geometry::projection::SweepView {
@@ -40,6 +56,16 @@ impl LidarSweep {
             stamp_nanos: self.stamp_nanos,
         }
     }
+}
+
+/// Keep `items[i]` where `keep[i]` (or `i` is beyond `keep`).
+fn retain_flagged<T>(items: &mut Vec<T>, keep: &[bool]) {
+    let mut i = 0;
+    items.retain(|_| {
+        let k = keep.get(i).copied().unwrap_or(true);
+        i += 1;
+        k
+    });
 }
 
 const INTENSITY_NAMES: [&str; 3] = ["intensity", "reflectivity", "i"];

@@ -12,6 +12,7 @@ use super::correspondences::training_keypoints;
 use super::depth_calib::{CameraData, CameraFrame, DepthCalibConfig, DepthCalibration, LidarData};
 use super::masks::{ego_mask, is_masked, mark_traffic};
 use super::pose_window::{PoseWindow, window_len};
+use super::scene_bounds::{Kept, keep_near_drive};
 use super::surface_align::AlignmentLoss;
 use super::transient::{TransientStats, Witnesses, remove_transient};
 use crate::calib::Rig;
@@ -39,6 +40,7 @@ pub struct UnicalLidarStage {
     /// The sweeps as loaded, for finding moving traffic in camera images, with each LiDAR's
     /// name and extrinsic in their order; and what was dropped from the sweeps.
     transient: Option<(Witnesses, Vec<(String, Rigid)>, TransientStats)>,
+    scene_bounds: Option<Kept>,
     /// The latest iterates the reported result averages (`None`: the result is the last
     /// iterate; [`DepthCalibConfig::pose_average_fraction`]).
     window: Option<PoseWindow>,
@@ -79,6 +81,9 @@ impl UnicalLidarStage {
             let (stats, witnesses) = remove_transient(&mut lidars, &drive.trajectory, settings);
             (witnesses, sources, stats)
         });
+        let scene_bounds = config
+            .scene_radius_m
+            .map(|r| keep_near_drive(&mut lidars, &drive.trajectory, r));
         let window = match window_len(config.iterations, config.pose_average_fraction) {
             0 => None,
             n => Some(PoseWindow::new(n)),
@@ -89,8 +94,15 @@ impl UnicalLidarStage {
             rounds: 1,
             round: 0,
             transient,
+            scene_bounds,
             window,
         })
+    }
+
+    /// LiDAR returns kept and dropped by the scene's radius around the drive (`None`: every
+    /// return kept).
+    pub fn scene_bounds(&self) -> Option<Kept> {
+        self.scene_bounds
     }
 
     /// LiDAR returns dropped as moving traffic (`None`: the check is off).

@@ -192,6 +192,11 @@ pub struct DepthCalibConfig {
     /// built ([`super::transient`]), and mask camera pixels near them; `None` keeps every
     /// return and pixel.
     pub transient_returns: Option<TransientSettings>,
+    /// Drop LiDAR returns farther than this (m, horizontally) from the box around the
+    /// trajectory before the scene box is formed ([`super::scene_bounds`]): the scene then
+    /// spans the drive's surroundings instead of the LiDARs' whole reach, and the rest is the
+    /// background model's. `None` keeps every return.
+    pub scene_radius_m: Option<f64>,
     /// Mask the part of each camera's view that the vehicle itself fills (pixels still over
     /// the camera's frames, joined to the bottom row; `super::masks::ego_mask`).
     pub mask_own_vehicle: bool,
@@ -311,6 +316,7 @@ impl Default for DepthCalibConfig {
             // closer to the reference, and on the simulator's static drive 7 a few masked
             // façade windows changed where the back camera ended (17.6 cm instead of 7.3).
             transient_returns: None,
+            scene_radius_m: None,
             mask_own_vehicle: false,
             // Off: on the real PandaSet drive it takes the cameras' rotations from 0.60° to
             // 0.41–0.49° off the reference but their translations from 9.6 to 11.6–13.2 cm

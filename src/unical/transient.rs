@@ -260,22 +260,7 @@ pub fn remove_transient(
                 .map(|(_, transient)| !transient)
                 .collect();
             examined += sweep.len();
-            let mut it = keep.iter();
-            sweep
-                .points_in_sensor
-                .retain(|_| *it.next().unwrap_or(&true));
-            if sweep.intensity.len() == keep.len() {
-                let mut it = keep.iter();
-                sweep.intensity.retain(|_| *it.next().unwrap_or(&true));
-            }
-            if let Some(t) = sweep
-                .time_offset_secs
-                .as_mut()
-                .filter(|t| t.len() == keep.len())
-            {
-                let mut it = keep.iter();
-                t.retain(|_| *it.next().unwrap_or(&true));
-            }
+            sweep.retain(&keep);
             dropped += keep.iter().filter(|k| !**k).count();
         }
         stats
