@@ -40,6 +40,7 @@ pub struct UnicalLidarStage {
     /// The sweeps as loaded, for finding moving traffic in camera images, with each LiDAR's
     /// name and extrinsic in their order; and what was dropped from the sweeps.
     transient: Option<(Witnesses, Vec<(String, Rigid)>, TransientStats)>,
+    /// Returns kept and dropped by `DepthCalibConfig::scene_radius_m` (`None`: not applied).
     scene_bounds: Option<Kept>,
     /// The latest iterates the reported result averages (`None`: the result is the last
     /// iterate; [`DepthCalibConfig::pose_average_fraction`]).
