@@ -17,13 +17,40 @@ struct Cli {
     command: Option<Command>,
 }
 
+/// `calibrate --help`'s group of UniCal's everyday options.
+const HEADING_UNICAL: &str = "UniCal (--method unical)";
+/// `calibrate --help`'s group of UniCal's options that are off by default: each changes what
+/// the run does in a way BENCHMARKS.md measures, none has held on every drive tried.
+const HEADING_EXPERIMENTAL: &str =
+    "UniCal, experimental (off by default; what each did is in BENCHMARKS.md)";
+/// Typical `calibrate` commands, printed after its options.
+const CALIBRATE_EXAMPLES: &str = "\
+Examples:
+  # Every LiDAR and camera with UniCal: LiDARs registered by ICP first, 16 images per camera
+  rigcal calibrate drive.mcap --method unical --lidar-icp --camera-frames 16 \\
+      --camera-scale 0.25 --iterations 1400 --out calib.yaml
+  # The same from a poor initial guess (10°, a metre): each camera fitted to its motion first
+  rigcal calibrate drive.mcap --method unical --lidar-icp --camera-hand-eye --camera-frames 16 \\
+      --camera-scale 0.25 --iterations 1400 --init guess.urdf --out calib.yaml
+  # LiDARs only, by point-to-plane ICP against the first LiDAR
+  rigcal calibrate drive.mcap --method icp --out lidars.yaml
+  # Then measure and export
+  rigcal eval --ground-truth gt.yaml --calibration calib.yaml drive.mcap
+  rigcal export calib.yaml --format ros2-launch --out static_tf.launch.py
+
+The output is written before the first step and every 30 s (status: running: step k of n),
+so an interrupted run keeps its latest result.";
+
 // Parsed once at start-up: the calibrate variant's many options cost nothing worth boxing.
 #[allow(clippy::large_enum_variant)]
 #[derive(Subcommand)]
 enum Command {
     /// The studio (the default when no command is given).
     Studio {
+        /// The log to open (default: the embedded demo drive).
         log: Option<PathBuf>,
+        /// An initial calibration: a native file, URDF, ROS camera_info YAML or an MCAP's
+        /// /tf_static (default: the log's /tf_static).
         #[arg(long)]
         calibration: Option<PathBuf>,
         /// Restore a saved session (its log, edits, segments, locks and view).
@@ -32,6 +59,7 @@ enum Command {
     },
     /// Sensors, topics, counts, rates, time range, TF tree and problems of a log.
     Inspect {
+        /// The log (MCAP, ROS 2 or Foxglove schemas).
         log: PathBuf,
         /// Fixed frame of the trajectory (default: the parent of the densest /tf edge).
         #[arg(long)]
@@ -41,7 +69,9 @@ enum Command {
         vehicle_frame: Option<String>,
     },
     /// Calibrate a drive and write the native calibration file.
+    #[command(after_help = CALIBRATE_EXAMPLES)]
     Calibrate {
+        /// The drive (MCAP, ROS 2 or Foxglove schemas).
         log: PathBuf,
         /// unical | icp | mi | target | pose-graph | edge
         #[arg(long)]
@@ -57,131 +87,135 @@ enum Command {
         /// Sensors to optimise, comma-separated (default: all the method handles).
         #[arg(long, value_delimiter = ',')]
         sensors: Vec<String>,
+        /// Optimisation steps for unical (default 300), mi, target and edge (their own
+        /// defaults); icp and pose-graph run until they converge.
         #[arg(long)]
         iterations: Option<usize>,
+        /// Seed of every random choice (ray draws, RANSAC, --perturb-*): one seed, one result
+        /// at a fixed thread count.
         #[arg(long, default_value_t = 1)]
         seed: u64,
-        /// unical: images per camera for the colour term (cameras join the optimisation;
+        /// Images per camera for the colour term (cameras join the optimisation;
         /// 0 = LiDAR depth stage only)
-        #[arg(long, default_value_t = 0)]
+        #[arg(help_heading = HEADING_UNICAL, long, default_value_t = 0)]
         camera_frames: usize,
-        /// unical: LiDAR sweeps per LiDAR that shape the scene (spread over the drive or the
+        /// LiDAR sweeps per LiDAR that shape the scene (spread over the drive or the
         /// segments; more: denser geometry under the cameras' rays, a longer preparation)
-        #[arg(long, default_value_t = 4)]
+        #[arg(help_heading = HEADING_UNICAL, long, default_value_t = 4)]
         lidar_sweeps: usize,
-        /// unical: drop LiDAR returns farther than this many metres (horizontally) from the
+        /// Drop LiDAR returns farther than this many metres (horizontally) from the
         /// drive before the scene box is formed: the scene spans the drive's surroundings, not
         /// the LiDARs' whole reach, and camera rays leave it into the background model
-        #[arg(long = "scene-radius")]
+        #[arg(help_heading = HEADING_EXPERIMENTAL, long = "scene-radius")]
         scene_radius_m: Option<f64>,
-        /// unical: a sensor whose extrinsic stays fixed (the root); default: every sensor
+        /// A sensor whose extrinsic stays fixed (the root); default: every sensor
         /// moves and the trajectory fixes the gauge
-        #[arg(long)]
+        #[arg(long, help_heading = HEADING_UNICAL)]
         root: Option<String>,
-        /// unical with cameras: the correspondence term between camera images: none |
+        /// With --camera-frames: the correspondence term between camera images: none |
         /// ray-distance (SC-NeRF's projected ray distance) | surface (UniCal's surface alignment)
-        #[arg(long, default_value = "surface")]
+        #[arg(help_heading = HEADING_UNICAL, long, default_value = "surface")]
         alignment: String,
-        /// unical: register the reference LiDAR (the root, else the first) to the trajectory
+        /// Register the reference LiDAR (the root, else the first) to the trajectory
         /// by its own sweeps (not the root: it stays) and every other LiDAR to it by
         /// point-to-plane ICP first, then hold the LiDARs while UniCal calibrates the cameras
-        #[arg(long)]
+        #[arg(long, help_heading = HEADING_UNICAL)]
         lidar_icp: bool,
-        /// unical with cameras: fit each camera to its own motion first (hand-eye against the
+        /// With --camera-frames: fit each camera to its own motion first (hand-eye against the
         /// trajectory, from keypoints matched between its images a few metres apart): for
         /// starts too far off for the scene (10°, a metre); directions the drive does not
         /// observe (the height on a level drive) are kept. Fitted cameras then move at half
         /// the rotation rate, their translations at the full rate decaying to 5 %, and UniCal
         /// turns them at most 0.5° from their fit
-        #[arg(long)]
+        #[arg(long, help_heading = HEADING_UNICAL)]
         camera_hand_eye: bool,
-        /// unical with cameras: the scale images are used at (0.125: 1920×1080 → 240×135)
-        #[arg(long, default_value_t = 0.125)]
+        /// With --camera-frames: the scale images are used at (0.125: 1920×1080 → 240×135)
+        #[arg(help_heading = HEADING_UNICAL, long, default_value_t = 0.125)]
         camera_scale: f64,
-        /// unical with cameras: rays per camera and step (more: less noisy pose gradients,
+        /// With --camera-frames: rays per camera and step (more: less noisy pose gradients,
         /// slower steps)
-        #[arg(long, default_value_t = 512)]
+        #[arg(help_heading = HEADING_UNICAL, long, default_value_t = 512)]
         camera_rays: usize,
-        /// unical with cameras: the camera pose rate (Adam; it decays to 1 % over the run and
+        /// With --camera-frames: the camera pose rate (Adam; it decays to 1 % over the run and
         /// bounds how far a camera can move)
-        #[arg(long)]
+        #[arg(long, help_heading = HEADING_UNICAL)]
         camera_lr: Option<f32>,
-        /// unical with cameras: the cameras' translation rate as a multiple of their rotation
+        /// With --camera-frames: the cameras' translation rate as a multiple of their rotation
         /// rate (default 1; translations are the slower-observed part of a camera's pose)
-        #[arg(long)]
+        #[arg(long, help_heading = HEADING_UNICAL)]
         camera_translation_rate: Option<f32>,
-        /// unical with cameras: what the cameras' translation rate decays to by the end of the
+        /// With --camera-frames: what the cameras' translation rate decays to by the end of the
         /// run, as a fraction of its start (default: 0.01, as the rotation's); a larger one
         /// keeps translations moving late, when the rotations have settled
-        #[arg(long)]
+        #[arg(long, help_heading = HEADING_UNICAL)]
         camera_translation_final: Option<f32>,
-        /// unical with cameras: ITER[,RATE]: the cameras start to move at iteration ITER of
+        /// With --camera-frames: the cameras start to move at iteration ITER of
         /// the geometry initialisation, on the correspondence term alone, at RATE (default
         /// 0.1) times their rate, so the first extrinsic update comes seconds into the run
         /// instead of after the warm-up; --camera-hand-eye sets it at 30, and then only the
         /// translations of the cameras it fitted move until the warm-up ends; ",translations"
         /// moves only the translations whatever the start
-        #[arg(long, value_name = "ITER[,RATE[,translations]]")]
+        #[arg(help_heading = HEADING_UNICAL, long, value_name = "ITER[,RATE[,translations]]")]
         camera_early_release: Option<String>,
-        /// unical: run in ROUNDS rounds of --iterations each, every one with a fresh scene
+        /// Run in ROUNDS rounds of --iterations each, every one with a fresh scene
         /// formed at the extrinsics the previous round reached (a scene formed around the
         /// cameras' errors holds them back)
-        #[arg(long, default_value_t = 1)]
+        #[arg(help_heading = HEADING_UNICAL, long, default_value_t = 1)]
         rounds: usize,
-        /// unical: coarse-to-fine hash grid, LEVELS,FRACTION: the scene starts with LEVELS open
+        /// Coarse-to-fine hash grid, LEVELS,FRACTION: the scene starts with LEVELS open
         /// levels and opens the rest evenly until FRACTION of the run (BARF); default 4,0.6 (the
         /// CPU preset), `off` opens every level from the start
-        #[arg(long)]
+        #[arg(long, help_heading = HEADING_UNICAL)]
         coarse_to_fine: Option<String>,
-        /// unical with cameras: also step one translation shared by every camera (the camera
+        /// With --camera-frames: also step one translation shared by every camera (the camera
         /// rig's offset from the LiDARs) on the sum of their gradients: on the simulator it
         /// follows a height a level drive leaves the LiDARs at, on the real PandaSet drive it
         /// lets the cameras drift together (BENCHMARKS.md)
-        #[arg(long)]
+        #[arg(long, help_heading = HEADING_EXPERIMENTAL)]
         shared_camera_translation: bool,
-        /// unical with cameras: each camera's translation coordinates share Adam's step scale,
+        /// With --camera-frames: each camera's translation coordinates share Adam's step scale,
         /// so a direction the drive hardly sees moves by its share of the gradient instead of
         /// the full rate (BENCHMARKS.md)
-        #[arg(long)]
+        #[arg(long, help_heading = HEADING_EXPERIMENTAL)]
         grouped_camera_translation: bool,
-        /// unical with cameras: draw camera rays only up to the LiDARs' highest beam (above it
+        /// With --camera-frames: draw camera rays only up to the LiDARs' highest beam (above it
         /// the scene has no geometry and the cameras' colour can only go to the sky); on the
         /// real PandaSet drive rotations end closer to the reference, translations further
         /// (BENCHMARKS.md)
-        #[arg(long)]
+        #[arg(long, help_heading = HEADING_EXPERIMENTAL)]
         camera_rays_below_lidar_top: bool,
-        /// unical with cameras: solution remapping: each camera step keeps only the directions
+        /// With --camera-frames: solution remapping: each camera step keeps only the directions
         /// of its pose that the correspondence term observes at least RATIO times as well as
         /// its best one (e.g. 0.02); the rest stay at the initial guess (BENCHMARKS.md)
-        #[arg(long, value_name = "RATIO")]
+        #[arg(help_heading = HEADING_EXPERIMENTAL, long, value_name = "RATIO")]
         camera_hold_unobserved: Option<f64>,
-        /// unical with cameras: blur the images by a Gaussian of this σ (pixels at
+        /// With --camera-frames: blur the images by a Gaussian of this σ (pixels at
         /// --camera-scale) before they become the colour term's target, to meet the scene's
         /// blurrier colour field halfway (0: sharp)
-        #[arg(long, value_name = "PX")]
+        #[arg(help_heading = HEADING_EXPERIMENTAL, long, value_name = "PX")]
         camera_blur: Option<f64>,
-        /// unical with cameras: the colour term moves the cameras through the hash grid's
+        /// With --camera-frames: the colour term moves the cameras through the hash grid's
         /// LEVELS coarsest levels only (fractions open a level partly); the scene still learns
         /// from every open level (BARF; BENCHMARKS.md)
-        #[arg(long, value_name = "LEVELS")]
+        #[arg(help_heading = HEADING_EXPERIMENTAL, long, value_name = "LEVELS")]
         colour_pose_levels: Option<f64>,
-        /// unical: entries per level of the scene's hash table, as a power of two (the CPU
+        /// Entries per level of the scene's hash table, as a power of two (the CPU
         /// preset's 19, the paper's 21; 12 to 24): a larger table for a larger scene
-        #[arg(long, value_name = "BITS")]
+        #[arg(help_heading = HEADING_UNICAL, long, value_name = "BITS")]
         hash_table_log2: Option<u32>,
-        /// unical: report each pose averaged over the run's latest steps, this fraction of them
+        /// Report each pose averaged over the run's latest steps, this fraction of them
         /// (default 0.1; 0: the last step's pose). Averaging takes out the steps' noise
-        #[arg(long, value_name = "FRACTION")]
+        #[arg(help_heading = HEADING_UNICAL, long, value_name = "FRACTION")]
         pose_average: Option<f64>,
-        /// unical: map the scene box to the hash grid's unit cube by its largest extent, so
+        /// Map the scene box to the hash grid's unit cube by its largest extent, so
         /// cells are as tall as they are wide (default: each axis by its own extent, which on a
         /// street scene makes them about ten times finer vertically)
-        #[arg(long)]
+        #[arg(long, help_heading = HEADING_EXPERIMENTAL)]
         cubic_scene_box: bool,
-        /// unical: drop LiDAR returns that other sweeps saw through (moving traffic), and mask
+        /// Drop LiDAR returns that other sweeps saw through (moving traffic), and mask
         /// the pixels near them and the vehicle's own body in the images (BENCHMARKS.md,
         /// "Moving traffic")
-        #[arg(long)]
+        #[arg(long, help_heading = HEADING_EXPERIMENTAL)]
         drop_moving: bool,
         /// Add this many milliseconds to every camera image's stamp: a known delay between the
         /// cameras and the trajectory (negative: the images were taken before their stamps)
@@ -196,6 +230,7 @@ enum Command {
         /// direction (drawn from --seed)
         #[arg(long, default_value_t = 0.0)]
         perturb_cm: f64,
+        /// The native calibration file to write (atomically; see the note below).
         #[arg(long)]
         out: PathBuf,
     },

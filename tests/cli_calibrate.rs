@@ -229,3 +229,44 @@ fn unical_with_lidar_icp_registers_the_lidars_first_and_holds_them() {
     }
     let _ = std::fs::remove_dir_all(dir);
 }
+
+/// `calibrate --help` groups UniCal's options apart from the experimental ones and ends with
+/// example commands, every option of which the command knows.
+#[test]
+fn calibrate_help_groups_the_options_and_its_examples_use_real_ones() {
+    let o = Command::new(env!("CARGO_BIN_EXE_rigcal"))
+        .args(["calibrate", "--help"])
+        .output()
+        .unwrap();
+    assert!(o.status.success());
+    let help = String::from_utf8_lossy(&o.stdout);
+    let (options, examples) = help.split_once("Examples:").expect("an Examples section");
+    let unical = options
+        .find("UniCal (--method unical):")
+        .expect("the UniCal group");
+    let experimental = options
+        .find("UniCal, experimental")
+        .expect("the experimental group");
+    assert!(unical < experimental);
+    // An everyday option in the first group, an experimental one in the second.
+    let hand_eye = options.find("--camera-hand-eye").unwrap();
+    let blur = options.find("--camera-blur").unwrap();
+    assert!(unical < hand_eye && hand_eye < experimental && experimental < blur);
+    let mut checked = 0;
+    for line in examples
+        .lines()
+        .filter(|l| l.contains("rigcal calibrate") || l.trim_start().starts_with("--"))
+    {
+        for flag in line.split_whitespace().filter(|w| w.starts_with("--")) {
+            assert!(
+                options.contains(&format!("{flag} ")) || options.contains(&format!("{flag}\n")),
+                "the example's {flag} is not an option of calibrate"
+            );
+            checked += 1;
+        }
+    }
+    assert!(
+        checked >= 10,
+        "only {checked} options checked in:\n{examples}"
+    );
+}
