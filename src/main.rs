@@ -268,6 +268,7 @@ enum Command {
         /// quick (≤ 10 minutes on two cores, release build) | paper (the full protocol: hours)
         #[arg(long, default_value = "quick")]
         suite: String,
+        /// Folder for the tables, CSV, JSON, plots and the simulated drives.
         #[arg(long, default_value = "bench-out")]
         out: PathBuf,
         /// Folder of the PandaSet drive (pandaset-002.mcap + ground_truth.json); skipped when
@@ -311,8 +312,11 @@ enum Command {
         /// straight | circle | s-curve | figure8 | flower | stationary
         #[arg(long, default_value = "figure8")]
         trajectory: String,
+        /// Length of the drive (seconds).
         #[arg(long, default_value_t = 8.0)]
         seconds: f64,
+        /// Seed of the scene's layout and textures, the trajectory's variation and the
+        /// perturbation of the initial guess.
         #[arg(long, default_value_t = 7)]
         seed: u64,
         /// Rotation error of the initial guess written to /tf_static, per sensor (degrees).
@@ -327,8 +331,10 @@ enum Command {
         /// Camera frame rate (Hz); LiDARs run at their own rate.
         #[arg(long, default_value_t = 10.0)]
         camera_hz: f64,
+        /// The drive to write (ROS 2 MCAP; /tf_static holds the initial guess).
         #[arg(long)]
         out: PathBuf,
+        /// The true extrinsics, as a native calibration file.
         #[arg(long)]
         ground_truth: PathBuf,
     },
