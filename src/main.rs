@@ -344,10 +344,27 @@ fn main() -> ExitCode {
     match run() {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("rigcal: {e:#}");
+            eprintln!("rigcal: {}", one_line(&e));
             ExitCode::FAILURE
         }
     }
+}
+
+/// The error and its causes on one line, leaving out a cause whose text an outer message
+/// already holds (the library's errors name their source in their own message).
+fn one_line(error: &anyhow::Error) -> String {
+    let mut line = String::new();
+    for cause in error.chain() {
+        let text = cause.to_string();
+        if line.contains(&text) {
+            continue;
+        }
+        if !line.is_empty() {
+            line.push_str(": ");
+        }
+        line.push_str(&text);
+    }
+    line
 }
 
 fn run() -> Result<()> {
@@ -649,4 +666,27 @@ fn studio(
     anyhow::bail!(
         "this build has no studio (built without the `app` feature); use the subcommands, e.g. `rigcal inspect LOG.mcap`"
     )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::one_line;
+
+    #[test]
+    fn a_cause_already_in_the_message_is_not_repeated() {
+        let io = std::io::Error::new(std::io::ErrorKind::NotFound, "No such file");
+        #[derive(Debug, thiserror::Error)]
+        #[error("x.mcap: cannot read: {source}")]
+        struct Read {
+            source: std::io::Error,
+        }
+        let e = anyhow::Error::new(Read { source: io }).context("cannot inspect x.mcap");
+        assert_eq!(
+            one_line(&e),
+            "cannot inspect x.mcap: x.mcap: cannot read: No such file"
+        );
+        // A cause that adds something is kept.
+        let e = anyhow::anyhow!("disk full").context("cannot write out.yaml");
+        assert_eq!(one_line(&e), "cannot write out.yaml: disk full");
+    }
 }

@@ -89,6 +89,26 @@ fn a_truncated_log_keeps_what_came_before() {
     assert!(total > 10, "messages before the damage are kept ({total})");
 }
 
+/// A log cut inside its first chunk has nothing to give: the error says so with every reason,
+/// why the summary was not used and where the file ends.
+#[test]
+fn a_log_cut_in_its_first_chunk_says_why_it_is_unusable() {
+    let bytes = fixture("ros2.mcap");
+    let dir = scratch();
+    // The first record after the magic and the header: find the first chunk (opcode 0x06).
+    let mut offset = 8usize;
+    while bytes[offset] != 0x06 {
+        let len = u64::from_le_bytes(bytes[offset + 1..offset + 9].try_into().unwrap()) as usize;
+        offset += 9 + len;
+    }
+    let path = write_tmp(&dir, &bytes[..offset + 40], "cut-in-chunk");
+    let err = Drive::open(&path).unwrap_err().to_string();
+    assert!(err.contains("cut-in-chunk.mcap"), "{err}");
+    assert!(err.contains("no channels or messages found"), "{err}");
+    assert!(err.contains("summary section is unusable"), "{err}");
+    assert!(err.contains("the file ends first (truncated)"), "{err}");
+}
+
 #[test]
 fn not_mcap_is_a_clear_error() {
     let dir = scratch();

@@ -201,7 +201,7 @@ impl McapContainer {
                 Err(e) => {
                     drop(guard);
                     self.problems.push(Problem::file(format!(
-                        "summary section unusable ({e}); read the file linearly"
+                        "its summary section is unusable ({e}), so it was read from the start"
                     )));
                     return false;
                 }
@@ -336,11 +336,14 @@ impl McapContainer {
             self.channels.insert(ch.id, info);
         }
         if self.channels.is_empty() && self.chunks.is_empty() && self.loose.is_empty() {
-            let what = self
-                .problems
-                .first()
-                .map(|p| p.what.clone())
-                .unwrap_or_else(|| "no records".into());
+            // Every reason, in the order met: why the summary was not used, then where the
+            // walk from the start stopped.
+            let what = if self.problems.is_empty() {
+                "no records".to_string()
+            } else {
+                let reasons: Vec<&str> = self.problems.iter().map(|p| p.what.as_str()).collect();
+                reasons.join("; ")
+            };
             return Err(LogError::Unusable {
                 path: self.path.clone(),
                 what: format!("no channels or messages found: {what}"),
