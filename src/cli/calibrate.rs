@@ -391,6 +391,23 @@ pub fn parse_segment(text: &str, t0_nanos: i64) -> Result<(i64, i64), String> {
     Ok((t0_nanos + (a * 1e9) as i64, t0_nanos + (b * 1e9) as i64))
 }
 
+/// A segment must overlap the log's time range; else the error says where the log lies.
+fn check_segment_in_log(
+    text: &str,
+    (start, end): (i64, i64),
+    (first, last): (i64, i64),
+    log: &std::path::Path,
+) -> Result<(), String> {
+    if start < last && end > first {
+        return Ok(());
+    }
+    Err(format!(
+        "--segment '{text}' lies outside {}, which spans 0..{:.1} s",
+        log.display(),
+        (last - first) as f64 * 1e-9
+    ))
+}
+
 /// Run the calibration; `progress(step, max_steps)` is called after every step. Returns the
 /// written document.
 pub fn calibrate(
@@ -427,9 +444,16 @@ pub fn calibrate(
             ));
         }
     }
-    let t0 = drive.time_range_nanos().map_or(0, |r| r.0);
+    let range = drive.time_range_nanos();
+    let t0 = range.map_or(0, |r| r.0);
     let segments: Vec<(i64, i64)> = match &args.segment {
-        Some(s) => vec![parse_segment(s, t0)?],
+        Some(s) => {
+            let segment = parse_segment(s, t0)?;
+            if let Some(range) = range {
+                check_segment_in_log(s, segment, range, &args.log)?;
+            }
+            vec![segment]
+        }
         None => Vec::new(),
     };
     let mut calibrator: Box<dyn Calibrator> = match args.method.as_str() {
@@ -848,6 +872,17 @@ mod tests {
         assert!(parse_segment("4..1", 0).unwrap_err().contains("after"));
         assert!(parse_segment("a..1", 0).unwrap_err().contains("'a'"));
         assert!(parse_segment("3", 0).unwrap_err().contains("START..END"));
+        // A segment must overlap the log: 100..200 s of an 8-second log is refused by name.
+        let log = std::path::Path::new("drive.mcap");
+        let range = (1_000, 1_000 + 8_000_000_000);
+        let far = parse_segment("100..200", 1_000).unwrap();
+        let err = check_segment_in_log("100..200", far, range, log).unwrap_err();
+        assert!(
+            err.contains("drive.mcap") && err.contains("0..8.0 s"),
+            "{err}"
+        );
+        let inside = parse_segment("7..20", 1_000).unwrap();
+        assert!(check_segment_in_log("7..20", inside, range, log).is_ok());
     }
 
     #[test]

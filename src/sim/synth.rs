@@ -119,6 +119,39 @@ pub fn perturb_rig(rig: &Rig, deg: f64, cm: f64, seed: u64) -> Rig {
     out
 }
 
+/// The longest drive `synthesize` writes (s): ten minutes of a six-camera rig already takes hours
+/// to render on two cores.
+pub const MAX_SECONDS: f64 = 600.0;
+
+/// Refuse settings that cannot make a drive, before any work, naming the option.
+fn check_config(cfg: &SynthConfig) -> Result<(), SimError> {
+    let bad = |what: String| Err(SimError::Config(what));
+    if !(cfg.duration_secs > 0.2 && cfg.duration_secs <= MAX_SECONDS) {
+        return bad(format!(
+            "--seconds must be more than 0.2 and at most {MAX_SECONDS}, got {}",
+            cfg.duration_secs
+        ));
+    }
+    if !(cfg.scale > 0.0 && cfg.scale <= 4.0) {
+        return bad(format!("--scale must be in (0, 4], got {}", cfg.scale));
+    }
+    if !(cfg.camera_rate_hz > 0.0 && cfg.camera_rate_hz <= 100.0) {
+        return bad(format!(
+            "--camera-hz must be in (0, 100], got {}",
+            cfg.camera_rate_hz
+        ));
+    }
+    for (name, value) in [
+        ("--perturb-deg", cfg.perturb_deg),
+        ("--perturb-cm", cfg.perturb_cm),
+    ] {
+        if !(value.is_finite() && value >= 0.0) {
+            return bad(format!("{name} must be a finite number ≥ 0, got {value}"));
+        }
+    }
+    Ok(())
+}
+
 /// Simulate and write the drive; `progress(done, total)` is called as frames complete.
 pub fn synthesize(
     cfg: &SynthConfig,
@@ -126,18 +159,7 @@ pub fn synthesize(
     ground_truth_path: &Path,
     progress: &mut dyn FnMut(usize, usize),
 ) -> Result<SynthOutput, SimError> {
-    if cfg.duration_secs.is_nan() || cfg.duration_secs <= 0.2 {
-        return Err(SimError::Config(format!(
-            "--seconds must be more than 0.2, got {}",
-            cfg.duration_secs
-        )));
-    }
-    if cfg.scale.is_nan() || cfg.scale <= 0.0 || cfg.scale > 4.0 {
-        return Err(SimError::Config(format!(
-            "--scale must be in (0, 4], got {}",
-            cfg.scale
-        )));
-    }
+    check_config(cfg)?;
     let rig = if (cfg.scale - 1.0).abs() > 1e-12 {
         cfg.rig.scaled(cfg.scale)
     } else {
@@ -328,6 +350,7 @@ pub fn encode_jpeg(img: &image::RgbImage, quality: u8) -> Result<Vec<u8>, SimErr
 mod tests {
     use super::*;
     use crate::calib::{Sensor, SensorKind};
+    use crate::sim::rigs::RigPreset;
 
     fn sensor(name: &str, at: Rigid) -> Sensor {
         Sensor {
@@ -338,6 +361,44 @@ mod tests {
             vehicle_from_sensor: at,
             camera: None,
         }
+    }
+
+    #[test]
+    fn settings_that_cannot_make_a_drive_are_refused_by_name_before_any_work() {
+        let dir = std::env::temp_dir().join(format!("rigcal-synth-cfg-{}", std::process::id()));
+        let (mcap, gt) = (dir.join("never.mcap"), dir.join("never.yaml"));
+        let base = || {
+            SynthConfig::new(
+                SceneKind::Urban,
+                SimRig::preset(RigPreset::Pandaset),
+                TrajectoryKind::Figure8,
+                8.0,
+                1,
+            )
+        };
+        let cases: [(&str, Box<dyn Fn(&mut SynthConfig)>); 7] = [
+            ("--seconds", Box::new(|c| c.duration_secs = 0.1)),
+            ("--seconds", Box::new(|c| c.duration_secs = 1e9)),
+            ("--seconds", Box::new(|c| c.duration_secs = f64::NAN)),
+            ("--scale", Box::new(|c| c.scale = 0.0)),
+            ("--camera-hz", Box::new(|c| c.camera_rate_hz = -5.0)),
+            ("--perturb-deg", Box::new(|c| c.perturb_deg = f64::INFINITY)),
+            ("--perturb-cm", Box::new(|c| c.perturb_cm = -1.0)),
+        ];
+        for (name, change) in cases {
+            let mut cfg = base();
+            change(&mut cfg);
+            let started = std::time::Instant::now();
+            let err = synthesize(&cfg, &mcap, &gt, &mut |_, _| {}).unwrap_err();
+            assert!(err.to_string().contains(name), "{name}: {err}");
+            assert!(
+                started.elapsed().as_secs_f64() < 1.0,
+                "{name}: refused late"
+            );
+            assert!(!mcap.exists() && !gt.exists());
+        }
+        // The defaults pass the check.
+        assert!(check_config(&base()).is_ok());
     }
 
     #[test]
