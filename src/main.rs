@@ -607,6 +607,7 @@ fn bench(suite: &str, out: &std::path::Path, pandaset: PathBuf, seeds: Option<u6
     }
     let mut chosen = make(pandaset);
     if let Some(n) = seeds {
+        anyhow::ensure!(n >= 1, "--seeds 0: expected at least one seed per case");
         chosen = chosen.with_seeds(n);
     }
     eprintln!(

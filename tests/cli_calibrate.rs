@@ -147,6 +147,23 @@ fn bad_arguments_fail_with_one_line() {
     assert!(!ok && err.contains("--rounds 0"), "{err}");
     let (ok, err) = run(&["--method", "unical", "--lidar-sweeps", "0"]);
     assert!(!ok && err.contains("--lidar-sweeps 0"), "{err}");
+    let (ok, err) = run(&["--method", "unical", "--iterations", "0"]);
+    assert!(!ok && err.contains("--iterations 0"), "{err}");
+    let (ok, err) = run(&[
+        "--method",
+        "unical",
+        "--camera-frames",
+        "4",
+        "--camera-rays",
+        "0",
+    ]);
+    assert!(!ok && err.contains("--camera-rays 0"), "{err}");
+    // A segment past the log's end names the log's span.
+    let (ok, err) = run(&["--method", "edge", "--segment", "100..200"]);
+    assert!(
+        !ok && err.contains("lies outside") && err.contains("which spans 0.."),
+        "{err}"
+    );
     // A valid run with an unwritable output fails before calibrating, naming the path.
     let (ok, err) = run(&["--method", "edge", "--iterations", "1"]);
     assert!(!ok && err.contains("/nonexistent-dir/out.yaml"), "{err}");

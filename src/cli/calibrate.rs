@@ -415,6 +415,9 @@ pub fn calibrate(
     progress: &mut dyn FnMut(usize, usize),
 ) -> Result<CalibrationFile, String> {
     let perturbation = args.perturbation()?;
+    if args.iterations == Some(0) {
+        return Err("--iterations 0: expected at least one step".into());
+    }
     if !args.camera_time_offset_ms.is_finite() || args.camera_time_offset_ms.abs() > 1000.0 {
         return Err(format!(
             "--camera-time-offset-ms must be a number of milliseconds within ±1000, not {}",
@@ -528,6 +531,11 @@ pub fn calibrate(
             )?;
             if args.lidar_sweeps == 0 {
                 return Err("--lidar-sweeps 0: expected at least one sweep per LiDAR".into());
+            }
+            if args.camera_frames > 0 && args.camera_rays == 0 {
+                return Err(
+                    "--camera-rays 0: expected at least one ray per camera and step".into(),
+                );
             }
             let early_release = args
                 .camera_early_release
