@@ -438,6 +438,9 @@ pub fn calibrate(
     if let Some((deg, cm)) = perturbation {
         rig = crate::sim::synth::perturb_rig(&rig, deg, cm, args.seed);
     }
+    // What the user gave (after --init and --perturb-*), to say at the end how far each sensor
+    // moved from it.
+    let initial_guess = rig.clone();
     let asked = args.sensors.iter().map(|s| ("--sensors", s));
     for (option, s) in asked.chain(args.root.iter().map(|s| ("--root", s))) {
         if rig.sensor(s).is_none() {
@@ -768,7 +771,39 @@ pub fn calibrate(
         warn_at_bound(&rig, &calibrator.best());
     }
     doc.save(&args.out).map_err(|e| e.to_string())?;
+    if let Ok(result) = doc.to_rig(&args.out) {
+        eprint!("{}", moves_report(&initial_guess, &result));
+    }
     Ok(doc)
+}
+
+/// How far each sensor of `result` lies from the initial guess, one line each, the largest
+/// rotation first; sensors that did not move are named together. A camera far from a guess
+/// the user trusts is the one to look at in the studio.
+pub fn moves_report(initial: &Rig, result: &Rig) -> String {
+    let mut moved: Vec<(String, f64, f64)> = Vec::new();
+    let mut kept: Vec<&str> = Vec::new();
+    for s in &initial.sensors {
+        let Some(r) = result.sensor(&s.name) else {
+            continue;
+        };
+        let (rot, trans) = s.vehicle_from_sensor.difference(r.vehicle_from_sensor);
+        if rot + trans > 1e-9 {
+            moved.push((s.name.clone(), rot.to_degrees(), trans * 100.0));
+        } else {
+            kept.push(&s.name);
+        }
+    }
+    moved.sort_by(|a, b| b.1.total_cmp(&a.1));
+    let mut out = String::from("moved from the initial guess:\n");
+    let width = moved.iter().map(|m| m.0.len()).max().unwrap_or(0);
+    for (name, deg, cm) in &moved {
+        out.push_str(&format!("  {name:width$}  {deg:6.3}° {cm:7.2} cm\n"));
+    }
+    if !kept.is_empty() {
+        out.push_str(&format!("  where they were: {}\n", kept.join(", ")));
+    }
+    out
 }
 
 /// Whether any sensor of `now` differs from `start` (by more than rounding).
@@ -870,6 +905,47 @@ fn document(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_moves_report_names_each_sensor_largest_turn_first_and_the_ones_kept() {
+        use crate::calib::{Sensor, SensorKind};
+        use crate::geometry::{Rigid, so3};
+        use glam::DVec3;
+        let sensor = |name: &str| Sensor {
+            name: name.into(),
+            kind: SensorKind::Lidar,
+            frame_id: name.into(),
+            topics: Vec::new(),
+            vehicle_from_sensor: Rigid::IDENTITY,
+            camera: None,
+        };
+        let initial = Rig {
+            vehicle_frame: "base_link".into(),
+            sensors: vec![sensor("top"), sensor("front"), sensor("rear")],
+        };
+        let mut result = initial.clone();
+        result.sensors[1].vehicle_from_sensor = Rigid::new(
+            so3::exp(DVec3::new(0.0, 0.0, 0.5f64.to_radians())),
+            DVec3::new(0.03, 0.0, 0.04),
+        );
+        result.sensors[2].vehicle_from_sensor = Rigid::new(
+            so3::exp(DVec3::new(2f64.to_radians(), 0.0, 0.0)),
+            DVec3::ZERO,
+        );
+        let report = moves_report(&initial, &result);
+        let lines: Vec<&str> = report.lines().collect();
+        assert_eq!(lines.len(), 4, "{report}");
+        assert!(
+            lines[1].contains("rear") && lines[1].contains("2.000°"),
+            "{report}"
+        );
+        assert!(
+            lines[2].contains("front") && lines[2].contains("0.500°"),
+            "{report}"
+        );
+        assert!(lines[2].contains("5.00 cm"), "{report}");
+        assert_eq!(lines[3], "  where they were: top");
+    }
 
     #[test]
     fn segments_parse_in_seconds_from_the_start() {
