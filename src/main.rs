@@ -88,7 +88,8 @@ enum Command {
         #[arg(long, value_delimiter = ',')]
         sensors: Vec<String>,
         /// Optimisation steps for unical (default 300), mi, target and edge (their own
-        /// defaults); icp and pose-graph run until they converge.
+        /// defaults; edge with 0 writes the initial guess as it is); icp and pose-graph run
+        /// until they converge.
         #[arg(long)]
         iterations: Option<usize>,
         /// Seed of every random choice (ray draws, RANSAC, --perturb-*): one seed, one result

@@ -415,8 +415,8 @@ pub fn calibrate(
     progress: &mut dyn FnMut(usize, usize),
 ) -> Result<CalibrationFile, String> {
     let perturbation = args.perturbation()?;
-    if args.iterations == Some(0) {
-        return Err("--iterations 0: expected at least one step".into());
+    if args.method == "unical" && args.iterations == Some(0) {
+        return Err("--iterations 0: UniCal needs at least one step".into());
     }
     if !args.camera_time_offset_ms.is_finite() || args.camera_time_offset_ms.abs() > 1000.0 {
         return Err(format!(
