@@ -109,9 +109,10 @@ enum Command {
         /// the LiDARs' whole reach, and camera rays leave it into the background model
         #[arg(help_heading = HEADING_EXPERIMENTAL, long = "scene-radius")]
         scene_radius_m: Option<f64>,
-        /// A sensor whose extrinsic stays fixed (the root); default: every sensor
-        /// moves and the trajectory fixes the gauge
-        #[arg(long, help_heading = HEADING_UNICAL)]
+        /// unical: a sensor whose extrinsic stays fixed (default none: every sensor moves and
+        /// the trajectory fixes the gauge); icp, mi, target, pose-graph and --lidar-icp: the
+        /// reference LiDAR (default the first)
+        #[arg(long)]
         root: Option<String>,
         /// With --camera-frames: the correspondence term between camera images: none |
         /// ray-distance (SC-NeRF's projected ray distance) | surface (UniCal's surface alignment)
@@ -266,7 +267,7 @@ enum Command {
     /// Run the paper's evaluation protocols on simulated drives and the PandaSet drive; write
     /// Markdown tables, CSV, JSON and PNG plots.
     Bench {
-        /// quick (≤ 10 minutes on two cores, release build) | paper (the full protocol: hours)
+        /// quick (≤ 10 minutes on two cores, release build) | paper (the full protocol: a day or more)
         #[arg(long, default_value = "quick")]
         suite: String,
         /// Folder for the tables, CSV, JSON, plots and the simulated drives.
