@@ -24,6 +24,7 @@ use crate::classical::pose_graph_calibrator::{PoseGraphCalibrator, PoseGraphConf
 use crate::classical::target::TargetConfig;
 use crate::classical::target_calibrator::TargetCalibrator;
 use crate::classical::trajectory_icp::{MIN_TURN_DEG, TrajectoryFit, register_to_trajectory};
+use crate::geometry::Rigid;
 use crate::log::Drive;
 use crate::optim::edge_refine::EdgeRefiner;
 use crate::optim::runner::Calibrator;
@@ -766,14 +767,13 @@ pub fn calibrate(
             saved_at = std::time::Instant::now();
         }
     }
-    let doc = document(args, &rig, calibrator.as_ref(), &last, "complete".into());
+    let result = result_rig(args, &rig, calibrator.as_ref());
+    let doc = document_of(args, &result, calibrator.as_ref(), &last, "complete".into());
     if args.camera_hand_eye {
         warn_at_bound(&rig, &calibrator.best());
     }
     doc.save(&args.out).map_err(|e| e.to_string())?;
-    if let Ok(result) = doc.to_rig(&args.out) {
-        eprint!("{}", moves_report(&initial_guess, &result));
-    }
+    eprint!("{}", moves_report(&initial_guess, &result));
     Ok(doc)
 }
 
@@ -787,11 +787,9 @@ pub fn moves_report(initial: &Rig, result: &Rig) -> String {
         let Some(r) = result.sensor(&s.name) else {
             continue;
         };
-        let (rot, trans) = s.vehicle_from_sensor.difference(r.vehicle_from_sensor);
-        if rot + trans > 1e-9 {
-            moved.push((s.name.clone(), rot.to_degrees(), trans * 100.0));
-        } else {
-            kept.push(&s.name);
+        match moved_by(s.vehicle_from_sensor, r.vehicle_from_sensor) {
+            Some((rot, trans)) => moved.push((s.name.clone(), rot.to_degrees(), trans * 100.0)),
+            None => kept.push(&s.name),
         }
     }
     moved.sort_by(|a, b| b.1.total_cmp(&a.1));
@@ -809,11 +807,16 @@ pub fn moves_report(initial: &Rig, result: &Rig) -> String {
 /// Whether any sensor of `now` differs from `start` (by more than rounding).
 fn rig_moved(start: &Rig, now: &Rig) -> bool {
     start.sensors.iter().any(|s| {
-        now.sensor(&s.name).is_some_and(|n| {
-            let (rot, trans) = s.vehicle_from_sensor.difference(n.vehicle_from_sensor);
-            rot + trans > 1e-9
-        })
+        now.sensor(&s.name)
+            .is_some_and(|n| moved_by(s.vehicle_from_sensor, n.vehicle_from_sensor).is_some())
     })
+}
+
+/// The rotation (rad) and translation (m) between two poses of a sensor, if it moved by more
+/// than rounding.
+fn moved_by(from: Rigid, to: Rigid) -> Option<(f64, f64)> {
+    let (rot, trans) = from.difference(to);
+    (rot + trans > 1e-9).then_some((rot, trans))
 }
 
 /// The step and the time into the optimisation at which the extrinsics first changed: what a
@@ -860,6 +863,12 @@ fn document(
     losses: &[(String, f64)],
     status: String,
 ) -> CalibrationFile {
+    let result = result_rig(args, initial, calibrator);
+    document_of(args, &result, calibrator, losses, status)
+}
+
+/// The calibrator's best rig, with the sensors `--sensors` leaves out where `initial` has them.
+fn result_rig(args: &CalibrateArgs, initial: &Rig, calibrator: &dyn Calibrator) -> Rig {
     let mut result: Rig = calibrator.best();
     if !args.sensors.is_empty() {
         for s in &mut result.sensors {
@@ -870,7 +879,18 @@ fn document(
             }
         }
     }
-    let mut doc = CalibrationFile::from_rig(&result);
+    result
+}
+
+/// The native file of `result`, with the run's provenance and losses.
+fn document_of(
+    args: &CalibrateArgs,
+    result: &Rig,
+    calibrator: &dyn Calibrator,
+    losses: &[(String, f64)],
+    status: String,
+) -> CalibrationFile {
+    let mut doc = CalibrationFile::from_rig(result);
     let v = |s: String| serde_yaml::Value::String(s);
     doc.provenance
         .insert("input".into(), v(args.log.display().to_string()));
@@ -909,7 +929,7 @@ mod tests {
     #[test]
     fn the_moves_report_names_each_sensor_largest_turn_first_and_the_ones_kept() {
         use crate::calib::{Sensor, SensorKind};
-        use crate::geometry::{Rigid, so3};
+        use crate::geometry::so3;
         use glam::DVec3;
         let sensor = |name: &str| Sensor {
             name: name.into(),
