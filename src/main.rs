@@ -191,6 +191,12 @@ enum Command {
         /// its best one (e.g. 0.02); the rest stay at the initial guess (BENCHMARKS.md)
         #[arg(help_heading = HEADING_EXPERIMENTAL, long, value_name = "RATIO")]
         camera_hold_unobserved: Option<f64>,
+        /// With --camera-frames: the share of the heat-map ray draws centred on the LiDARs'
+        /// silhouettes (depth edges projected into each image) instead of on keypoints; a
+        /// silhouette ties a camera to the LiDARs' geometry where texture could slide. Preset
+        /// 0.5; 0 is the paper's keypoints only (BENCHMARKS.md)
+        #[arg(help_heading = HEADING_EXPERIMENTAL, long, value_name = "SHARE")]
+        silhouette_share: Option<f64>,
         /// With --camera-frames: blur the images by a Gaussian of this σ (pixels at
         /// --camera-scale) before they become the colour term's target, to meet the scene's
         /// blurrier colour field halfway (0: sharp)
@@ -420,6 +426,7 @@ fn run() -> Result<()> {
             grouped_camera_translation,
             camera_rays_below_lidar_top,
             camera_hold_unobserved,
+            silhouette_share,
             camera_blur,
             colour_pose_levels,
             hash_table_log2,
@@ -459,6 +466,7 @@ fn run() -> Result<()> {
                 grouped_camera_translation,
                 camera_rays_below_lidar_top,
                 camera_hold_unobserved,
+                silhouette_share,
                 camera_blur,
                 colour_pose_levels,
                 hash_table_log2,

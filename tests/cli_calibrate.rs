@@ -136,6 +136,7 @@ fn bad_arguments_fail_with_one_line() {
         ("--colour-pose-levels", ["-1", "65", "nan"], "0 to 64"),
         ("--hash-table-log2", ["11", "25", "0"], "12 to 24"),
         ("--pose-average", ["-0.1", "1.5", "nan"], "0 to 1"),
+        ("--silhouette-share", ["-0.1", "1.5", "nan"], "0 to 1"),
         ("--scene-radius", ["4", "-60", "inf"], "5 m or more"),
     ] {
         for bad in bads {

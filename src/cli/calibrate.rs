@@ -102,6 +102,9 @@ pub struct CalibrateArgs {
     /// unical with cameras: hold the directions the correspondence term hardly observes
     /// ([`DepthCalibConfig::camera_hold_unobserved`]); in (0, 1).
     pub camera_hold_unobserved: Option<f64>,
+    /// unical with cameras: share of the heat-map draws centred on LiDAR silhouettes
+    /// ([`DepthCalibConfig::silhouette_share`]; default the preset's); in [0, 1].
+    pub silhouette_share: Option<f64>,
     /// unical with cameras: σ (working pixels) the images are blurred by before they become
     /// the colour term's target ([`DepthCalibConfig::camera_target_blur_px`]; default the
     /// preset's).
@@ -503,6 +506,12 @@ pub fn calibrate(
                 "a fraction in (0, 1)",
                 |r| r > 0.0 && r < 1.0,
             )?;
+            let silhouette_share = checked(
+                args.silhouette_share,
+                "--silhouette-share",
+                "a fraction from 0 to 1",
+                |r| (0.0..=1.0).contains(&r),
+            )?;
             let camera_blur = checked(
                 args.camera_blur,
                 "--camera-blur",
@@ -590,6 +599,7 @@ pub fn calibrate(
                 grouped_camera_translation: args.grouped_camera_translation,
                 camera_rays_below_lidar_top: args.camera_rays_below_lidar_top,
                 camera_hold_unobserved,
+                silhouette_share: silhouette_share.unwrap_or(preset.silhouette_share),
                 camera_target_blur_px: camera_blur.unwrap_or(preset.camera_target_blur_px),
                 colour_pose_levels: colour_pose_levels
                     .map(|l| l as f32)
