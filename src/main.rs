@@ -191,10 +191,11 @@ enum Command {
         /// its best one (e.g. 0.02); the rest stay at the initial guess (BENCHMARKS.md)
         #[arg(help_heading = HEADING_EXPERIMENTAL, long, value_name = "RATIO")]
         camera_hold_unobserved: Option<f64>,
-        /// With --camera-frames: the share of the heat-map ray draws centred on the LiDARs'
-        /// silhouettes (depth edges projected into each image) instead of on keypoints; a
-        /// silhouette ties a camera to the LiDARs' geometry where texture could slide. Preset
-        /// 0.5; 0 is the paper's keypoints only (BENCHMARKS.md)
+        /// With --camera-frames: the share of the camera rays, once heat maps are on, drawn
+        /// around the LiDARs' silhouettes (depth edges projected into each image); the rest
+        /// are drawn around keypoints but for a small uniform share. A silhouette ties a camera
+        /// to the LiDARs' geometry where texture could slide. Preset 0.5; 0: heat maps around
+        /// keypoints only, as in the paper (BENCHMARKS.md)
         #[arg(help_heading = HEADING_EXPERIMENTAL, long, value_name = "SHARE")]
         silhouette_share: Option<f64>,
         /// With --camera-frames: blur the images by a Gaussian of this σ (pixels at

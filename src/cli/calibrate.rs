@@ -102,7 +102,7 @@ pub struct CalibrateArgs {
     /// unical with cameras: hold the directions the correspondence term hardly observes
     /// ([`DepthCalibConfig::camera_hold_unobserved`]); in (0, 1).
     pub camera_hold_unobserved: Option<f64>,
-    /// unical with cameras: share of the heat-map draws centred on LiDAR silhouettes
+    /// unical with cameras: share of the camera ray draws (heat maps on) centred on LiDAR silhouettes
     /// ([`DepthCalibConfig::silhouette_share`]; default the preset's); in [0, 1].
     pub silhouette_share: Option<f64>,
     /// unical with cameras: σ (working pixels) the images are blurred by before they become

@@ -175,9 +175,11 @@ pub struct DepthCalibConfig {
     pub heatmap_sigma_px: (f64, f64),
     /// Share of camera pixels still drawn uniformly once heat maps are on.
     pub heatmap_uniform_share: f64,
-    /// Share of the heat-map draws centred on LiDAR silhouettes instead of keypoints: depth
-    /// discontinuities of the sweep nearest each frame, projected into it under the current
-    /// poses (refreshed every [`SILHOUETTE_REFRESH`] iterations). Where colour texture may
+    /// Share of the camera pixel draws, once heat maps are on, centred on LiDAR silhouettes:
+    /// depth discontinuities of the sweep nearest each frame, projected into it under the
+    /// current poses (refreshed every [`SILHOUETTE_REFRESH`] iterations). The rest are drawn
+    /// as without it ([`Self::heatmap_uniform_share`] of them uniformly, the others around
+    /// keypoints); a frame without silhouettes draws as with 0. Where colour texture may
     /// slide along a surface with a camera's translation, a silhouette cannot: it ties the
     /// camera to the LiDARs' geometry. 0 draws around keypoints only (the paper); the CPU
     /// preset draws half of them here.
