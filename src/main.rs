@@ -257,7 +257,7 @@ enum Command {
         /// Root sensor for the alignment (default: the reference's first LiDAR).
         #[arg(long)]
         root: Option<String>,
-        /// Frames per sensor pair for the data metrics.
+        /// Frames per sensor pair for the data metrics (1–1000).
         #[arg(long, default_value_t = 3)]
         frames: usize,
         /// Also measure the checkerboard corner re-projection error (logs with boards).

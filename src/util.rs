@@ -3,9 +3,101 @@
 use std::io::Write;
 use std::path::Path;
 
+/// Where a write to `path` lands.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum OutputTarget {
+    /// A regular file, or none yet: written beside it and renamed over it. A symbolic link is
+    /// followed, so the file it points to is replaced and the link stays a link.
+    Replace(std::path::PathBuf),
+    /// Something a rename must not replace (a device such as `/dev/null` or `/dev/stdout`, a
+    /// pipe): written to directly.
+    Direct(std::path::PathBuf),
+}
+
+/// Resolve an output path: follow symbolic links (also one whose target does not exist yet)
+/// and tell a regular file from a device or pipe. A directory is an error.
+pub fn output_target(path: &Path) -> std::io::Result<OutputTarget> {
+    // What the path names after every link (the kernel's own resolution: /dev/stdout is a link
+    // to /proc/self/fd/1, which names a pipe or terminal only the kernel can follow).
+    match std::fs::metadata(path) {
+        Ok(m) if m.is_dir() => {
+            return Err(std::io::Error::new(
+                std::io::ErrorKind::InvalidInput,
+                format!("{} is a directory", path.display()),
+            ));
+        }
+        Ok(m) if !m.is_file() => return Ok(OutputTarget::Direct(path.to_path_buf())),
+        _ => {}
+    }
+    // A regular file or none yet: the file the links end at is the one to replace.
+    let mut p = path.to_path_buf();
+    // As many links as Linux follows before ELOOP.
+    for _ in 0..40 {
+        match std::fs::symlink_metadata(&p) {
+            Ok(m) if m.file_type().is_symlink() => {
+                let target = std::fs::read_link(&p)?;
+                p = match p.parent() {
+                    Some(dir) if target.is_relative() => dir.join(target),
+                    _ => target,
+                };
+            }
+            Ok(m) if m.is_dir() => {
+                return Err(std::io::Error::new(
+                    std::io::ErrorKind::InvalidInput,
+                    format!("{} is a directory", p.display()),
+                ));
+            }
+            Ok(m) if !m.is_file() => return Ok(OutputTarget::Direct(p)),
+            _ => return Ok(OutputTarget::Replace(p)),
+        }
+    }
+    Err(std::io::Error::new(
+        std::io::ErrorKind::InvalidInput,
+        format!("{}: too many levels of symbolic links", path.display()),
+    ))
+}
+
+/// Whether a file can be written at `path`, checked before long work rather than after it: not
+/// a directory, and its directory exists (after links).
+pub fn check_output(path: &Path) -> std::io::Result<()> {
+    let OutputTarget::Replace(p) = output_target(path)? else {
+        return Ok(());
+    };
+    let dir = match p.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d,
+        _ => Path::new("."),
+    };
+    if !dir.is_dir() {
+        return Err(std::io::Error::new(
+            std::io::ErrorKind::NotFound,
+            format!("the directory {} does not exist", dir.display()),
+        ));
+    }
+    Ok(())
+}
+
+/// Whether two paths name the same existing file (after links), so an output would overwrite
+/// an input.
+pub fn same_file(a: &Path, b: &Path) -> bool {
+    match (std::fs::canonicalize(a), std::fs::canonicalize(b)) {
+        (Ok(a), Ok(b)) => a == b,
+        _ => false,
+    }
+}
+
 /// Write `bytes` to `path` atomically: a temporary file in the same directory, fsync, rename.
-/// A crash leaves either the old file or the new one, never half of one.
+/// A crash leaves either the old file or the new one, never half of one. A symbolic link is
+/// followed (its target is replaced); a device or pipe is written to directly
+/// ([`output_target`]).
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
+    let path = match output_target(path)? {
+        OutputTarget::Direct(p) => {
+            let mut f = std::fs::OpenOptions::new().write(true).open(p)?;
+            return f.write_all(bytes).and_then(|()| f.flush());
+        }
+        OutputTarget::Replace(p) => p,
+    };
+    let path = path.as_path();
     let dir = match path.parent() {
         Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
         _ => std::path::PathBuf::from("."),
@@ -83,6 +175,51 @@ mod tests {
         assert_eq!(std::fs::read(&p).unwrap(), b"two");
         // No temporary files are left behind.
         assert_eq!(std::fs::read_dir(&dir).unwrap().count(), 1);
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[cfg(unix)]
+    #[test]
+    fn a_link_stays_a_link_and_a_device_is_written_to_not_replaced() {
+        let dir = std::env::temp_dir().join(format!("rigcal-atomic-link-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let target = dir.join("target.yaml");
+        let link = dir.join("link.yaml");
+        std::fs::write(&target, b"old").unwrap();
+        std::os::unix::fs::symlink("target.yaml", &link).unwrap();
+        write_atomic(&link, b"new").unwrap();
+        assert!(
+            std::fs::symlink_metadata(&link)
+                .unwrap()
+                .file_type()
+                .is_symlink()
+        );
+        assert_eq!(std::fs::read(&target).unwrap(), b"new");
+        // A link whose target does not exist yet creates the target.
+        let dangling = dir.join("dangling.yaml");
+        std::os::unix::fs::symlink("made.yaml", &dangling).unwrap();
+        write_atomic(&dangling, b"made").unwrap();
+        assert_eq!(std::fs::read(dir.join("made.yaml")).unwrap(), b"made");
+        assert!(
+            std::fs::symlink_metadata(&dangling)
+                .unwrap()
+                .file_type()
+                .is_symlink()
+        );
+        // /dev/null stays a device.
+        let null = Path::new("/dev/null");
+        if null.exists() {
+            assert_eq!(
+                output_target(null).unwrap(),
+                OutputTarget::Direct(null.into())
+            );
+            write_atomic(null, b"gone").unwrap();
+            assert!(!std::fs::metadata(null).unwrap().is_file());
+        }
+        // A directory is refused, naming it.
+        let e = write_atomic(&dir, b"x").unwrap_err();
+        assert!(e.to_string().contains("is a directory"), "{e}");
+        assert!(same_file(&link, &target) && !same_file(&link, &dangling));
         std::fs::remove_dir_all(&dir).unwrap();
     }
 }

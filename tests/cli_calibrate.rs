@@ -168,6 +168,44 @@ fn bad_arguments_fail_with_one_line() {
     // A valid run with an unwritable output fails before calibrating, naming the path.
     let (ok, err) = run(&["--method", "edge", "--iterations", "1"]);
     assert!(!ok && err.contains("/nonexistent-dir/out.yaml"), "{err}");
+    // Perturbations beyond a half turn or 10 m are refused, not allocated for.
+    let (ok, err) = run(&["--method", "unical", "--perturb-cm", "1e6"]);
+    assert!(
+        !ok && err.contains("--perturb-cm") && err.contains("[0, 1000]"),
+        "{err}"
+    );
+    let (ok, err) = run(&["--method", "unical", "--perturb-deg", "1e160"]);
+    assert!(
+        !ok && err.contains("--perturb-deg") && err.contains("[0, 180]"),
+        "{err}"
+    );
+    // An output that is the log itself (here through a link) is refused before anything is
+    // written; a copy of a small fixture stands in for the log.
+    let dir = std::env::temp_dir().join(format!("rigcal-cli-self-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let log = dir.join("drive.mcap");
+    let fixture =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/mcap/ros2.mcap");
+    std::fs::copy(&fixture, &log).unwrap();
+    let link = dir.join("link.mcap");
+    std::os::unix::fs::symlink(&log, &link).unwrap();
+    let o = Command::new(env!("CARGO_BIN_EXE_rigcal"))
+        .arg("calibrate")
+        .arg(&log)
+        .args(["--method", "edge", "--iterations", "1", "--out"])
+        .arg(&link)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        !o.status.success() && err.contains("is the log itself"),
+        "{err}"
+    );
+    assert_eq!(
+        std::fs::read(&log).unwrap(),
+        std::fs::read(&fixture).unwrap()
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
     let (ok, err) = run(&["--method", "edge", "--segment", "5..1"]);
     assert!(!ok && err.contains("--segment"), "{err}");
     assert_eq!(err.trim().lines().count(), 1, "{err}");

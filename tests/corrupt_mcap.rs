@@ -139,3 +139,35 @@ proptest! {
         exercise(&write_tmp(&dir, &bytes, "flip"));
     }
 }
+
+/// A log whose messages sit outside chunks and whose summary has channels but no statistics
+/// (both allowed by the MCAP spec) reads every message, as the same log written chunked does.
+#[test]
+fn unchunked_messages_with_a_summary_without_statistics_are_read() {
+    let bytes = fixture("ros2.mcap");
+    let dir = scratch();
+    let path = dir.path().join("unchunked.mcap");
+    {
+        let file = std::io::BufWriter::new(std::fs::File::create(&path).unwrap());
+        let mut writer = mcap::WriteOptions::new()
+            .use_chunks(false)
+            .emit_statistics(false)
+            .profile("ros2")
+            .create(file)
+            .unwrap();
+        for message in mcap::MessageStream::new(&bytes).unwrap() {
+            writer.write(&message.unwrap()).unwrap();
+        }
+        writer.finish().unwrap();
+    }
+    let original = Drive::open(&write_tmp(&dir, &bytes, "chunked")).unwrap();
+    let rewritten = Drive::open(&path).unwrap();
+    let counts = |d: &Drive| -> Vec<(String, usize)> {
+        d.streams
+            .iter()
+            .map(|s| (s.topic.clone(), s.frames.len()))
+            .collect()
+    };
+    assert!(!counts(&original).is_empty());
+    assert_eq!(counts(&rewritten), counts(&original));
+}

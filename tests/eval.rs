@@ -123,6 +123,17 @@ fn a_known_perturbation_is_reported_exactly_both_ways_and_under_a_common_offset(
     };
     let e = evaluate(&args, &mut |_, _| {}).unwrap_err();
     assert!(e.contains("nope"), "{e}");
+    // Frames per pair outside 1–1000 are refused before any work (not allocated for).
+    for frames in [0, 1001, usize::MAX] {
+        let args = EvalArgs {
+            ground_truth: gt_path.clone(),
+            calibration: est_path.clone(),
+            frames,
+            ..Default::default()
+        };
+        let e = evaluate(&args, &mut |_, _| {}).unwrap_err();
+        assert!(e.contains("--frames must be 1–1000"), "{e}");
+    }
 }
 
 #[test]

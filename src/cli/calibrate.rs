@@ -134,14 +134,10 @@ pub struct CalibrateArgs {
 
 impl CalibrateArgs {
     /// The perturbation of the initial guess, `None` when there is none; an error for
-    /// negative or non-finite values.
+    /// negative, non-finite or too large values.
     fn perturbation(&self) -> Result<Option<(f64, f64)>, String> {
         let (deg, cm) = self.perturb;
-        if !(deg.is_finite() && cm.is_finite() && deg >= 0.0 && cm >= 0.0) {
-            return Err(format!(
-                "--perturb-deg / --perturb-cm must be non-negative numbers, not {deg} / {cm}"
-            ));
-        }
+        crate::sim::synth::check_perturbation(deg, cm)?;
         Ok((deg > 0.0 || cm > 0.0).then_some((deg, cm)))
     }
 }
@@ -419,6 +415,12 @@ pub fn calibrate(
     progress: &mut dyn FnMut(usize, usize),
 ) -> Result<CalibrationFile, String> {
     let perturbation = args.perturbation()?;
+    if args.out == args.log || crate::util::same_file(&args.out, &args.log) {
+        return Err(format!(
+            "--out {} is the log itself; the calibration would overwrite it",
+            args.out.display()
+        ));
+    }
     if args.method == "unical" && args.iterations == Some(0) {
         return Err("--iterations 0: UniCal needs at least one step".into());
     }

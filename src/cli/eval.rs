@@ -30,8 +30,11 @@ use crate::log::Drive;
 use crate::optim::edge_align::EdgeAlignment;
 use crate::optim::photo_consistency::{PhotoConfig, PhotoProblem, lidar_map};
 
+/// The most frames per sensor pair `--frames` takes (every sweep of a long log is far fewer).
+pub const MAX_FRAMES: usize = 1000;
+
 /// What `rigcal eval` was asked to do.
-#[derive(Clone, Debug, Default)]
+#[derive(Clone, Debug)]
 pub struct EvalArgs {
     pub ground_truth: PathBuf,
     pub calibration: PathBuf,
@@ -43,6 +46,21 @@ pub struct EvalArgs {
     pub checkerboard: bool,
     /// Also the photometric consistency of every camera over the LiDAR map, and its best delay.
     pub photometric: bool,
+}
+
+impl Default for EvalArgs {
+    /// The CLI's defaults: 3 frames per pair, no log.
+    fn default() -> Self {
+        Self {
+            ground_truth: PathBuf::new(),
+            calibration: PathBuf::new(),
+            log: None,
+            root: None,
+            frames: 3,
+            checkerboard: false,
+            photometric: false,
+        }
+    }
 }
 
 /// One metric of one sensor pair, for the calibration and for the reference.
@@ -85,6 +103,12 @@ pub fn evaluate(
     args: &EvalArgs,
     progress: &mut dyn FnMut(usize, usize),
 ) -> Result<EvalReport, String> {
+    if !(1..=MAX_FRAMES).contains(&args.frames) {
+        return Err(format!(
+            "--frames must be 1–{MAX_FRAMES}, got {}",
+            args.frames
+        ));
+    }
     let reference = load_reference(&args.ground_truth).map_err(|e| e.to_string())?;
     let calibration = CalibrationFile::load_rig(&args.calibration).map_err(|e| e.to_string())?;
     let common = |name: &str| calibration.sensor(name).is_some();

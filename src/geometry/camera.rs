@@ -73,6 +73,11 @@ impl CameraModel {
     }
 }
 
+/// The largest image side [`CameraIntrinsics::validate`] accepts (px): larger than any camera
+/// made, so a larger one is a mistake (a unit slip, an unset field) that would only fail later
+/// as an allocation of tens of gigabytes.
+pub const MAX_IMAGE_SIDE_PX: u32 = 32768;
+
 /// Intrinsics of one camera.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct CameraIntrinsics {
@@ -163,6 +168,18 @@ impl CameraIntrinsics {
                 "image size must be positive ({} × {})",
                 self.width, self.height
             ));
+        }
+        if self.width.max(self.height) > MAX_IMAGE_SIDE_PX {
+            return Err(format!(
+                "image size {} × {} is more than {MAX_IMAGE_SIDE_PX} px a side",
+                self.width, self.height
+            ));
+        }
+        if self.model == CameraModel::Pinhole && self.distortion.iter().any(|&v| v != 0.0) {
+            return Err(
+                "pinhole takes no distortion coefficients; name the model plumb_bob to use them"
+                    .into(),
+            );
         }
         if let Some(v) = self.distortion.iter().find(|v| !v.is_finite()) {
             return Err(format!("distortion coefficient {v} is not finite"));
@@ -476,6 +493,14 @@ mod tests {
         assert!(with(&|c| c.height = 0).contains("image size"));
         assert!(with(&|c| c.distortion[2] = f64::NAN).contains("not finite"));
         assert!(with(&|c| c.distortion.extend([0.0, 0.3])).contains("plumb_bob takes 5"));
+        assert!(with(&|c| c.width = 200_000).contains("32768 px a side"));
+        assert!(with(&|c| c.height = u32::MAX).contains("32768 px a side"));
+        // A pinhole has no coefficients to use: non-zero ones are refused, zeros are fine.
+        assert!(with(&|c| c.model = CameraModel::Pinhole).contains("pinhole takes no"));
+        let mut zeros = plumb_bob_wide();
+        zeros.model = CameraModel::Pinhole;
+        zeros.distortion = vec![0.0; 5];
+        assert!(zeros.validate().is_ok());
     }
 
     fn plumb_bob_wide() -> CameraIntrinsics {

@@ -211,9 +211,11 @@ impl McapContainer {
         let Some(summary) = reader.finish() else {
             return false;
         };
-        let message_count = summary.stats.as_ref().map(|s| s.message_count).unwrap_or(0);
-        if summary.chunk_indexes.is_empty() && message_count > 0 {
-            return false; // messages outside chunks: only a linear walk finds them
+        // Messages outside chunks (or a summary without statistics, which the spec allows and
+        // which then cannot say there are none): only a linear walk finds them.
+        let may_have_messages = summary.stats.as_ref().is_none_or(|s| s.message_count > 0);
+        if summary.chunk_indexes.is_empty() && may_have_messages {
+            return false;
         }
         for (id, ch) in &summary.channels {
             self.channels.insert(

@@ -86,6 +86,28 @@ pub struct SynthOutput {
     pub images: usize,
 }
 
+/// The largest perturbation [`perturb_rig`] is asked for by the CLI: a half turn, and 10 m
+/// (a sensor further off than that is not an initial guess, and a scene box that spans it
+/// would not fit in memory).
+pub const MAX_PERTURB_DEG: f64 = 180.0;
+pub const MAX_PERTURB_CM: f64 = 1000.0;
+
+/// Why a perturbation cannot be used, if it cannot: each value finite, ≥ 0 and at most
+/// [`MAX_PERTURB_DEG`] / [`MAX_PERTURB_CM`]; the message names the option.
+pub fn check_perturbation(deg: f64, cm: f64) -> Result<(), String> {
+    for (name, value, most) in [
+        ("--perturb-deg", deg, MAX_PERTURB_DEG),
+        ("--perturb-cm", cm, MAX_PERTURB_CM),
+    ] {
+        if !(value.is_finite() && (0.0..=most).contains(&value)) {
+            return Err(format!(
+                "{name} must be a number in [0, {most}], got {value}"
+            ));
+        }
+    }
+    Ok(())
+}
+
 /// Perturb every sensor by exactly `deg` about a random axis and `cm` along a random direction.
 ///
 /// A sensor whose frame *is* the rig's vehicle frame is left alone: its extrinsic is the
@@ -123,6 +145,10 @@ pub fn perturb_rig(rig: &Rig, deg: f64, cm: f64, seed: u64) -> Rig {
 /// to render on two cores.
 pub const MAX_SECONDS: f64 = 600.0;
 
+/// The smallest and largest image side `synthesize` renders (px, after `--scale`).
+const MIN_IMAGE_SIDE_PX: f64 = 8.0;
+const MAX_IMAGE_SIDE_PX: f64 = 16384.0;
+
 /// Refuse settings that cannot make a drive, before any work, naming the option.
 fn check_config(cfg: &SynthConfig) -> Result<(), SimError> {
     let bad = |what: String| Err(SimError::Config(what));
@@ -141,12 +167,15 @@ fn check_config(cfg: &SynthConfig) -> Result<(), SimError> {
             cfg.camera_rate_hz
         ));
     }
-    for (name, value) in [
-        ("--perturb-deg", cfg.perturb_deg),
-        ("--perturb-cm", cfg.perturb_cm),
-    ] {
-        if !(value.is_finite() && value >= 0.0) {
-            return bad(format!("{name} must be a finite number ≥ 0, got {value}"));
+    check_perturbation(cfg.perturb_deg, cfg.perturb_cm).map_err(SimError::Config)?;
+    for camera in &cfg.rig.cameras {
+        let (w, h) = (camera.intrinsics.width, camera.intrinsics.height);
+        let (sw, sh) = (w as f64 * cfg.scale, h as f64 * cfg.scale);
+        if sw.min(sh) < MIN_IMAGE_SIDE_PX || sw.max(sh) > MAX_IMAGE_SIDE_PX {
+            return bad(format!(
+                "camera '{}' ({w} × {h} px) would render at {sw:.0} × {sh:.0} px with --scale {}; each side must be {MIN_IMAGE_SIDE_PX}–{MAX_IMAGE_SIDE_PX} px",
+                camera.name, cfg.scale
+            ));
         }
     }
     Ok(())
@@ -160,6 +189,17 @@ pub fn synthesize(
     progress: &mut dyn FnMut(usize, usize),
 ) -> Result<SynthOutput, SimError> {
     check_config(cfg)?;
+    // Both outputs are checked before the simulation, not after it.
+    if out_mcap == ground_truth_path || crate::util::same_file(out_mcap, ground_truth_path) {
+        return Err(SimError::Config(format!(
+            "--out and --ground-truth are the same file ({}); the ground truth would overwrite the drive",
+            out_mcap.display()
+        )));
+    }
+    for (option, path) in [("--out", out_mcap), ("--ground-truth", ground_truth_path)] {
+        crate::util::check_output(path)
+            .map_err(|e| SimError::Config(format!("{option} {}: {e}", path.display())))?;
+    }
     let rig = if (cfg.scale - 1.0).abs() > 1e-12 {
         cfg.rig.scaled(cfg.scale)
     } else {
@@ -376,14 +416,25 @@ mod tests {
                 1,
             )
         };
-        let cases: [(&str, Box<dyn Fn(&mut SynthConfig)>); 7] = [
+        let cases: [(&str, Box<dyn Fn(&mut SynthConfig)>); 11] = [
             ("--seconds", Box::new(|c| c.duration_secs = 0.1)),
             ("--seconds", Box::new(|c| c.duration_secs = 1e9)),
             ("--seconds", Box::new(|c| c.duration_secs = f64::NAN)),
             ("--scale", Box::new(|c| c.scale = 0.0)),
+            // Images of a pixel or less (the renderer needs rows to split).
+            ("--scale", Box::new(|c| c.scale = 0.0001)),
             ("--camera-hz", Box::new(|c| c.camera_rate_hz = -5.0)),
             ("--perturb-deg", Box::new(|c| c.perturb_deg = f64::INFINITY)),
+            ("--perturb-deg", Box::new(|c| c.perturb_deg = 1e160)),
             ("--perturb-cm", Box::new(|c| c.perturb_cm = -1.0)),
+            ("--perturb-cm", Box::new(|c| c.perturb_cm = 1e6)),
+            // A camera of a rig file larger than any made, at the default scale.
+            (
+                "--scale",
+                Box::new(|c| {
+                    c.rig.cameras[0].intrinsics.width = 200_000;
+                }),
+            ),
         ];
         for (name, change) in cases {
             let mut cfg = base();
@@ -399,6 +450,34 @@ mod tests {
         }
         // The defaults pass the check.
         assert!(check_config(&base()).is_ok());
+    }
+
+    #[test]
+    fn outputs_that_would_overwrite_each_other_or_cannot_be_written_are_refused_first() {
+        let dir = std::env::temp_dir().join(format!("rigcal-synth-out-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let cfg = SynthConfig::new(
+            SceneKind::Urban,
+            SimRig::preset(RigPreset::Pandaset),
+            TrajectoryKind::Figure8,
+            8.0,
+            1,
+        );
+        let same = dir.join("drive.yaml");
+        let missing_dir = dir.join("nope").join("gt.yaml");
+        let cases = [
+            (same.clone(), same.clone(), "same file"),
+            (dir.join("drive.mcap"), missing_dir, "does not exist"),
+            (dir.join("drive.mcap"), dir.clone(), "is a directory"),
+        ];
+        for (out, gt, why) in cases {
+            let started = std::time::Instant::now();
+            let err = synthesize(&cfg, &out, &gt, &mut |_, _| {}).unwrap_err();
+            assert!(err.to_string().contains(why), "{why}: {err}");
+            assert!(started.elapsed().as_secs_f64() < 1.0, "{why}: refused late");
+            assert!(!out.exists() || out == dir);
+        }
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 
     #[test]

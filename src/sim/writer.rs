@@ -403,6 +403,17 @@ impl Ros2McapWriter {
             path: path.to_path_buf(),
             what: what.to_string(),
         };
+        // Follow a link so it stays a link; a device or pipe cannot take a rename.
+        let resolved = match crate::util::output_target(path) {
+            Ok(crate::util::OutputTarget::Replace(p)) => p,
+            Ok(crate::util::OutputTarget::Direct(_)) => {
+                return Err(invalid(
+                    "is not a regular file (a device or pipe); an MCAP is written beside its target and renamed into place",
+                ));
+            }
+            Err(e) => return Err(invalid(&e.to_string())),
+        };
+        let path = resolved.as_path();
         let file_name = path
             .file_name()
             .ok_or_else(|| invalid("the output path has no file name"))?;
