@@ -326,3 +326,32 @@ fn calibrate_help_groups_the_options_and_its_examples_use_real_ones() {
         "only {checked} options checked in:\n{examples}"
     );
 }
+
+/// An initial guess that gives only some of the log's sensors says which ones keep the log's
+/// extrinsics instead of applying it silently.
+#[test]
+fn an_initial_guess_for_some_sensors_names_the_ones_it_leaves() {
+    let drive = Drive::open(&pandaset()).unwrap();
+    let dir = std::env::temp_dir().join(format!("rigcal-cli-partial-init-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let mut init = drive.rig.clone();
+    init.sensors.retain(|s| s.name != "left_camera");
+    let init_path = dir.join("init.yaml");
+    CalibrationFile::from_rig(&init).save(&init_path).unwrap();
+    let o = Command::new(env!("CARGO_BIN_EXE_rigcal"))
+        .arg("calibrate")
+        .arg(pandaset())
+        .args(["--method", "edge", "--iterations", "0", "--init"])
+        .arg(&init_path)
+        .arg("--out")
+        .arg(dir.join("out.yaml"))
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{err}");
+    assert!(
+        err.contains("gives 7 of 8 sensors; from the log's /tf_static: left_camera"),
+        "{err}"
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}

@@ -122,6 +122,19 @@ fn not_mcap_is_a_clear_error() {
         .unwrap_err()
         .to_string();
     assert!(err.contains("/nonexistent/x.mcap"), "{err}");
+    // An empty file, a directory and a rosbag2-like folder say what they are.
+    let empty = write_tmp(&dir, b"", "empty");
+    let err = Drive::open(&empty).unwrap_err().to_string();
+    assert!(err.contains("the file is empty"), "{err}");
+    let err = Drive::open(dir.path()).unwrap_err().to_string();
+    assert!(
+        err.contains("directory") && err.contains("empty.mcap"),
+        "{err}"
+    );
+    let bare = dir.path().join("bare");
+    std::fs::create_dir(&bare).unwrap();
+    let err = Drive::open(&bare).unwrap_err().to_string();
+    assert!(err.contains("it is a directory, not a file"), "{err}");
 }
 
 proptest! {

@@ -437,9 +437,26 @@ pub fn calibrate(
     let drive = Drive::open_with(&args.log, &options).map_err(|e| e.to_string())?;
     let mut rig = drive.rig.clone();
     if let Some(init) = &args.init {
-        rig = crate::interop::import::load_initial_guess(init, &rig)
-            .map_err(|e| format!("--init: {e}"))?
-            .rig;
+        let imported = crate::interop::import::load_initial_guess(init, &rig)
+            .map_err(|e| format!("--init: {e}"))?;
+        let kept: Vec<&str> = rig
+            .sensors
+            .iter()
+            .map(|s| s.name.as_str())
+            .filter(|name| !imported.matched.iter().any(|m| m == name))
+            .collect();
+        if !kept.is_empty() {
+            // Not an error (a file may hold only some sensors), but never silent.
+            eprintln!(
+                "--init {} ({}) gives {} of {} sensors; from the log's /tf_static: {}",
+                init.display(),
+                imported.format,
+                rig.sensors.len() - kept.len(),
+                rig.sensors.len(),
+                kept.join(", ")
+            );
+        }
+        rig = imported.rig;
     }
     if let Some((deg, cm)) = perturbation {
         rig = crate::sim::synth::perturb_rig(&rig, deg, cm, args.seed);

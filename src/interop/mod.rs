@@ -367,7 +367,8 @@ pub(crate) fn pick<'a>(
 
 /// Write an export atomically: the file at `out`, or for per-camera formats the directory `out`
 /// (created if missing) holding one file per camera, each written atomically. Nothing is
-/// written unless every file's directory exists or can be made.
+/// written unless every file's directory exists or can be made and no file's name is taken by
+/// a directory.
 pub fn write(export: &Export, out: &Path) -> Result<Vec<PathBuf>, ExportError> {
     let err = |path: &Path, what: String| ExportError::Write {
         path: path.to_path_buf(),
@@ -384,6 +385,12 @@ pub fn write(export: &Export, out: &Path) -> Result<Vec<PathBuf>, ExportError> {
             ));
         }
         std::fs::create_dir_all(out).map_err(|e| err(out, e.to_string()))?;
+        // Every file's place is checked before the first is written, so a folder in the way
+        // of one camera's file does not leave the others half replaced.
+        for f in &export.files {
+            let path = out.join(&f.name);
+            crate::util::check_output(&path).map_err(|e| err(&path, e.to_string()))?;
+        }
         let mut written = Vec::new();
         for f in &export.files {
             let path = out.join(&f.name);
@@ -496,6 +503,22 @@ mod collision_tests {
             std::fs::metadata(&out).unwrap().permissions().mode() & 0o100,
             0
         );
+        let _ = std::fs::remove_dir_all(dir);
+    }
+
+    #[test]
+    fn a_per_camera_export_with_one_name_taken_by_a_folder_writes_nothing() {
+        let dir = std::env::temp_dir().join(format!("rigcal-export-taken-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let doc = CalibrationFile::from_rig(&test_rig::rig());
+        let e = export(&doc, ExportFormat::CameraInfo, &ExportOptions::default()).unwrap();
+        assert!(e.files.len() >= 2);
+        // The last camera's file name is a folder: nothing may be written before that shows.
+        let taken = dir.join(&e.files[e.files.len() - 1].name);
+        std::fs::create_dir_all(&taken).unwrap();
+        let err = write(&e, &dir).unwrap_err().to_string();
+        assert!(err.contains("is a directory"), "{err}");
+        assert_eq!(std::fs::read_dir(&dir).unwrap().count(), 1);
         let _ = std::fs::remove_dir_all(dir);
     }
 }

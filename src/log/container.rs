@@ -111,14 +111,46 @@ impl McapContainer {
             path: path.to_path_buf(),
             source,
         };
+        let not_mcap = |what: String| LogError::NotMcap {
+            path: path.to_path_buf(),
+            what,
+        };
+        if path.is_dir() {
+            // A rosbag2 folder holds its .mcap files and a metadata.yaml.
+            let mcaps: Vec<String> = std::fs::read_dir(path)
+                .map(|entries| {
+                    entries
+                        .filter_map(|e| e.ok())
+                        .map(|e| e.file_name().to_string_lossy().into_owned())
+                        .filter(|n| n.ends_with(".mcap"))
+                        .collect()
+                })
+                .unwrap_or_default();
+            return Err(not_mcap(if mcaps.is_empty() {
+                "it is a directory, not a file".into()
+            } else {
+                format!(
+                    "it is a directory (a rosbag2 folder?); give one of its MCAP files: {}",
+                    mcaps.join(", ")
+                )
+            }));
+        }
         let mut file = File::open(path).map_err(io)?;
-        let file_len = file.metadata().map_err(io)?.len();
+        let meta = file.metadata().map_err(io)?;
+        if !meta.is_file() {
+            return Err(not_mcap(
+                "it is not a regular file (a pipe or device); an MCAP is read by seeking".into(),
+            ));
+        }
+        let file_len = meta.len();
+        if file_len == 0 {
+            return Err(not_mcap("the file is empty".into()));
+        }
         let mut magic = [0u8; 8];
         if file_len < 8 || file.read_exact(&mut magic).is_err() || &magic != MAGIC {
-            return Err(LogError::NotMcap {
-                path: path.to_path_buf(),
-                what: "the file does not start with the MCAP magic bytes".into(),
-            });
+            return Err(not_mcap(
+                "the file does not start with the MCAP magic bytes".into(),
+            ));
         }
         let mut c = Self {
             path: path.to_path_buf(),

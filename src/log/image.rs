@@ -70,7 +70,57 @@ pub fn decode_compressed(img: &CompressedImage<'_>) -> DecodeResult<RgbImage> {
             img.format
         ))
     })?;
+    if format == image::ImageFormat::Jpeg && !ends_with_jpeg_eoi(&img.data) {
+        // The decoder would fill what is missing with grey and say nothing.
+        return Err(DecodeError::new(
+            "JPEG data ends without its end-of-image marker (truncated?)".to_string(),
+        ));
+    }
     image::load_from_memory_with_format(&img.data, format)
         .map(|d| d.into_rgb8())
         .map_err(|e| DecodeError::new(format!("cannot decode {:?} image: {e}", format)))
+}
+
+/// Whether JPEG data ends with its end-of-image marker (FF D9), ignoring zero padding after it.
+fn ends_with_jpeg_eoi(data: &[u8]) -> bool {
+    let end = data.iter().rposition(|&b| b != 0).map_or(0, |i| i + 1);
+    data[..end].ends_with(&[0xFF, 0xD9])
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+    use super::*;
+
+    #[test]
+    fn a_truncated_jpeg_is_an_error_not_a_grey_image() {
+        let pixels =
+            image::RgbImage::from_fn(32, 16, |x, y| image::Rgb([x as u8 * 8, y as u8 * 16, 90]));
+        let mut jpeg = Vec::new();
+        image::DynamicImage::ImageRgb8(pixels)
+            .write_to(
+                &mut std::io::Cursor::new(&mut jpeg),
+                image::ImageFormat::Jpeg,
+            )
+            .unwrap();
+        let message = |data: Vec<u8>| CompressedImage {
+            stamp_nanos: 0,
+            frame_id: "camera".into(),
+            format: "jpeg".into(),
+            data: data.into(),
+        };
+        assert_eq!(
+            decode_compressed(&message(jpeg.clone()))
+                .unwrap()
+                .dimensions(),
+            (32, 16)
+        );
+        // Zero padding after the marker is fine.
+        let mut padded = jpeg.clone();
+        padded.extend([0, 0, 0]);
+        assert!(decode_compressed(&message(padded)).is_ok());
+        let cut = jpeg[..jpeg.len() - 40].to_vec();
+        let err = decode_compressed(&message(cut)).unwrap_err().to_string();
+        assert!(err.contains("end-of-image marker"), "{err}");
+    }
 }
