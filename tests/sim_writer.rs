@@ -535,3 +535,36 @@ fn errors_name_the_output_path() {
     assert!(Drive::open(&path).is_ok());
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// One corrupt trajectory pose (1000 km off) does not sink the drive: it is dropped and named,
+/// and the rest of the trajectory is kept.
+#[test]
+fn a_trajectory_pose_far_from_its_neighbours_is_dropped_with_a_problem() {
+    let dir = temp_dir("jump");
+    let path = dir.join("jump.mcap");
+    let mut w = Ros2McapWriter::create(&path).unwrap();
+    w.write_tf_static(
+        T0,
+        &[("base_link".into(), "lidar".into(), base_from_lidar())],
+    )
+    .unwrap();
+    for i in 0..20 {
+        let mut pose = Rigid::new(DQuat::IDENTITY, DVec3::new(0.5 * i as f64, 0.0, 0.0));
+        if i == 7 {
+            pose.translation.y += 1e6;
+        }
+        w.write_tf(T0 + i * 100 * MS, "odom", "base_link", pose)
+            .unwrap();
+    }
+    w.finish().unwrap();
+    let drive = Drive::open(&path).unwrap();
+    assert_eq!(drive.trajectory.len(), 19);
+    let said: Vec<String> = drive.problems.iter().map(|p| p.to_string()).collect();
+    assert!(
+        said.iter()
+            .any(|p| p.contains("trajectory pose at") && p.contains("dropped")),
+        "{said:?}"
+    );
+    let at_seven = drive.trajectory.world_from_vehicle(T0 + 700 * MS).unwrap();
+    assert!((at_seven.translation - DVec3::new(3.5, 0.0, 0.0)).length() < 1e-9);
+}

@@ -55,6 +55,46 @@ impl Trajectory {
         }
     }
 
+    /// Remove poses that jump away from both neighbours faster than `max_speed_mps` while the
+    /// neighbours agree with each other (a corrupt message, not a fast vehicle); an end pose is
+    /// removed when it jumps from the two next to it. Returns each removed pose's stamp and how
+    /// far (m) it lay from where its neighbours put the vehicle.
+    pub fn remove_jumps(&mut self, max_speed_mps: f64) -> Vec<(i64, f64)> {
+        let speed = |a: usize, b: usize, s: &Self| {
+            let dt = (s.stamps_nanos[b] - s.stamps_nanos[a]) as f64 * 1e-9;
+            let d = (s.world_from_vehicle[b].translation - s.world_from_vehicle[a].translation)
+                .length();
+            (d / dt.max(1e-9), d)
+        };
+        let mut removed = Vec::new();
+        let mut i = 0;
+        while self.len() >= 3 && i < self.len() {
+            let n = self.len();
+            let jump = if i == 0 {
+                let (v01, d01) = speed(0, 1, self);
+                (v01 > max_speed_mps && speed(1, 2, self).0 <= max_speed_mps).then_some(d01)
+            } else if i == n - 1 {
+                let (v, d) = speed(n - 2, n - 1, self);
+                (v > max_speed_mps && speed(n - 3, n - 2, self).0 <= max_speed_mps).then_some(d)
+            } else {
+                let (before, d) = speed(i - 1, i, self);
+                let after = speed(i, i + 1, self).0;
+                let across = speed(i - 1, i + 1, self).0;
+                (before > max_speed_mps && after > max_speed_mps && across <= max_speed_mps)
+                    .then_some(d)
+            };
+            match jump {
+                Some(d) => {
+                    removed.push((self.stamps_nanos[i], d));
+                    self.stamps_nanos.remove(i);
+                    self.world_from_vehicle.remove(i);
+                }
+                None => i += 1,
+            }
+        }
+        removed
+    }
+
     pub fn with_max_extrapolation_nanos(mut self, nanos: i64) -> Self {
         self.max_extrapolation_nanos = nanos.max(0);
         self
@@ -166,5 +206,35 @@ mod tests {
             Trajectory::default().world_from_vehicle(0),
             Err(TrajectoryError::Empty)
         );
+    }
+
+    #[test]
+    fn a_pose_that_jumps_away_from_both_neighbours_is_removed_and_fast_driving_is_not() {
+        let drive = |speed_mps: f64| -> Vec<(i64, Rigid)> {
+            (0..10)
+                .map(|k| {
+                    let t = k as f64 * 0.1;
+                    (
+                        k * 100_000_000,
+                        Rigid::new(DQuat::IDENTITY, DVec3::new(speed_mps * t, 0.0, 0.0)),
+                    )
+                })
+                .collect()
+        };
+        // 50 m/s throughout: nothing is a jump.
+        let mut fast = Trajectory::new(drive(50.0));
+        assert!(fast.remove_jumps(100.0).is_empty());
+        assert_eq!(fast.len(), 10);
+        // One pose 1000 km off, inside and at either end.
+        for k in [4usize, 0, 9] {
+            let mut poses = drive(5.0);
+            poses[k].1.translation.y += 1e6;
+            let mut t = Trajectory::new(poses);
+            let removed = t.remove_jumps(100.0);
+            assert_eq!(removed.len(), 1, "pose {k}");
+            assert_eq!(removed[0].0, k as i64 * 100_000_000);
+            assert!((removed[0].1 - 1e6).abs() < 1.0, "{removed:?}");
+            assert_eq!(t.len(), 9);
+        }
     }
 }

@@ -22,6 +22,10 @@ use crate::calib::{Rig, Sensor, SensorKind};
 use crate::geometry::camera::CameraIntrinsics;
 use crate::geometry::{Rigid, Trajectory};
 
+/// Faster than any vehicle: a trajectory pose that implies it on both sides is dropped
+/// ([`Trajectory::remove_jumps`]).
+const MAX_VEHICLE_SPEED_MPS: f64 = 100.0;
+
 #[derive(Clone, Debug)]
 pub struct DriveOptions {
     /// Fixed frame of the trajectory (e.g. world, odom, map); default: parent of the densest
@@ -306,6 +310,13 @@ impl Drive {
                     .map(|p| (p.stamp_nanos, p.frame_from_body))
                     .collect(),
             );
+        }
+        // A pose far from both neighbours is a corrupt message, not a drive: drop it and say so.
+        for (stamp, jump_m) in trajectory.remove_jumps(MAX_VEHICLE_SPEED_MPS) {
+            problems.push(Problem::file(format!(
+                "trajectory pose at {:.3} s lies {jump_m:.3e} m from where its neighbours put the vehicle (faster than {MAX_VEHICLE_SPEED_MPS} m/s): dropped",
+                stamp as f64 * 1e-9
+            )));
         }
         let trajectory = trajectory.with_max_extrapolation_nanos(max_extrapolation_nanos);
 

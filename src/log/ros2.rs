@@ -60,11 +60,26 @@ fn pose(r: &mut CdrReader<'_>, what: &str) -> DecodeResult<Rigid> {
     rigid_from(p, q, what)
 }
 
+/// The longest translation a pose in a message may have (m): Earth-centred and UTM coordinates
+/// are below 1e7 m, so anything longer is a corrupt value, not a place.
+pub const MAX_TRANSLATION_M: f64 = 1e8;
+
 /// A rigid transform from a translation and an (x, y, z, w) quaternion read from a message.
 pub fn rigid_from(p: [f64; 3], q: [f64; 4], what: &str) -> DecodeResult<Rigid> {
     let quat = DQuat::from_xyzw(q[0], q[1], q[2], q[3]);
     let norm = quat.length();
-    if !norm.is_finite() || !(0.5..2.0).contains(&norm) || !p.iter().all(|v| v.is_finite()) {
+    if !p.iter().all(|v| v.is_finite()) {
+        return Err(DecodeError::new(format!(
+            "{what}: invalid pose (translation {p:?} is not finite)"
+        )));
+    }
+    let length_m = DVec3::from_array(p).length();
+    if length_m > MAX_TRANSLATION_M {
+        return Err(DecodeError::new(format!(
+            "{what}: invalid pose (translation of {length_m:.3e} m, beyond any map frame's {MAX_TRANSLATION_M:.0e} m)"
+        )));
+    }
+    if !norm.is_finite() || !(0.5..2.0).contains(&norm) {
         return Err(DecodeError::new(format!(
             "{what}: invalid pose (quaternion norm {norm})"
         )));
@@ -195,4 +210,29 @@ pub fn decode(kind: Ros2Type, payload: &[u8]) -> DecodeResult<Decoded<'_>> {
             })
         }
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_bad_pose_is_refused_naming_what_is_wrong() {
+        let unit = [0.0, 0.0, 0.0, 1.0];
+        assert!(rigid_from([1.0, 2.0, 3.0], unit, "pose").is_ok());
+        let e = rigid_from([f64::NAN, 0.0, 0.0], unit, "pose")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("not finite"), "{e}");
+        let e = rigid_from([1e300, 0.0, 0.0], unit, "pose")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("beyond any map frame"), "{e}");
+        // Earth-centred coordinates are places, not corruption.
+        assert!(rigid_from([-2.7e6, -4.3e6, 3.9e6], unit, "pose").is_ok());
+        let e = rigid_from([0.0; 3], [0.0; 4], "pose")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("quaternion norm"), "{e}");
+    }
 }
