@@ -98,6 +98,11 @@ fn bad_arguments_fail_with_one_line() {
         !ok && err.contains("'front_camera' is not a LiDAR"),
         "{err}"
     );
+    let (ok, err) = run(&["--method", "icp", "--root", "front_camera"]);
+    assert!(
+        !ok && err.contains("--root: 'front_camera' is not a LiDAR"),
+        "{err}"
+    );
     let (ok, err) = run(&["--method", "edge", "--sensors", "nope"]);
     assert!(!ok && err.contains("'nope'"), "{err}");
     let (ok, err) = run(&["--method", "unical", "--root", "roof"]);

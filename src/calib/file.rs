@@ -147,6 +147,13 @@ impl CalibrationFile {
                 .vehicle_from_sensor
                 .to_rigid()
                 .map_err(|e| invalid(format!("sensor '{}': {e}", s.name)))?;
+            let offset_m = vehicle_from_sensor.translation.length();
+            if offset_m > MAX_SENSOR_OFFSET_M {
+                return Err(invalid(format!(
+                    "sensor '{}' is {offset_m:.3e} m from the vehicle frame; a sensor on a vehicle is within {MAX_SENSOR_OFFSET_M} m (translation_m is in metres)",
+                    s.name
+                )));
+            }
             if s.kind == SensorKind::Camera {
                 match &s.camera {
                     None => {
@@ -187,6 +194,18 @@ impl CalibrationFile {
     }
 
     pub fn parse(text: &str, path: &Path) -> Result<Self, CalibFileError> {
+        // Editors on Windows may start a UTF-8 file with a byte-order mark.
+        let text = text.strip_prefix('\u{feff}').unwrap_or(text);
+        let depth = flow_nesting_depth(text);
+        if depth > MAX_FLOW_NESTING {
+            // The YAML parser takes time cubic in this depth: refuse before parsing.
+            return Err(CalibFileError::Invalid {
+                path: path.to_path_buf(),
+                what: format!(
+                    "brackets nested {depth} deep (a calibration file nests a few; at most {MAX_FLOW_NESTING})"
+                ),
+            });
+        }
         serde_yaml::from_str(text).map_err(|source| CalibFileError::Parse {
             path: path.to_path_buf(),
             source,
@@ -221,6 +240,37 @@ impl CalibrationFile {
             }
         })
     }
+}
+
+/// The farthest a sensor may sit from the vehicle frame (m): a larger translation is a unit
+/// slip (millimetres read as metres) or a corrupt value.
+pub const MAX_SENSOR_OFFSET_M: f64 = 1000.0;
+
+/// The deepest `[ … ]` / `{ … }` nesting a calibration file may have.
+const MAX_FLOW_NESTING: usize = 64;
+
+/// How deep YAML flow collections (`[`, `{`) nest in `text`, outside quoted strings and
+/// comments.
+fn flow_nesting_depth(text: &str) -> usize {
+    let (mut depth, mut deepest) = (0usize, 0usize);
+    for line in text.lines() {
+        let mut quote: Option<char> = None;
+        for c in line.chars() {
+            match (quote, c) {
+                (Some(q), c) if c == q => quote = None,
+                (Some(_), _) => {}
+                (None, '"' | '\'') => quote = Some(c),
+                (None, '#') => break,
+                (None, '[' | '{') => {
+                    depth += 1;
+                    deepest = deepest.max(depth);
+                }
+                (None, ']' | '}') => depth = depth.saturating_sub(1),
+                _ => {}
+            }
+        }
+    }
+    deepest
 }
 
 #[cfg(test)]
@@ -342,6 +392,27 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(err.contains("/nonexistent/c.yaml"));
+        // A sensor kilometres off, brackets nested thousands deep.
+        let mut file = CalibrationFile::from_rig(&sample_rig());
+        file.sensors[0].vehicle_from_sensor.translation_m = [1e308, 0.0, 0.0];
+        let err = file.to_rig(p).unwrap_err().to_string();
+        assert!(err.contains("within 1000 m"), "{err}");
+        let deep = format!("ignored: {}{}\n", "[".repeat(5000), "]".repeat(5000));
+        let started = std::time::Instant::now();
+        let err = CalibrationFile::parse(&deep, p).unwrap_err().to_string();
+        assert!(
+            err.contains("nested 5000 deep") && err.contains("bad.yaml"),
+            "{err}"
+        );
+        assert!(started.elapsed().as_secs_f64() < 1.0);
+        // Quoted brackets and comments do not count; a byte-order mark is read past.
+        let text = format!(
+            "\u{feff}{}",
+            CalibrationFile::from_rig(&sample_rig()).to_yaml()
+        );
+        let text = text.replace("vehicle_frame:", "# [[[[ a comment\nvehicle_frame:");
+        assert!(CalibrationFile::parse(&text, p).unwrap().to_rig(p).is_ok());
+        assert_eq!(flow_nesting_depth("a: '[[[' # {{{\nb: [1, [2, {c: 3}]]"), 3);
     }
 
     #[test]

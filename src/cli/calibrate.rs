@@ -149,7 +149,12 @@ const TRAJECTORY_SWEEPS: usize = 10;
 /// The reference LiDAR: `--root`, else the rig's first LiDAR.
 fn reference_lidar(args: &CalibrateArgs, rig: &Rig) -> Result<String, String> {
     match &args.root {
-        Some(r) => Ok(r.clone()),
+        Some(r) if rig.lidars().any(|l| &l.name == r) => Ok(r.clone()),
+        Some(r) => Err(format!(
+            "--root: '{r}' is not a LiDAR of {}; --method {} registers against a LiDAR",
+            args.log.display(),
+            args.method
+        )),
         None => rig
             .lidars()
             .next()
