@@ -484,7 +484,7 @@ fn run() -> Result<()> {
                 .map_err(anyhow::Error::msg)
                 .with_context(|| format!("cannot calibrate {}", log.display()))?;
             bar.finish();
-            println!(
+            eprintln!(
                 "wrote {} in {:.1} s",
                 out.display(),
                 started.elapsed().as_secs_f64()
@@ -546,7 +546,8 @@ fn run() -> Result<()> {
                 .with_context(|| format!("cannot export {}", calibration.display()))?;
             let written = interop::write(&export, &out)?;
             for path in written {
-                println!("wrote {}", path.display());
+                // On stderr: the export itself may be going to stdout.
+                eprintln!("wrote {}", path.display());
             }
             Ok(())
         }

@@ -27,12 +27,17 @@ pub fn output_target(path: &Path) -> std::io::Result<OutputTarget> {
             ));
         }
         Ok(m) if !m.is_file() => return Ok(OutputTarget::Direct(path.to_path_buf())),
+        // /dev/stdout redirected to a file resolves through /proc/self/fd to that file;
+        // replacing it by a rename would leave the shell's descriptor on the unlinked old one.
+        Ok(_) if path.starts_with("/dev") || path.starts_with("/proc") => {
+            return Ok(OutputTarget::Direct(path.to_path_buf()));
+        }
         _ => {}
     }
     // A regular file or none yet: the file the links end at is the one to replace.
     let mut p = path.to_path_buf();
-    // As many links as Linux follows before ELOOP.
-    for _ in 0..40 {
+    // As many links as Linux follows before ELOOP, and the file they end at.
+    for _ in 0..=40 {
         match std::fs::symlink_metadata(&p) {
             Ok(m) if m.file_type().is_symlink() => {
                 let target = std::fs::read_link(&p)?;
@@ -81,8 +86,25 @@ pub fn check_output(path: &Path) -> std::io::Result<()> {
 pub fn same_file(a: &Path, b: &Path) -> bool {
     match (std::fs::canonicalize(a), std::fs::canonicalize(b)) {
         (Ok(a), Ok(b)) => a == b,
-        _ => false,
+        // A file not written yet: compare where the two would be written.
+        _ => match (landing_place(a), landing_place(b)) {
+            (Some(a), Some(b)) => a == b,
+            _ => false,
+        },
     }
+}
+
+/// Where a write to `path` would create its file: its directory canonicalised, and its name
+/// (after links).
+fn landing_place(path: &Path) -> Option<std::path::PathBuf> {
+    let OutputTarget::Replace(p) = output_target(path).ok()? else {
+        return Some(path.to_path_buf());
+    };
+    let dir = match p.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d,
+        _ => Path::new("."),
+    };
+    Some(std::fs::canonicalize(dir).ok()?.join(p.file_name()?))
 }
 
 /// Write `bytes` to `path` atomically: a temporary file in the same directory, fsync, rename.
@@ -206,16 +228,21 @@ mod tests {
                 .file_type()
                 .is_symlink()
         );
-        // /dev/null stays a device.
+        // /dev/null is written to, not replaced (asserted on the resolution only, so a
+        // regression cannot replace the machine's /dev/null when tests run as root).
         let null = Path::new("/dev/null");
         if null.exists() {
             assert_eq!(
                 output_target(null).unwrap(),
                 OutputTarget::Direct(null.into())
             );
-            write_atomic(null, b"gone").unwrap();
-            assert!(!std::fs::metadata(null).unwrap().is_file());
         }
+        // Two names of one file not written yet are the same file.
+        assert!(same_file(
+            &dir.join("new.mcap"),
+            &dir.join(".").join("new.mcap")
+        ));
+        assert!(!same_file(&dir.join("new.mcap"), &dir.join("new.yaml")));
         // A directory is refused, naming it.
         let e = write_atomic(&dir, b"x").unwrap_err();
         assert!(e.to_string().contains("is a directory"), "{e}");

@@ -184,6 +184,25 @@ fn bad_arguments_fail_with_one_line() {
         !ok && err.contains("--perturb-deg") && err.contains("[0, 180]"),
         "{err}"
     );
+    // A device as the output is refused: the file is written at the start and replaced.
+    let o = Command::new(env!("CARGO_BIN_EXE_rigcal"))
+        .arg("calibrate")
+        .arg(pandaset())
+        .args([
+            "--method",
+            "edge",
+            "--iterations",
+            "1",
+            "--out",
+            "/dev/null",
+        ])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        !o.status.success() && err.contains("is not a regular file"),
+        "{err}"
+    );
     // An output that is the log itself (here through a link) is refused before anything is
     // written; a copy of a small fixture stands in for the log.
     let dir = std::env::temp_dir().join(format!("rigcal-cli-self-{}", std::process::id()));

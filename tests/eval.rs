@@ -253,6 +253,21 @@ fn the_command_prints_tables_and_fails_with_the_file_named() {
     );
     let parsed: serde_json::Value = serde_json::from_slice(&std::fs::read(&json).unwrap()).unwrap();
     assert!(parsed["poses"].as_array().unwrap().len() > 2);
+    // A log that holds none of the calibration's sensors is refused, not measured as empty.
+    let other_log = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/mcap/ros2.mcap");
+    let out = Command::new(env!("CARGO_BIN_EXE_rigcal"))
+        .args(["eval", "--ground-truth"])
+        .arg(&gt)
+        .arg("--calibration")
+        .arg(&gt)
+        .arg(&other_log)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success() && err.contains("has none of the sensors of"),
+        "{err}"
+    );
     let bad = dir.join("bad.yaml");
     std::fs::write(&bad, "rigcal_calibration: 1\nsensors: 7\n").unwrap();
     let out = Command::new(env!("CARGO_BIN_EXE_rigcal"))

@@ -420,6 +420,12 @@ pub fn calibrate(
     progress: &mut dyn FnMut(usize, usize),
 ) -> Result<CalibrationFile, String> {
     let perturbation = args.perturbation()?;
+    if let Ok(crate::util::OutputTarget::Direct(_)) = crate::util::output_target(&args.out) {
+        return Err(format!(
+            "--out {} is not a regular file (a device or pipe); calibrate writes its file at the start and replaces it every 30 s",
+            args.out.display()
+        ));
+    }
     if args.out == args.log || crate::util::same_file(&args.out, &args.log) {
         return Err(format!(
             "--out {} is the log itself; the calibration would overwrite it",

@@ -30,7 +30,8 @@ use crate::log::Drive;
 use crate::optim::edge_align::EdgeAlignment;
 use crate::optim::photo_consistency::{PhotoConfig, PhotoProblem, lidar_map};
 
-/// The most frames per sensor pair `--frames` takes (every sweep of a long log is far fewer).
+/// The most frames per sensor pair `--frames` takes: each frame costs a sweep's registration
+/// or an image's edge search, so more is hours of work, and a larger number is a slip.
 pub const MAX_FRAMES: usize = 1000;
 
 /// What `rigcal eval` was asked to do.
@@ -157,6 +158,23 @@ pub fn evaluate(
     };
     if let Some(log) = &args.log {
         let drive = Drive::open(log).map_err(|e| e.to_string())?;
+        if !calibration
+            .sensors
+            .iter()
+            .any(|s| drive.stream(&s.name).is_some())
+        {
+            let in_log: Vec<&str> = drive.rig.sensors.iter().map(|s| s.name.as_str()).collect();
+            return Err(format!(
+                "{} has none of the sensors of {} (the log's: {}); is it the right log?",
+                log.display(),
+                args.calibration.display(),
+                if in_log.is_empty() {
+                    "none".to_string()
+                } else {
+                    in_log.join(", ")
+                }
+            ));
+        }
         measure_on_data(
             args,
             &drive,

@@ -55,43 +55,53 @@ impl Trajectory {
         }
     }
 
-    /// Remove poses that jump away from both neighbours faster than `max_speed_mps` while the
-    /// neighbours agree with each other (a corrupt message, not a fast vehicle); an end pose is
-    /// removed when it jumps from the two next to it. Returns each removed pose's stamp and how
-    /// far (m) it lay from where its neighbours put the vehicle.
+    /// Remove poses that lie farther from most of their four nearest poses (two either side
+    /// where there are) than `max_speed_mps` allows: a corrupt message, not a fast vehicle. A
+    /// pose is judged against poses, not a model of the drive, so a genuine jump of the whole
+    /// trajectory (a relocalisation) removes nothing, and two or more bad poses in a row that
+    /// agree with each other are found only while they are fewer than their good neighbours.
+    /// Returns each removed pose's stamp and its distance (m) to the nearest good pose.
     pub fn remove_jumps(&mut self, max_speed_mps: f64) -> Vec<(i64, f64)> {
-        let speed = |a: usize, b: usize, s: &Self| {
-            let dt = (s.stamps_nanos[b] - s.stamps_nanos[a]) as f64 * 1e-9;
-            let d = (s.world_from_vehicle[b].translation - s.world_from_vehicle[a].translation)
+        let n = self.len();
+        let far = |a: usize, b: usize| {
+            let dt = (self.stamps_nanos[b] - self.stamps_nanos[a]).abs() as f64 * 1e-9;
+            let d = (self.world_from_vehicle[b].translation
+                - self.world_from_vehicle[a].translation)
                 .length();
-            (d / dt.max(1e-9), d)
+            d > max_speed_mps * dt
         };
+        let nearest = |i: usize| -> Vec<usize> {
+            let mut others: Vec<usize> = (i.saturating_sub(4)..(i + 5).min(n))
+                .filter(|&j| j != i)
+                .collect();
+            others.sort_by_key(|&j| j.abs_diff(i));
+            others.truncate(4);
+            others
+        };
+        let bad: Vec<bool> = (0..n)
+            .map(|i| {
+                let others = nearest(i);
+                others.len() >= 3
+                    && 2 * others.iter().filter(|&&j| far(i, j)).count() > others.len()
+            })
+            .collect();
         let mut removed = Vec::new();
-        let mut i = 0;
-        while self.len() >= 3 && i < self.len() {
-            let n = self.len();
-            let jump = if i == 0 {
-                let (v01, d01) = speed(0, 1, self);
-                (v01 > max_speed_mps && speed(1, 2, self).0 <= max_speed_mps).then_some(d01)
-            } else if i == n - 1 {
-                let (v, d) = speed(n - 2, n - 1, self);
-                (v > max_speed_mps && speed(n - 3, n - 2, self).0 <= max_speed_mps).then_some(d)
-            } else {
-                let (before, d) = speed(i - 1, i, self);
-                let after = speed(i, i + 1, self).0;
-                let across = speed(i - 1, i + 1, self).0;
-                (before > max_speed_mps && after > max_speed_mps && across <= max_speed_mps)
-                    .then_some(d)
-            };
-            match jump {
-                Some(d) => {
-                    removed.push((self.stamps_nanos[i], d));
-                    self.stamps_nanos.remove(i);
-                    self.world_from_vehicle.remove(i);
-                }
-                None => i += 1,
-            }
+        for i in (0..n).filter(|&i| bad[i]) {
+            let distance_m = (0..n)
+                .filter(|&j| !bad[j])
+                .min_by_key(|&j| j.abs_diff(i))
+                .map_or(f64::NAN, |j| {
+                    (self.world_from_vehicle[i].translation
+                        - self.world_from_vehicle[j].translation)
+                        .length()
+                });
+            removed.push((self.stamps_nanos[i], distance_m));
         }
+        let mut keep = bad.iter().map(|b| !b);
+        self.stamps_nanos.retain(|_| keep.next().unwrap_or(true));
+        let mut keep = bad.iter().map(|b| !b);
+        self.world_from_vehicle
+            .retain(|_| keep.next().unwrap_or(true));
         removed
     }
 
@@ -209,7 +219,7 @@ mod tests {
     }
 
     #[test]
-    fn a_pose_that_jumps_away_from_both_neighbours_is_removed_and_fast_driving_is_not() {
+    fn a_pose_far_from_most_of_its_neighbours_is_removed_and_fast_driving_is_not() {
         let drive = |speed_mps: f64| -> Vec<(i64, Rigid)> {
             (0..10)
                 .map(|k| {
@@ -225,6 +235,26 @@ mod tests {
         let mut fast = Trajectory::new(drive(50.0));
         assert!(fast.remove_jumps(100.0).is_empty());
         assert_eq!(fast.len(), 10);
+        // Poses 0 and 2 off (pose 1 between them is good): both go, pose 1 stays.
+        let mut poses = drive(5.0);
+        poses[0].1.translation.y += 1e6;
+        poses[2].1.translation.y += 1e6;
+        let mut t = Trajectory::new(poses);
+        assert_eq!(t.remove_jumps(100.0).len(), 2);
+        assert_eq!(t.len(), 8);
+        // Two in a row off by the same: both go.
+        let mut poses = drive(5.0);
+        poses[5].1.translation.y += 1e6;
+        poses[6].1.translation.y += 1e6;
+        let mut t = Trajectory::new(poses);
+        assert_eq!(t.remove_jumps(100.0).len(), 2);
+        // The whole trajectory jumping once (a relocalisation) loses nothing.
+        let mut poses = drive(5.0);
+        for p in &mut poses[5..] {
+            p.1.translation.y += 1e6;
+        }
+        let mut t = Trajectory::new(poses);
+        assert!(t.remove_jumps(100.0).is_empty());
         // One pose 1000 km off, inside and at either end.
         for k in [4usize, 0, 9] {
             let mut poses = drive(5.0);

@@ -135,13 +135,14 @@ impl McapContainer {
                 )
             }));
         }
-        let mut file = File::open(path).map_err(io)?;
-        let meta = file.metadata().map_err(io)?;
-        if !meta.is_file() {
+        // Before opening: opening a named pipe blocks until something writes to it.
+        if std::fs::metadata(path).is_ok_and(|m| !m.is_file()) {
             return Err(not_mcap(
                 "it is not a regular file (a pipe or device); an MCAP is read by seeking".into(),
             ));
         }
+        let mut file = File::open(path).map_err(io)?;
+        let meta = file.metadata().map_err(io)?;
         let file_len = meta.len();
         if file_len == 0 {
             return Err(not_mcap("the file is empty".into()));

@@ -314,7 +314,7 @@ impl Drive {
         // A pose far from both neighbours is a corrupt message, not a drive: drop it and say so.
         for (stamp, jump_m) in trajectory.remove_jumps(MAX_VEHICLE_SPEED_MPS) {
             problems.push(Problem::file(format!(
-                "trajectory pose at {:.3} s lies {jump_m:.3e} m from where its neighbours put the vehicle (faster than {MAX_VEHICLE_SPEED_MPS} m/s): dropped",
+                "trajectory pose at {:.3} s lies {jump_m:.3e} m from the nearest good pose, farther from most of its neighbours than {MAX_VEHICLE_SPEED_MPS} m/s allows: dropped",
                 stamp as f64 * 1e-9
             )));
         }

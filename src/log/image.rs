@@ -81,10 +81,15 @@ pub fn decode_compressed(img: &CompressedImage<'_>) -> DecodeResult<RgbImage> {
         .map_err(|e| DecodeError::new(format!("cannot decode {:?} image: {e}", format)))
 }
 
-/// Whether JPEG data ends with its end-of-image marker (FF D9), ignoring zero padding after it.
+/// Whether JPEG data has its end-of-image marker (FF D9) after the first start of scan (FF DA):
+/// entropy-coded data cannot hold FF D9 (an FF there is followed by 00), so a scan cut short has
+/// none, while bytes an encoder appends after the marker (fill, metadata) do not matter, and an
+/// EXIF thumbnail's marker comes before the scan.
 fn ends_with_jpeg_eoi(data: &[u8]) -> bool {
-    let end = data.iter().rposition(|&b| b != 0).map_or(0, |i| i + 1);
-    data[..end].ends_with(&[0xFF, 0xD9])
+    let Some(scan) = data.windows(2).position(|w| w == [0xFF, 0xDA]) else {
+        return false;
+    };
+    data[scan..].windows(2).any(|w| w == [0xFF, 0xD9])
 }
 
 #[cfg(test)]
@@ -115,9 +120,9 @@ mod tests {
                 .dimensions(),
             (32, 16)
         );
-        // Zero padding after the marker is fine.
+        // Bytes an encoder appends after the marker are fine.
         let mut padded = jpeg.clone();
-        padded.extend([0, 0, 0]);
+        padded.extend([0, 0, 0xFF, 0xFF, b'x']);
         assert!(decode_compressed(&message(padded)).is_ok());
         let cut = jpeg[..jpeg.len() - 40].to_vec();
         let err = decode_compressed(&message(cut)).unwrap_err().to_string();
