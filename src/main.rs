@@ -191,6 +191,12 @@ enum Command {
         /// its best one (e.g. 0.02); the rest stay at the initial guess (BENCHMARKS.md)
         #[arg(help_heading = HEADING_EXPERIMENTAL, long, value_name = "RATIO")]
         camera_hold_unobserved: Option<f64>,
+        /// With --camera-frames: hold each camera's translation along its own optical axis at
+        /// the initial guess; only the part of each step square to the axis moves it. Along the
+        /// axis a camera is observed least, and there the colour term pulls it away from what it
+        /// sees (BENCHMARKS.md)
+        #[arg(long, help_heading = HEADING_EXPERIMENTAL)]
+        camera_hold_axial: bool,
         /// With --camera-frames: the share of the camera rays, once heat maps are on, drawn
         /// around the LiDARs' silhouettes (depth edges projected into each image); the rest
         /// are drawn around keypoints but for a small uniform share. A silhouette ties a camera
@@ -427,6 +433,7 @@ fn run() -> Result<()> {
             grouped_camera_translation,
             camera_rays_below_lidar_top,
             camera_hold_unobserved,
+            camera_hold_axial,
             silhouette_share,
             camera_blur,
             colour_pose_levels,
@@ -467,6 +474,7 @@ fn run() -> Result<()> {
                 grouped_camera_translation,
                 camera_rays_below_lidar_top,
                 camera_hold_unobserved,
+                camera_hold_axial,
                 silhouette_share,
                 camera_blur,
                 colour_pose_levels,

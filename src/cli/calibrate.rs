@@ -102,6 +102,9 @@ pub struct CalibrateArgs {
     /// unical with cameras: hold the directions the correspondence term hardly observes
     /// ([`DepthCalibConfig::camera_hold_unobserved`]); in (0, 1).
     pub camera_hold_unobserved: Option<f64>,
+    /// unical with cameras: hold each camera's translation along its optical axis
+    /// ([`DepthCalibConfig::camera_hold_axial`]).
+    pub camera_hold_axial: bool,
     /// unical with cameras: share of the camera ray draws (heat maps on) centred on LiDAR silhouettes
     /// ([`DepthCalibConfig::silhouette_share`]; default the preset's); in [0, 1].
     pub silhouette_share: Option<f64>,
@@ -629,6 +632,7 @@ pub fn calibrate(
                 grouped_camera_translation: args.grouped_camera_translation,
                 camera_rays_below_lidar_top: args.camera_rays_below_lidar_top,
                 camera_hold_unobserved,
+                camera_hold_axial: args.camera_hold_axial || preset.camera_hold_axial,
                 silhouette_share: silhouette_share.unwrap_or(preset.silhouette_share),
                 camera_target_blur_px: camera_blur.unwrap_or(preset.camera_target_blur_px),
                 colour_pose_levels: colour_pose_levels

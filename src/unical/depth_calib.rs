@@ -211,6 +211,12 @@ pub struct DepthCalibConfig {
     /// camera's best observed one, so a direction the drive hardly sees stays where the initial
     /// guess put it. `None`: every direction moves (the paper).
     pub camera_hold_unobserved: Option<f64>,
+    /// Hold each camera's translation along its own optical axis at the initial guess: a step
+    /// keeps only its part square to the axis. Along the axis a camera is observed least (a
+    /// shift δ scales what it sees by about δ / depth), and there the colour term pulls a
+    /// camera away from what it sees (BENCHMARKS.md, "Blurred colour targets", "Where the real
+    /// drive's right camera comes to rest"). Off: every direction moves (the paper).
+    pub camera_hold_axial: bool,
     /// Gaussian σ (pixels of the working image) the camera images are blurred by before
     /// their colour becomes the colour term's target. The scene's colour field is blurrier
     /// than a sharp image; against sharp edges a camera may lower that mismatch by backing
@@ -325,6 +331,7 @@ impl Default for DepthCalibConfig {
             // (BENCHMARKS.md, "… the cameras' pitch against the LiDARs' highest beam").
             camera_rays_below_lidar_top: false,
             camera_hold_unobserved: None,
+            camera_hold_axial: false,
             // Off: with σ = 1 px the simulator's cameras move along their axes towards what
             // they see, but drive 7 has no backing away left to undo (0.068° / 1.54 cm against
             // 0.040° / 1.29 cm), and on PandaSet the left pair jumped 500 steps sooner
@@ -784,6 +791,15 @@ fn hold_unobserved(pose: &mut PoseParams, before: &PoseParams, info: &PoseInform
     pose.translation_m = before.translation_m + v;
 }
 
+/// Undo the part of the translation step from `before` to `pose` along the camera's optical
+/// axis (its frame's z in the vehicle frame, after the step)
+/// ([`DepthCalibConfig::camera_hold_axial`]).
+fn hold_axial(pose: &mut PoseParams, before: &PoseParams) {
+    let axis = pose.rotation().col(2).normalize_or_zero();
+    let step = pose.translation_m - before.translation_m;
+    pose.translation_m -= axis * step.dot(axis);
+}
+
 /// Keep `pose`'s rotation within `bound_rad` of `start`: a rotation further off is turned back
 /// along the geodesic to the bound (its translation is left as it is).
 fn bound_rotation(pose: &mut PoseParams, start: glam::DQuat, bound_rad: f64) {
@@ -823,6 +839,9 @@ impl CameraStage {
                 translation_scale,
                 config.grouped_camera_translation,
             );
+            if config.camera_hold_axial {
+                hold_axial(&mut self.poses[k], &before);
+            }
             if let (Some(ratio), Some(info)) =
                 (config.camera_hold_unobserved, self.information.get(k))
             {
@@ -2367,6 +2386,23 @@ mod tests {
         let mut p = PoseParams::from_rigid(moved);
         hold_unobserved(&mut p, &before, &PoseInformation::default(), 0.05);
         assert!((p.to_rigid().translation - moved.translation).length() < 1e-12);
+    }
+
+    #[test]
+    fn the_axial_hold_keeps_only_the_step_square_to_the_optical_axis() {
+        // A camera looking along the vehicle's +x (its z axis), stepping 3 cm forward, 2 cm
+        // left and 1 cm up: the forward part is undone, the rest and the rotation stay.
+        let looking_forward =
+            glam::DMat3::from_cols(glam::DVec3::NEG_Y, glam::DVec3::NEG_Z, glam::DVec3::X);
+        let before = PoseParams {
+            r6: crate::geometry::rot6d::from_matrix(looking_forward),
+            translation_m: glam::DVec3::new(1.0, 0.0, 1.5),
+        };
+        let mut p = before;
+        p.translation_m += glam::DVec3::new(0.03, 0.02, 0.01);
+        hold_axial(&mut p, &before);
+        assert!((p.translation_m - glam::DVec3::new(1.0, 0.02, 1.51)).length() < 1e-12);
+        assert_eq!(p.r6, before.r6);
     }
 
     #[test]
