@@ -62,16 +62,21 @@ pub fn output_target(path: &Path) -> std::io::Result<OutputTarget> {
     ))
 }
 
+/// The directory a file at `path` lives in (`.` for a bare file name).
+fn parent_dir(path: &Path) -> &Path {
+    match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d,
+        _ => Path::new("."),
+    }
+}
+
 /// Whether a file can be written at `path`, checked before long work rather than after it: not
 /// a directory, and its directory exists (after links).
 pub fn check_output(path: &Path) -> std::io::Result<()> {
     let OutputTarget::Replace(p) = output_target(path)? else {
         return Ok(());
     };
-    let dir = match p.parent() {
-        Some(d) if !d.as_os_str().is_empty() => d,
-        _ => Path::new("."),
-    };
+    let dir = parent_dir(&p);
     if !dir.is_dir() {
         return Err(std::io::Error::new(
             std::io::ErrorKind::NotFound,
@@ -100,11 +105,11 @@ fn landing_place(path: &Path) -> Option<std::path::PathBuf> {
     let OutputTarget::Replace(p) = output_target(path).ok()? else {
         return Some(path.to_path_buf());
     };
-    let dir = match p.parent() {
-        Some(d) if !d.as_os_str().is_empty() => d,
-        _ => Path::new("."),
-    };
-    Some(std::fs::canonicalize(dir).ok()?.join(p.file_name()?))
+    Some(
+        std::fs::canonicalize(parent_dir(&p))
+            .ok()?
+            .join(p.file_name()?),
+    )
 }
 
 /// Write `bytes` to `path` atomically: a temporary file in the same directory, fsync, rename.
@@ -120,10 +125,7 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
         OutputTarget::Replace(p) => p,
     };
     let path = path.as_path();
-    let dir = match path.parent() {
-        Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
-        _ => std::path::PathBuf::from("."),
-    };
+    let dir = parent_dir(path);
     let file_name = path.file_name().ok_or_else(|| {
         std::io::Error::new(std::io::ErrorKind::InvalidInput, "path has no file name")
     })?;

@@ -429,7 +429,7 @@ pub fn calibrate(
             args.out.display()
         ));
     }
-    if args.out == args.log || crate::util::same_file(&args.out, &args.log) {
+    if crate::util::same_file(&args.out, &args.log) {
         return Err(format!(
             "--out {} is the log itself; the calibration would overwrite it",
             args.out.display()

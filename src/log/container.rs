@@ -115,7 +115,9 @@ impl McapContainer {
             path: path.to_path_buf(),
             what,
         };
-        if path.is_dir() {
+        // One look before opening: opening a named pipe blocks until something writes to it.
+        let kind = std::fs::metadata(path).map(|m| (m.is_dir(), m.is_file()));
+        if let Ok((true, _)) = kind {
             // A rosbag2 folder holds its .mcap files and a metadata.yaml.
             let mcaps: Vec<String> = std::fs::read_dir(path)
                 .map(|entries| {
@@ -135,15 +137,13 @@ impl McapContainer {
                 )
             }));
         }
-        // Before opening: opening a named pipe blocks until something writes to it.
-        if std::fs::metadata(path).is_ok_and(|m| !m.is_file()) {
+        if let Ok((_, false)) = kind {
             return Err(not_mcap(
                 "it is not a regular file (a pipe or device); an MCAP is read by seeking".into(),
             ));
         }
         let mut file = File::open(path).map_err(io)?;
-        let meta = file.metadata().map_err(io)?;
-        let file_len = meta.len();
+        let file_len = file.metadata().map_err(io)?.len();
         if file_len == 0 {
             return Err(not_mcap("the file is empty".into()));
         }

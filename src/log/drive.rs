@@ -22,8 +22,8 @@ use crate::calib::{Rig, Sensor, SensorKind};
 use crate::geometry::camera::CameraIntrinsics;
 use crate::geometry::{Rigid, Trajectory};
 
-/// Faster than any vehicle: a trajectory pose that implies it on both sides is dropped
-/// ([`Trajectory::remove_jumps`]).
+/// Faster than any vehicle: a trajectory pose that implies it towards most of its nearest poses
+/// is dropped ([`Trajectory::remove_jumps`]).
 const MAX_VEHICLE_SPEED_MPS: f64 = 100.0;
 
 #[derive(Clone, Debug)]
@@ -311,7 +311,8 @@ impl Drive {
                     .collect(),
             );
         }
-        // A pose far from both neighbours is a corrupt message, not a drive: drop it and say so.
+        // A pose far from most of its neighbours is a corrupt message, not a drive: drop it and
+        // say so.
         for (stamp, jump_m) in trajectory.remove_jumps(MAX_VEHICLE_SPEED_MPS) {
             problems.push(Problem::file(format!(
                 "trajectory pose at {:.3} s lies {jump_m:.3e} m from the nearest good pose, farther from most of its neighbours than {MAX_VEHICLE_SPEED_MPS} m/s allows: dropped",

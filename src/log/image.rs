@@ -70,7 +70,7 @@ pub fn decode_compressed(img: &CompressedImage<'_>) -> DecodeResult<RgbImage> {
             img.format
         ))
     })?;
-    if format == image::ImageFormat::Jpeg && !ends_with_jpeg_eoi(&img.data) {
+    if format == image::ImageFormat::Jpeg && !has_end_of_image_after_scan(&img.data) {
         // The decoder would fill what is missing with grey and say nothing.
         return Err(DecodeError::new(
             "JPEG data ends without its end-of-image marker (truncated?)".to_string(),
@@ -85,11 +85,12 @@ pub fn decode_compressed(img: &CompressedImage<'_>) -> DecodeResult<RgbImage> {
 /// entropy-coded data cannot hold FF D9 (an FF there is followed by 00), so a scan cut short has
 /// none, while bytes an encoder appends after the marker (fill, metadata) do not matter, and an
 /// EXIF thumbnail's marker comes before the scan.
-fn ends_with_jpeg_eoi(data: &[u8]) -> bool {
+fn has_end_of_image_after_scan(data: &[u8]) -> bool {
     let Some(scan) = data.windows(2).position(|w| w == [0xFF, 0xDA]) else {
         return false;
     };
-    data[scan..].windows(2).any(|w| w == [0xFF, 0xD9])
+    // From the end: the marker is almost always the last two bytes.
+    data[scan..].windows(2).rev().any(|w| w == [0xFF, 0xD9])
 }
 
 #[cfg(test)]
