@@ -95,18 +95,81 @@ fn a_truncated_log_keeps_what_came_before() {
 fn a_log_cut_in_its_first_chunk_says_why_it_is_unusable() {
     let bytes = fixture("ros2.mcap");
     let dir = scratch();
-    // The first record after the magic and the header: find the first chunk (opcode 0x06).
-    let mut offset = 8usize;
-    while bytes[offset] != 0x06 {
-        let len = u64::from_le_bytes(bytes[offset + 1..offset + 9].try_into().unwrap()) as usize;
-        offset += 9 + len;
-    }
+    let offset = first_chunk(&bytes);
     let path = write_tmp(&dir, &bytes[..offset + 40], "cut-in-chunk");
     let err = Drive::open(&path).unwrap_err().to_string();
     assert!(err.contains("cut-in-chunk.mcap"), "{err}");
     assert!(err.contains("no channels or messages found"), "{err}");
     assert!(err.contains("summary section is unusable"), "{err}");
     assert!(err.contains("the file ends first (truncated)"), "{err}");
+}
+
+/// Messages per topic, as the drive lists them.
+fn message_count(drive: &Drive) -> u64 {
+    drive.topics.iter().map(|t| t.count).sum()
+}
+
+/// The offset of the first chunk record (opcode 0x06) of an intact file.
+fn first_chunk(bytes: &[u8]) -> usize {
+    let mut offset = 8usize;
+    while bytes[offset] != 0x06 {
+        let len = u64::from_le_bytes(bytes[offset + 1..offset + 9].try_into().unwrap()) as usize;
+        offset += 9 + len;
+    }
+    offset
+}
+
+/// A damaged closing magic with an intact footer before it: the summary is still read, and
+/// every message with it.
+#[test]
+fn a_damaged_closing_magic_still_reads_the_summary() {
+    let bytes = fixture("ros2.mcap");
+    let dir = scratch();
+    let intact = Drive::open(&write_tmp(&dir, &bytes, "intact")).unwrap();
+    let mut damaged = bytes.clone();
+    let last = damaged.len() - 1;
+    damaged[last] ^= 0xFF;
+    let drive = Drive::open(&write_tmp(&dir, &damaged, "end-magic")).unwrap();
+    assert_eq!(message_count(&drive), message_count(&intact));
+    assert!(
+        drive
+            .problems
+            .iter()
+            .any(|p| p.what.contains("closing magic bytes are damaged")),
+        "{:?}",
+        drive.problems
+    );
+}
+
+/// A chunk whose record length is damaged, in a log whose summary is unusable too: the walk from
+/// the start skips to the next chunk and keeps every later message.
+#[test]
+fn a_damaged_record_length_loses_only_its_own_chunk() {
+    let bytes = fixture("ros2.mcap");
+    let dir = scratch();
+    let intact = Drive::open(&write_tmp(&dir, &bytes, "intact")).unwrap();
+    let mut damaged = bytes.clone();
+    let chunk = first_chunk(&damaged);
+    damaged[chunk + 1..chunk + 9].copy_from_slice(&(u64::MAX / 4).to_le_bytes());
+    // The footer's opcode and the closing magic: no summary to fall back on.
+    let footer = damaged.len() - 8 - 29;
+    damaged[footer] = 0xFF;
+    let last = damaged.len() - 1;
+    damaged[last] ^= 0xFF;
+    let path = write_tmp(&dir, &damaged, "bad-length");
+    let drive = Drive::open(&path).unwrap();
+    let (kept, all) = (message_count(&drive), message_count(&intact));
+    assert!(kept > 0 && kept < all, "{kept} of {all} messages");
+    assert!(
+        drive
+            .problems
+            .iter()
+            .any(|p| p.what.contains(&format!("at byte {chunk} claims"))
+                && p.what.contains("to the next chunk at byte")),
+        "{:?}",
+        drive.problems
+    );
+    exercise(&path);
 }
 
 #[test]

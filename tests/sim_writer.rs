@@ -568,3 +568,101 @@ fn a_trajectory_pose_far_from_its_neighbours_is_dropped_with_a_problem() {
     let at_seven = drive.trajectory.world_from_vehicle(T0 + 700 * MS).unwrap();
     assert!((at_seven.translation - DVec3::new(3.5, 0.0, 0.0)).length() < 1e-9);
 }
+
+/// Two /tf poses of one edge at one stamp that disagree are named as a problem; the last one
+/// in the log is the trajectory's, and the same pose sent twice is no problem.
+#[test]
+fn two_poses_at_one_stamp_that_disagree_are_named() {
+    let dir = temp_dir("conflict");
+    let path = dir.join("conflict.mcap");
+    let mut w = Ros2McapWriter::create(&path).unwrap();
+    w.write_tf_static(
+        T0,
+        &[("base_link".into(), "lidar".into(), base_from_lidar())],
+    )
+    .unwrap();
+    for i in 0..10 {
+        let pose = Rigid::new(DQuat::IDENTITY, DVec3::new(0.5 * i as f64, 0.0, 0.0));
+        w.write_tf(T0 + i * 100 * MS, "odom", "base_link", pose)
+            .unwrap();
+        if i == 2 {
+            // The same pose again: no conflict.
+            w.write_tf(T0 + i * 100 * MS, "odom", "base_link", pose)
+                .unwrap();
+        }
+        if i == 4 {
+            let other = Rigid::new(DQuat::IDENTITY, DVec3::new(0.5 * i as f64, 0.25, 0.0));
+            w.write_tf(T0 + i * 100 * MS, "odom", "base_link", other)
+                .unwrap();
+        }
+    }
+    w.finish().unwrap();
+    let drive = Drive::open(&path).unwrap();
+    let said: Vec<String> = drive.problems.iter().map(|p| p.to_string()).collect();
+    let conflicts: Vec<&String> = said.iter().filter(|p| p.contains("disagree")).collect();
+    assert_eq!(conflicts.len(), 1, "{said:?}");
+    assert!(
+        conflicts[0].contains("/tf odom -> base_link: 1 stamp(s)")
+            && conflicts[0].contains("0.250 m"),
+        "{said:?}"
+    );
+    let at_four = drive.trajectory.world_from_vehicle(T0 + 400 * MS).unwrap();
+    assert!(
+        (at_four.translation.y - 0.25).abs() < 1e-9,
+        "the last pose given"
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// Frame ids a calibration file cannot carry (a line break, white space around, none at all)
+/// and a blank vehicle frame never reach the rig: what `calibrate --out` writes loads again.
+#[test]
+fn odd_frame_ids_and_a_blank_vehicle_frame_give_a_rig_that_saves_and_loads() {
+    let dir = temp_dir("odd-frames");
+    let path = dir.join("odd.mcap");
+    let mut w = Ros2McapWriter::create(&path).unwrap();
+    for i in 0..5 {
+        let pose = Rigid::new(DQuat::IDENTITY, DVec3::new(0.5 * i as f64, 0.0, 0.0));
+        w.write_tf(T0 + i * 100 * MS, "odom", "base_link", pose)
+            .unwrap();
+        let points = [[1.0f32, 2.0, 3.0]; 4];
+        w.write_pointcloud(
+            "/a/points",
+            T0 + i * 100 * MS,
+            "lidar\na ",
+            &points,
+            &[1.0; 4],
+            &[0.0; 4],
+        )
+        .unwrap();
+        w.write_pointcloud(
+            "/b/points",
+            T0 + i * 100 * MS,
+            "",
+            &points,
+            &[1.0; 4],
+            &[0.0; 4],
+        )
+        .unwrap();
+    }
+    w.finish().unwrap();
+    let options = rigcal::log::DriveOptions {
+        vehicle_frame: Some(" ".into()),
+        ..Default::default()
+    };
+    let drive = Drive::open_with(&path, &options).unwrap();
+    assert!(!drive.rig.vehicle_frame.trim().is_empty());
+    let mut names: Vec<(&str, &str)> = drive
+        .rig
+        .sensors
+        .iter()
+        .map(|s| (s.name.as_str(), s.frame_id.as_str()))
+        .collect();
+    names.sort();
+    assert_eq!(names, [("b_points", ""), ("lidar_a", "lidar_a")]);
+    let file = rigcal::calib::file::CalibrationFile::from_rig(&drive.rig);
+    let saved = dir.join("calib.yaml");
+    file.save(&saved).unwrap();
+    rigcal::calib::file::CalibrationFile::load_rig(&saved).unwrap();
+    std::fs::remove_dir_all(&dir).unwrap();
+}

@@ -135,10 +135,23 @@ impl CalibrationFile {
                 self.rigcal_calibration
             )));
         }
+        if let Some(why) = name_problem(&self.vehicle_frame) {
+            return Err(invalid(format!(
+                "vehicle_frame {why}; every export names the frame the extrinsics map into"
+            )));
+        }
         let mut sensors: Vec<Sensor> = Vec::with_capacity(self.sensors.len());
         for s in &self.sensors {
             if s.name.is_empty() {
                 return Err(invalid("a sensor has an empty name".into()));
+            }
+            if let Some(why) = name_problem(&s.name) {
+                return Err(invalid(format!("sensor name {:?} {why}", s.name)));
+            }
+            if !s.frame_id.is_empty()
+                && let Some(why) = name_problem(&s.frame_id)
+            {
+                return Err(invalid(format!("sensor '{}': frame_id {why}", s.name)));
             }
             if sensors.iter().any(|o| o.name == s.name) {
                 return Err(invalid(format!("sensor name '{}' appears twice", s.name)));
@@ -240,6 +253,30 @@ impl CalibrationFile {
             }
         })
     }
+}
+
+/// Why `name` (a frame id or sensor name) cannot go into the exports' TF trees, URDF links and
+/// file names, if it cannot: it is empty or blank, starts or ends with white space, or holds a
+/// control character (a line break would end a line of every text export).
+fn name_problem(name: &str) -> Option<&'static str> {
+    if name.trim().is_empty() {
+        Some("is empty")
+    } else if name.trim() != name {
+        Some("starts or ends with white space")
+    } else if name.chars().any(char::is_control) {
+        Some("holds a control character (a line break or tab)")
+    } else {
+        None
+    }
+}
+
+/// `name` as the calibration file accepts it ([`name_problem`]): trimmed, each control
+/// character replaced by `_`. Empty stays empty.
+pub fn exportable_name(name: &str) -> String {
+    name.trim()
+        .chars()
+        .map(|c| if c.is_control() { '_' } else { c })
+        .collect()
 }
 
 /// The farthest a sensor may sit from the vehicle frame (m): a larger translation is a unit
@@ -388,6 +425,31 @@ mod tests {
         let mut file = CalibrationFile::from_rig(&sample_rig());
         file.rigcal_calibration = 2;
         assert!(file.to_rig(p).is_err());
+        // Names that exports cannot carry: an empty or blank vehicle frame, a line break in a
+        // frame id, white space around a sensor's name.
+        for (vehicle, frame, name, says) in [
+            ("", "lidar_top", "lidar_top", "vehicle_frame is empty"),
+            ("  ", "lidar_top", "lidar_top", "vehicle_frame is empty"),
+            (
+                "base_link",
+                "lidar\ntop",
+                "lidar_top",
+                "frame_id holds a control character",
+            ),
+            (
+                "base_link",
+                "lidar_top",
+                " lidar_top",
+                "starts or ends with white space",
+            ),
+        ] {
+            let mut file = CalibrationFile::from_rig(&sample_rig());
+            file.vehicle_frame = vehicle.into();
+            file.sensors[0].frame_id = frame.into();
+            file.sensors[0].name = name.into();
+            let err = file.to_rig(p).unwrap_err().to_string();
+            assert!(err.contains("bad.yaml") && err.contains(says), "{err}");
+        }
         let err = CalibrationFile::load(Path::new("/nonexistent/c.yaml"))
             .unwrap_err()
             .to_string();

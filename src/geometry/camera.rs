@@ -50,15 +50,25 @@ impl CameraModel {
 
     /// The model and coefficients as read from a file or message: an all-zero radial-tangential
     /// distortion is a pinhole whatever the model's name (an all-zero fisheye is still a
-    /// fisheye: r = f·θ, not f·tan θ).
-    pub fn normalized(self, distortion: Vec<f64>) -> (Self, Vec<f64>) {
-        if self == CameraModel::Pinhole
-            || (self != CameraModel::Equidistant && distortion.iter().all(|&v| v == 0.0))
-        {
-            (CameraModel::Pinhole, Vec::new())
-        } else {
-            (self, distortion)
+    /// fisheye: r = f·θ, not f·tan θ). A pinhole (an empty, `none` or `pinhole` model name)
+    /// given non-zero coefficients is an error: dropping them would silently mis-project the
+    /// whole image, and guessing a model for them could be wrong.
+    pub fn normalized(self, distortion: Vec<f64>) -> Result<(Self, Vec<f64>), String> {
+        let zero = distortion.iter().all(|&v| v == 0.0);
+        if self == CameraModel::Pinhole && !zero {
+            return Err(format!(
+                "the distortion model is empty, none or pinhole, which takes no coefficients, but {} of the {} given are non-zero; name the model (plumb_bob, rational_polynomial or equidistant)",
+                distortion.iter().filter(|&&v| v != 0.0).count(),
+                distortion.len()
+            ));
         }
+        Ok(
+            if self == CameraModel::Pinhole || (self != CameraModel::Equidistant && zero) {
+                (CameraModel::Pinhole, Vec::new())
+            } else {
+                (self, distortion)
+            },
+        )
     }
 
     /// Parse a ROS `distortion_model` string (also accepts a few common aliases).
@@ -131,7 +141,7 @@ impl CameraIntrinsics {
         }
         let model = CameraModel::parse(model_name)
             .ok_or_else(|| format!("unknown distortion_model '{model_name}'"))?;
-        let (model, distortion) = model.normalized(distortion);
+        let (model, distortion) = model.normalized(distortion)?;
         let intrinsics = Self {
             width,
             height,
@@ -682,16 +692,32 @@ mod tests {
     #[test]
     fn zero_distortion_reads_as_pinhole_but_a_zero_fisheye_stays_a_fisheye() {
         use CameraModel::*;
-        assert_eq!(PlumbBob.normalized(vec![0.0; 5]), (Pinhole, vec![]));
+        assert_eq!(PlumbBob.normalized(vec![0.0; 5]), Ok((Pinhole, vec![])));
         assert_eq!(
             RationalPolynomial.normalized(vec![0.0; 8]),
-            (Pinhole, vec![])
+            Ok((Pinhole, vec![]))
         );
         assert_eq!(
             Equidistant.normalized(vec![0.0; 4]),
-            (Equidistant, vec![0.0; 4])
+            Ok((Equidistant, vec![0.0; 4]))
         );
-        assert_eq!(PlumbBob.normalized(vec![0.1]), (PlumbBob, vec![0.1]));
+        assert_eq!(PlumbBob.normalized(vec![0.1]), Ok((PlumbBob, vec![0.1])));
+        assert_eq!(Pinhole.normalized(vec![0.0; 5]), Ok((Pinhole, vec![])));
+        // A pinhole given coefficients is refused, not silently stripped of them.
+        let e = Pinhole
+            .normalized(vec![0.1, 0.0, 0.0, 0.0, 0.0])
+            .unwrap_err();
+        assert!(e.contains("1 of the 5 given are non-zero"), "{e}");
+        assert!(
+            CameraIntrinsics::from_camera_info(
+                10,
+                10,
+                "",
+                vec![-0.2],
+                &[1., 0., 5., 0., 1., 5., 0., 0., 1.]
+            )
+            .is_err()
+        );
         let mut c = CameraIntrinsics::pinhole(10, 10, 1.0, 1.0, 5.0, 5.0);
         assert_eq!(c.ros_distortion(), ("plumb_bob", vec![0.0; 5]));
         c.model = Equidistant;

@@ -15,4 +15,4 @@ pub mod spd;
 pub mod trajectory;
 
 pub use rigid::{RigError, Rigid, rig_errors};
-pub use trajectory::{Trajectory, TrajectoryError};
+pub use trajectory::{StampConflict, Trajectory, TrajectoryError, conflicting_stamps};

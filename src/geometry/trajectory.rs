@@ -24,6 +24,41 @@ pub enum TrajectoryError {
     },
 }
 
+/// A stamp given two or more poses that disagree ([`conflicting_stamps`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct StampConflict {
+    pub stamp_nanos: i64,
+    /// The largest translation (m) and rotation (rad) between the kept pose and another.
+    pub translation_m: f64,
+    pub rotation_rad: f64,
+}
+
+/// Stamps among `poses` (in the order given) that carry poses farther apart than a micrometre
+/// or a microradian. [`Trajectory::new`] keeps the last pose given for each; an identical
+/// pose sent twice is no conflict.
+pub fn conflicting_stamps(poses: &[(i64, Rigid)]) -> Vec<StampConflict> {
+    let mut order: Vec<usize> = (0..poses.len()).collect();
+    order.sort_by_key(|&i| poses[i].0);
+    let mut conflicts = Vec::new();
+    for group in order.chunk_by(|&a, &b| poses[a].0 == poses[b].0) {
+        let Some(&kept) = group.last() else { continue };
+        let (mut translation_m, mut rotation_rad) = (0.0f64, 0.0f64);
+        for &i in group {
+            let (r, t) = poses[kept].1.difference(poses[i].1);
+            rotation_rad = rotation_rad.max(r);
+            translation_m = translation_m.max(t);
+        }
+        if translation_m > 1e-6 || rotation_rad > 1e-6 {
+            conflicts.push(StampConflict {
+                stamp_nanos: poses[kept].0,
+                translation_m,
+                rotation_rad,
+            });
+        }
+    }
+    conflicts
+}
+
 /// Poses sorted by time; duplicate stamps keep the last pose given.
 #[derive(Clone, Debug, Default)]
 pub struct Trajectory {
@@ -193,6 +228,33 @@ mod tests {
         assert!((p.translation.x - 1.5).abs() < 1e-12);
         let (angle, _) = Rigid::IDENTITY.difference(p);
         assert!((angle - 0.15).abs() < 1e-12);
+    }
+
+    #[test]
+    fn two_poses_at_one_stamp_that_disagree_are_a_conflict_and_the_last_is_kept() {
+        let moved = Rigid::new(DQuat::IDENTITY, DVec3::new(0.0, 3.0, 0.0));
+        let poses = vec![
+            (5, Rigid::IDENTITY),
+            (1, Rigid::IDENTITY),
+            (5, moved),
+            (1, Rigid::IDENTITY),
+            (9, Rigid::IDENTITY),
+        ];
+        let conflicts = conflicting_stamps(&poses);
+        assert_eq!(conflicts.len(), 1, "{conflicts:?}");
+        assert_eq!(conflicts[0].stamp_nanos, 5);
+        assert!((conflicts[0].translation_m - 3.0).abs() < 1e-12);
+        assert!(conflicts[0].rotation_rad < 1e-12);
+        let kept = Trajectory::new(poses).world_from_vehicle(5).unwrap();
+        assert!(
+            (kept.translation.y - 3.0).abs() < 1e-12,
+            "the last pose given"
+        );
+        // A turn alone conflicts too; the same pose twice does not.
+        let turned = Rigid::new(DQuat::from_rotation_z(0.01), DVec3::ZERO);
+        let conflicts = conflicting_stamps(&[(0, Rigid::IDENTITY), (0, turned)]);
+        assert!((conflicts[0].rotation_rad - 0.01).abs() < 1e-9);
+        assert!(conflicting_stamps(&[(0, moved), (0, moved)]).is_empty());
     }
 
     #[test]

@@ -126,7 +126,9 @@ pub fn parse(text: &str, path: &Path) -> Result<(Option<String>, CameraIntrinsic
         ));
     }
     // A pinhole written as plumb_bob with zeros reads back as pinhole.
-    let (model, distortion) = model.normalized(distortion);
+    let (model, distortion) = model
+        .normalized(distortion)
+        .map_err(|e| format!("{file}: {e}"))?;
     let intrinsics = CameraIntrinsics {
         width: y.image_width,
         height: y.image_height,
@@ -174,6 +176,12 @@ mod tests {
         assert!(e.contains("cam.yaml") && e.contains("9"), "{e}");
         let e = parse("image_width: 10\nimage_height: 10\ncamera_matrix: {data: [1,0,1,0,1,1,0,0,1]}\ndistortion_model: weird", p).unwrap_err();
         assert!(e.contains("weird"), "{e}");
+        // No model named but coefficients given: refused, naming the file.
+        let e = parse("image_width: 10\nimage_height: 10\ncamera_matrix: {data: [1,0,1,0,1,1,0,0,1]}\ndistortion_coefficients: {data: [-0.2, 0.1, 0, 0, 0]}", p).unwrap_err();
+        assert!(
+            e.contains("cam.yaml") && e.contains("takes no coefficients"),
+            "{e}"
+        );
         assert!(parse("[", p).unwrap_err().contains("cam.yaml"));
     }
 }

@@ -214,6 +214,10 @@ impl McapContainer {
     /// Channels and chunk locations from the summary section; false if it is absent or unusable.
     fn try_summary(&mut self) -> bool {
         use mcap::sans_io::{SummaryReadEvent, SummaryReader, SummaryReaderOptions};
+        // A damaged closing magic in front of which the footer record is intact: read the
+        // summary as if the magic were right (the chunk offsets are still checked below).
+        let patch_end_magic = self.end_magic_damaged_before_a_footer();
+        let end_magic_at = self.file_len - MAGIC.len() as u64;
         let Ok(mut guard) = self.file.lock() else {
             return false;
         };
@@ -221,14 +225,27 @@ impl McapContainer {
         let mut reader = SummaryReader::new_with_options(
             SummaryReaderOptions::default().with_file_size(self.file_len),
         );
+        let mut position = 0u64;
         while let Some(event) = reader.next_event() {
             match event {
-                Ok(SummaryReadEvent::ReadRequest(n)) => match file.read(reader.insert(n)) {
-                    Ok(read) => reader.notify_read(read),
-                    Err(_) => return false,
-                },
+                Ok(SummaryReadEvent::ReadRequest(n)) => {
+                    let buf = reader.insert(n);
+                    match file.read(buf) {
+                        Ok(read) => {
+                            if patch_end_magic {
+                                overwrite_end_magic(&mut buf[..read], position, end_magic_at);
+                            }
+                            position += read as u64;
+                            reader.notify_read(read)
+                        }
+                        Err(_) => return false,
+                    }
+                }
                 Ok(SummaryReadEvent::SeekRequest(to)) => match file.seek(to) {
-                    Ok(pos) => reader.notify_seeked(pos),
+                    Ok(pos) => {
+                        position = pos;
+                        reader.notify_seeked(pos)
+                    }
                     Err(_) => return false,
                 },
                 Err(e) => {
@@ -270,9 +287,34 @@ impl McapContainer {
                 return false;
             }
         }
+        if patch_end_magic {
+            self.problems.push(Problem::file(
+                "its closing magic bytes are damaged; the summary before them was used",
+            ));
+        }
         self.chunks = chunks;
         self.used_summary = true;
         true
+    }
+
+    /// Whether the file's last 8 bytes are not the MCAP magic while a footer record (opcode
+    /// 0x02, 20 bytes long) sits right before them.
+    fn end_magic_damaged_before_a_footer(&self) -> bool {
+        const FOOTER_RECORD: u64 = 9 + 20;
+        let Some(footer_at) = self
+            .file_len
+            .checked_sub(FOOTER_RECORD + MAGIC.len() as u64)
+        else {
+            return false;
+        };
+        match self.read_at(footer_at, FOOTER_RECORD + MAGIC.len() as u64) {
+            Ok(tail) => {
+                &tail[FOOTER_RECORD as usize..] != MAGIC
+                    && tail[0] == op::FOOTER
+                    && tail[1..9] == 20u64.to_le_bytes()
+            }
+            Err(_) => false,
+        }
     }
 
     /// Walk the top-level records from the start; stop at the footer or at the first damage.
@@ -299,10 +341,16 @@ impl McapContainer {
             let len = u64::from_le_bytes(prefix[1..9].try_into().unwrap_or([0; 8]));
             let body_offset = offset + 9;
             if body_offset.saturating_add(len) > self.file_len {
-                self.problems.push(Problem::file(format!(
+                let what = format!(
                     "record (opcode {opcode:#04x}) at byte {offset} claims {len} bytes but the file ends first (truncated)"
-                )));
-                break;
+                );
+                match self.resync(offset, what) {
+                    Some(next) => {
+                        offset = next;
+                        continue;
+                    }
+                    None => break,
+                }
             }
             match opcode {
                 op::SCHEMA | op::CHANNEL | op::CHUNK => {
@@ -349,10 +397,14 @@ impl McapContainer {
                 }
                 op::FOOTER | op::DATA_END => break,
                 0 => {
-                    self.problems.push(Problem::file(format!(
-                        "invalid opcode 0 at byte {offset}; stopped reading"
-                    )));
-                    break;
+                    let what = format!("invalid opcode 0 at byte {offset}");
+                    match self.resync(offset, what) {
+                        Some(next) => {
+                            offset = next;
+                            continue;
+                        }
+                        None => break,
+                    }
                 }
                 _ => {}
             }
@@ -385,6 +437,21 @@ impl McapContainer {
             });
         }
         Ok(())
+    }
+
+    /// After damage at `offset` (described by `what`): the next chunk's offset, recorded with
+    /// the bytes skipped, or `None` (recorded as where reading stopped).
+    fn resync(&mut self, offset: u64, what: String) -> Option<u64> {
+        let next =
+            super::resync::next_chunk_after(|at, len| self.read_at(at, len), offset, self.file_len);
+        self.problems.push(Problem::file(match next {
+            Some(next) => format!(
+                "{what}; skipped {} bytes to the next chunk at byte {next}",
+                next - offset
+            ),
+            None => format!("{what}; no chunk follows, so reading stopped there"),
+        }));
+        next
     }
 
     fn corrupt(&self, offset: u64, what: String) -> LogError {
@@ -533,6 +600,19 @@ impl McapContainer {
             }
         }
         (kept, problems)
+    }
+}
+
+/// Write the MCAP magic over the bytes of `buf` (read from file offset `position`) that fall in
+/// the file's last 8 bytes, which start at `end_magic_at`.
+fn overwrite_end_magic(buf: &mut [u8], position: u64, end_magic_at: u64) {
+    for (i, byte) in buf.iter_mut().enumerate() {
+        let at = position + i as u64;
+        if at >= end_magic_at
+            && let Some(&m) = MAGIC.get((at - end_magic_at) as usize)
+        {
+            *byte = m;
+        }
     }
 }
 

@@ -18,13 +18,35 @@ use super::error::{LogError, Problem};
 use super::pointcloud::{self, LidarSweep};
 use super::tf::{TfTree, normalize_frame};
 use super::types::{CameraInfoMsg, Decoded, PoseMsg, TransformMsg};
+use crate::calib::file::exportable_name;
 use crate::calib::{Rig, Sensor, SensorKind};
 use crate::geometry::camera::CameraIntrinsics;
-use crate::geometry::{Rigid, Trajectory};
+use crate::geometry::{Rigid, StampConflict, Trajectory, conflicting_stamps};
 
 /// Faster than any vehicle: a trajectory pose that implies it towards most of its nearest poses
 /// is dropped ([`Trajectory::remove_jumps`]).
 const MAX_VEHICLE_SPEED_MPS: f64 = 100.0;
+
+/// One problem for the stamps of `source` that carry poses which disagree: how many, and the
+/// worst.
+fn stamp_conflicts(source: &str, conflicts: &[StampConflict]) -> Problem {
+    let worst = conflicts
+        .iter()
+        .max_by(|a, b| a.translation_m.total_cmp(&b.translation_m))
+        .copied();
+    let worst = worst.map_or(String::new(), |w| {
+        format!(
+            " (the worst at {:.3} s: {:.3} m and {:.3}° apart)",
+            w.stamp_nanos as f64 * 1e-9,
+            w.translation_m,
+            w.rotation_rad.to_degrees()
+        )
+    });
+    Problem::file(format!(
+        "{source}: {} stamp(s) carry poses that disagree{worst}; the last one in the log is used",
+        conflicts.len()
+    ))
+}
 
 #[derive(Clone, Debug)]
 pub struct DriveOptions {
@@ -270,6 +292,12 @@ impl Drive {
             })
             .collect();
         tf.promote_constant_dynamic_edges();
+        for ((parent, child), conflicts) in tf.conflicting_stamps() {
+            problems.push(stamp_conflicts(
+                &format!("/tf {parent} -> {child}"),
+                &conflicts,
+            ));
+        }
 
         // Trajectory: TF first, then odometry / pose topics.
         let max_extrapolation_nanos = (options.max_extrapolation_secs.max(0.0) * 1e9) as i64;
@@ -304,12 +332,15 @@ impl Drive {
                 format!("{topic}: {} -> {v} ({} poses)", first.frame_id, poses.len());
             fixed_frame = Some(normalize_frame(&first.frame_id));
             vehicle_frame = Some(v);
-            trajectory = Trajectory::new(
-                poses
-                    .iter()
-                    .map(|p| (p.stamp_nanos, p.frame_from_body))
-                    .collect(),
-            );
+            let poses: Vec<(i64, Rigid)> = poses
+                .iter()
+                .map(|p| (p.stamp_nanos, p.frame_from_body))
+                .collect();
+            let conflicts = conflicting_stamps(&poses);
+            if !conflicts.is_empty() {
+                problems.push(stamp_conflicts(topic, &conflicts));
+            }
+            trajectory = Trajectory::new(poses);
         }
         // A pose far from most of its neighbours is a corrupt message, not a drive: drop it and
         // say so.
@@ -322,10 +353,11 @@ impl Drive {
         let trajectory = trajectory.with_max_extrapolation_nanos(max_extrapolation_nanos);
 
         // Sensors: every topic carrying sweeps or images.
-        let vehicle_frame =
-            vehicle_frame.unwrap_or_else(|| static_root_of_sensors(&tf, &sensor_frames));
+        let vehicle_frame = vehicle_frame
+            .filter(|v| !v.trim().is_empty())
+            .unwrap_or_else(|| static_root_of_sensors(&tf, &sensor_frames));
         let mut rig = Rig {
-            vehicle_frame: vehicle_frame.clone(),
+            vehicle_frame: exportable_name(&vehicle_frame),
             sensors: Vec::new(),
         };
         let mut streams = Vec::new();
@@ -393,6 +425,16 @@ impl Drive {
             } else {
                 None
             };
+            // What the calibration file and the exports can carry: no line breaks, no white
+            // space around (the lookups above used the log's own frame id).
+            let (name, frame_id) = (exportable_name(&name), exportable_name(&frame_id));
+            if rig.sensor(&name).is_some() || name.is_empty() {
+                problems.push(Problem::file(format!(
+                    "{}: its frame id or name is blank or repeats another once cleaned of white space and control characters; skipped",
+                    ch.topic
+                )));
+                continue;
+            }
             rig.sensors.push(Sensor {
                 name: name.clone(),
                 kind,
@@ -579,6 +621,7 @@ fn static_root_of_sensors(
     }
     votes
         .into_iter()
+        .filter(|(f, _)| !exportable_name(f).is_empty())
         .max_by_key(|(_, n)| *n)
         .map(|(f, _)| f)
         .unwrap_or_else(|| "base_link".into())

@@ -16,6 +16,7 @@ pub mod foxglove;
 pub mod image;
 pub mod pointcloud;
 pub mod protobuf;
+mod resync;
 pub mod ros2;
 pub mod tf;
 pub mod types;

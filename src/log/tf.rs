@@ -8,7 +8,7 @@
 use std::collections::BTreeMap;
 
 use super::types::TransformMsg;
-use crate::geometry::{Rigid, Trajectory};
+use crate::geometry::{Rigid, StampConflict, Trajectory, conflicting_stamps};
 
 /// Names of world-fixed frames (REP 105 and common variants).
 const FIXED_FRAMES: [&str; 4] = ["world", "map", "odom", "earth"];
@@ -108,6 +108,16 @@ impl TfTree {
         f.sort();
         f.dedup();
         f
+    }
+
+    /// For each dynamic edge whose series gives one stamp poses that disagree: the edge
+    /// (parent, child) and its conflicts ([`crate::geometry::conflicting_stamps`]).
+    pub fn conflicting_stamps(&self) -> Vec<((String, String), Vec<StampConflict>)> {
+        self.dynamic_edges
+            .iter()
+            .map(|(edge, series)| (edge.clone(), conflicting_stamps(series)))
+            .filter(|(_, conflicts)| !conflicts.is_empty())
+            .collect()
     }
 
     /// The dynamic edge with the most samples: (fixed frame, vehicle frame).
