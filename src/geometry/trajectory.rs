@@ -132,11 +132,16 @@ impl Trajectory {
                 });
             removed.push((self.stamps_nanos[i], distance_m));
         }
-        let mut keep = bad.iter().map(|b| !b);
-        self.stamps_nanos.retain(|_| keep.next().unwrap_or(true));
-        let mut keep = bad.iter().map(|b| !b);
-        self.world_from_vehicle
-            .retain(|_| keep.next().unwrap_or(true));
+        let (stamps_nanos, world_from_vehicle) = self
+            .stamps_nanos
+            .iter()
+            .zip(&self.world_from_vehicle)
+            .zip(&bad)
+            .filter(|(_, bad)| !**bad)
+            .map(|((&t, &pose), _)| (t, pose))
+            .unzip();
+        self.stamps_nanos = stamps_nanos;
+        self.world_from_vehicle = world_from_vehicle;
         removed
     }
 
