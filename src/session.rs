@@ -175,12 +175,69 @@ pub fn state_dir() -> PathBuf {
 
 /// Where the studio autosaves its session after every change.
 pub fn autosave_path() -> PathBuf {
-    state_dir().join("autosave.rigcal-session.json")
+    state_dir().join(AUTOSAVE_NAME)
 }
+
+const AUTOSAVE_NAME: &str = "autosave.rigcal-session.json";
+const PREVIOUS_NAME: &str = "previous.rigcal-session.json";
 
 /// The autosave of the previous run, set aside at start-up (File ▸ Restore last session).
 pub fn previous_session_path() -> PathBuf {
-    state_dir().join("previous.rigcal-session.json")
+    state_dir().join(PREVIOUS_NAME)
+}
+
+/// How many runs' autosaves are kept before the previous one's (`previous-1` … `previous-5`).
+pub const EARLIER_SESSIONS_KEPT: usize = 5;
+
+/// The autosave set aside `n` runs before the previous one (`n` from 1).
+pub fn earlier_session_path(n: usize) -> PathBuf {
+    state_dir().join(earlier_session_name(n))
+}
+
+fn earlier_session_name(n: usize) -> String {
+    format!("previous-{n}.rigcal-session.json")
+}
+
+/// At start-up: the autosave becomes the previous run's session, and the sessions before it
+/// move one place back (the oldest of [`EARLIER_SESSIONS_KEPT`] is dropped). A run that never
+/// restores its predecessor so does not cost a crashed run's work at the next start.
+pub fn set_autosave_aside() -> std::io::Result<()> {
+    set_autosave_aside_in(&state_dir())
+}
+
+fn set_autosave_aside_in(dir: &Path) -> std::io::Result<()> {
+    let (autosave, previous) = (dir.join(AUTOSAVE_NAME), dir.join(PREVIOUS_NAME));
+    if !autosave.exists() {
+        return Ok(());
+    }
+    for n in (1..EARLIER_SESSIONS_KEPT).rev() {
+        let from = dir.join(earlier_session_name(n));
+        if from.exists() {
+            std::fs::rename(&from, dir.join(earlier_session_name(n + 1)))?;
+        }
+    }
+    if previous.exists() {
+        std::fs::rename(&previous, dir.join(earlier_session_name(1)))?;
+    }
+    std::fs::rename(&autosave, previous)
+}
+
+/// Where the session of `log` is kept when another log is opened over its edits.
+pub fn set_aside_path(log: &Path) -> PathBuf {
+    let stem: String = log
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_default()
+        .chars()
+        .map(|c| {
+            if c.is_alphanumeric() || c == '-' {
+                c
+            } else {
+                '_'
+            }
+        })
+        .collect();
+    state_dir().join(format!("set-aside-{stem}.rigcal-session.json"))
 }
 
 /// Most recently opened files, newest first, kept in a small text file.
@@ -236,6 +293,30 @@ mod tests {
     use crate::calib::{Sensor, SensorKind};
     use crate::geometry::Rigid;
     use glam::{DQuat, DVec3};
+
+    /// Seven start-ups, each after a run that autosaved: the last run's session is the
+    /// previous one and the five before it are kept, newest first.
+    #[test]
+    fn start_ups_keep_the_last_runs_sessions() {
+        let dir = tempfile::tempdir().unwrap();
+        for run in 0..7 {
+            std::fs::write(dir.path().join(AUTOSAVE_NAME), format!("run {run}")).unwrap();
+            set_autosave_aside_in(dir.path()).unwrap();
+        }
+        let read = |name: String| std::fs::read_to_string(dir.path().join(name)).ok();
+        assert_eq!(read(PREVIOUS_NAME.into()).as_deref(), Some("run 6"));
+        for n in 1..=EARLIER_SESSIONS_KEPT {
+            assert_eq!(
+                read(earlier_session_name(n)),
+                Some(format!("run {}", 6 - n))
+            );
+        }
+        assert_eq!(read(earlier_session_name(EARLIER_SESSIONS_KEPT + 1)), None);
+        assert!(!dir.path().join(AUTOSAVE_NAME).exists());
+        // A start-up after a run that saved nothing moves nothing.
+        set_autosave_aside_in(dir.path()).unwrap();
+        assert_eq!(read(PREVIOUS_NAME.into()).as_deref(), Some("run 6"));
+    }
 
     fn rig(yaw: f64) -> Rig {
         Rig {

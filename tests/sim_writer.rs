@@ -666,3 +666,32 @@ fn odd_frame_ids_and_a_blank_vehicle_frame_give_a_rig_that_saves_and_loads() {
     rigcal::calib::file::CalibrationFile::load_rig(&saved).unwrap();
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// A trajectory pose stamped near 0 in an epoch-stamped log is dropped with a problem, so the
+/// drive does not span fifty years.
+#[test]
+fn a_trajectory_pose_stamped_in_another_epoch_is_dropped_with_a_problem() {
+    let dir = temp_dir("epoch");
+    let path = dir.join("epoch.mcap");
+    let mut w = Ros2McapWriter::create(&path).unwrap();
+    w.write_tf(1_000, "odom", "base_link", Rigid::IDENTITY)
+        .unwrap();
+    for i in 0..20 {
+        let pose = Rigid::new(DQuat::IDENTITY, DVec3::new(0.5 * i as f64, 0.0, 0.0));
+        w.write_tf(T0 + i * 100 * MS, "odom", "base_link", pose)
+            .unwrap();
+    }
+    w.finish().unwrap();
+    let drive = Drive::open(&path).unwrap();
+    assert_eq!(
+        drive.trajectory.time_range_nanos(),
+        Some((T0, T0 + 1900 * MS))
+    );
+    let said: Vec<String> = drive.problems.iter().map(|p| p.to_string()).collect();
+    assert!(
+        said.iter()
+            .any(|p| p.contains("more than an hour apart") && p.contains("dropped")),
+        "{said:?}"
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}

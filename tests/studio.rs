@@ -107,6 +107,26 @@ fn the_optimiser_starts_publishes_and_stops() {
         "no packet from the optimiser: {:?}",
         s_status(&h)
     );
+    // While it runs it owns the rig: an edit or an undo is refused with a word, not lost.
+    if h.state().optimiser.run.is_some() {
+        let (undo_before, name) = (
+            h.state().undo.len(),
+            h.state().current.sensors[0].name.clone(),
+        );
+        h.state_mut()
+            .set_extrinsic(&name, rigcal::geometry::Rigid::IDENTITY);
+        h.state_mut().undo();
+        assert_eq!(h.state().undo.len(), undo_before);
+        assert!(
+            h.state()
+                .status
+                .last()
+                .unwrap()
+                .contains("the optimiser is running"),
+            "{:?}",
+            s_status(&h)
+        );
+    }
     // Stop (if it has not converged already) and wait for the end.
     if h.state().optimiser.run.is_some() {
         h.get_by_label("Stop").click();
@@ -114,7 +134,18 @@ fn the_optimiser_starts_publishes_and_stops() {
     assert!(run_until(&mut h, 60.0, |s| s.optimiser.run.is_none()));
     assert!(!h.state().optimiser.history.is_empty());
     assert!(
-        h.state().status.iter().all(|s| !s.starts_with("error")),
+        h.state()
+            .optimiser
+            .history
+            .iter()
+            .all(|(_, losses)| !losses.is_empty()),
+        "the Stop packet's empty losses are not history"
+    );
+    assert!(
+        h.state()
+            .status
+            .iter()
+            .all(|s| !s.starts_with("error") || s.contains("the optimiser is running")),
         "{:?}",
         s_status(&h)
     );
@@ -152,6 +183,31 @@ fn a_truncated_log_is_an_error_in_the_ui_and_the_studio_keeps_its_drive() {
         before,
         "a bad calibration file changed the rig"
     );
+    // A transform typed or pasted that is not finite, or puts a sensor 1000 km out, is refused:
+    // the rig could be neither saved nor autosaved.
+    let name = before.sensors[0].name.clone();
+    for t in [
+        rigcal::geometry::Rigid::new(glam::DQuat::IDENTITY, DVec3::new(f64::NAN, 0.0, 0.0)),
+        rigcal::geometry::Rigid::new(glam::DQuat::IDENTITY, DVec3::new(1e6, 0.0, 0.0)),
+    ] {
+        h.state_mut().set_extrinsic(&name, t);
+        assert!(h.state().status.last().unwrap().starts_with("error"));
+        assert_eq!(h.state().current, before);
+    }
+    let _ = std::fs::remove_dir_all(dir);
+}
+
+/// A log opened while the demo is still being generated is not replaced by the demo when it
+/// is ready.
+#[test]
+fn opening_a_log_cancels_the_demo() {
+    let mut studio = Studio::default();
+    let dir = std::env::temp_dir().join(format!("rigcal-demo-cancel-{}", std::process::id()));
+    rigcal::app::demo::start_in(&mut studio, dir.clone(), rigcal::sim::demo::demo_config());
+    assert!(studio.demo.is_some());
+    studio.open_log(&pandaset());
+    assert!(studio.demo.is_none(), "{:?}", studio.status);
+    assert_eq!(studio.drive.as_ref().unwrap().path(), pandaset());
     let _ = std::fs::remove_dir_all(dir);
 }
 

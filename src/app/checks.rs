@@ -45,6 +45,9 @@ pub struct CornerRow {
 #[derive(Default)]
 pub struct ChecksPanel {
     pub results: Vec<PairScore>,
+    /// The (initial, current) rigs `results` were scored with: an export writes a score only
+    /// for the rig it was measured on.
+    pub scored: Option<(Rig, Rig)>,
     pub spec: Option<BoardSpec>,
     pub corners: Vec<CornerRow>,
     pub corners_progress: (usize, usize),
@@ -79,6 +82,7 @@ pub fn start(studio: &mut Studio) {
         return;
     };
     let (initial, current) = (studio.initial.clone(), studio.current.clone());
+    studio.checks.scored = Some((initial.clone(), current.clone()));
     let segments = studio.segments.clone();
     let pairs = camera_lidar_pairs(&current);
     let (tx, rx) = channel();
@@ -151,7 +155,8 @@ pub fn start_corners(studio: &mut Studio) {
 pub fn poll(studio: &mut Studio, ctx: &egui::Context) {
     let c = &mut studio.checks;
     if let Some(rx) = &c.corner_job {
-        for msg in rx.try_iter() {
+        let (messages, gone) = super::drain(rx);
+        for msg in messages {
             match msg {
                 Some(row) => {
                     c.corners_progress.0 += 1;
@@ -159,6 +164,12 @@ pub fn poll(studio: &mut Studio, ctx: &egui::Context) {
                 }
                 None => c.corners_running = false,
             }
+        }
+        if gone && c.corners_running {
+            c.corners_running = false;
+            studio
+                .status
+                .push("error: the corner check's worker stopped without finishing".into());
         }
         if c.corners_running {
             ctx.request_repaint_after(std::time::Duration::from_millis(150));
@@ -169,7 +180,8 @@ pub fn poll(studio: &mut Studio, ctx: &egui::Context) {
     let Some(rx) = &c.job else {
         return;
     };
-    for msg in rx.try_iter() {
+    let (messages, gone) = super::drain(rx);
+    for msg in messages {
         match msg {
             Msg::Progress(k, n) => c.progress = (k, n),
             Msg::Pair(p) => {
@@ -181,6 +193,12 @@ pub fn poll(studio: &mut Studio, ctx: &egui::Context) {
             Msg::Skipped(e) => c.skipped.push(e),
             Msg::Done => c.running = false,
         }
+    }
+    if gone && c.running {
+        c.running = false;
+        studio
+            .status
+            .push("error: the checks' worker stopped without finishing".into());
     }
     if c.running {
         ctx.request_repaint_after(std::time::Duration::from_millis(150));

@@ -1,8 +1,10 @@
 //! First start: generate (or reuse) the simulator's demo drive on a background thread, with
-//! progress in the viewport, then open it with its ground truth.
+//! progress in the viewport, then open it with its ground truth. A log or session the user
+//! opens meanwhile cancels it ([`Studio::open_log`] drops the job), so the demo never replaces
+//! their drive.
 
 use std::path::PathBuf;
-use std::sync::mpsc::{Receiver, channel};
+use std::sync::mpsc::{Receiver, TryRecvError, channel};
 
 use crate::calib::CalibrationFile;
 use crate::sim::demo;
@@ -52,11 +54,17 @@ pub fn poll(studio: &mut Studio, ctx: &egui::Context) {
         return;
     };
     let mut ready = None;
-    for m in job.rx.try_iter() {
-        match m {
-            DemoMessage::Progress(d, n) => job.progress = (d, n),
-            DemoMessage::Ready(mcap, gt) => ready = Some(Ok((mcap, gt))),
-            DemoMessage::Failed(e) => ready = Some(Err(e)),
+    loop {
+        match job.rx.try_recv() {
+            Ok(DemoMessage::Progress(d, n)) => job.progress = (d, n),
+            Ok(DemoMessage::Ready(mcap, gt)) => ready = Some(Ok((mcap, gt))),
+            Ok(DemoMessage::Failed(e)) => ready = Some(Err(e)),
+            Err(TryRecvError::Empty) => break,
+            Err(TryRecvError::Disconnected) => {
+                // The worker is gone without a word (it panicked): say so, not a bar forever.
+                ready = ready.or(Some(Err("its worker stopped without a result".into())));
+                break;
+            }
         }
     }
     match ready {

@@ -71,13 +71,21 @@ pub fn document(studio: &Studio, rig: &Rig, which: ExtrinsicsView) -> Calibratio
         "version".into(),
         v(format!("rigcal {}", env!("CARGO_PKG_VERSION"))),
     );
+    // The checks' scores, only where they were measured on this very rig.
+    let scored = studio.checks.scored.as_ref();
+    let measured_initial = scored.is_some_and(|(initial, _)| initial == rig);
+    let measured_current = scored.is_some_and(|(_, current)| current == rig);
     for p in &studio.checks.results {
+        let px = if measured_current {
+            p.current_px
+        } else if measured_initial {
+            p.initial_px
+        } else {
+            continue;
+        };
         doc.metrics.insert(
             format!("edge_alignment_px/{}/{}", p.camera, p.lidar),
-            serde_yaml::Value::from(match which {
-                ExtrinsicsView::Initial => p.initial_px,
-                _ => p.current_px,
-            }),
+            serde_yaml::Value::from(px),
         );
     }
     doc
@@ -101,7 +109,12 @@ pub(crate) fn export_ui(studio: &mut Studio, ui: &mut egui::Ui) {
     if studio.optimiser.best.is_some() {
         views.insert(1, ExtrinsicsView::Best);
     }
-    let mut which = studio.export.which.unwrap_or(ExtrinsicsView::Current);
+    // A choice no longer offered (the best went with a newly opened log) falls back.
+    let mut which = studio
+        .export
+        .which
+        .filter(|w| views.contains(w))
+        .unwrap_or(ExtrinsicsView::Current);
     ui.horizontal(|ui| {
         ui.label("extrinsics:");
         for v in &views {

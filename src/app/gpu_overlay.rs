@@ -346,6 +346,9 @@ impl Resources {
             let entry = self.points.remove(i);
             self.points.push(entry);
         } else {
+            // More points than one storage binding holds (dense LiDARs, many sweeps accumulated)
+            // would be a validation error: keep the nearest, which come last.
+            let points = &points[points.len() - points.len().min(max_points(&device.limits()))..];
             let buf = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
                 label: Some("rigcal lidar points"),
                 contents: bytemuck::cast_slice(points),
@@ -358,6 +361,14 @@ impl Resources {
         }
         Some(self.points.len() - 1)
     }
+}
+
+/// How many points one storage buffer binding of a device with `limits` holds.
+pub fn max_points(limits: &wgpu::Limits) -> usize {
+    let bytes = limits
+        .max_storage_buffer_binding_size
+        .min(limits.max_buffer_size);
+    usize::try_from(bytes / std::mem::size_of::<GpuPoint>() as u64).unwrap_or(usize::MAX)
 }
 
 /// One frame's draw of the overlay in one viewport.
@@ -506,6 +517,18 @@ mod tests {
         // vec4<f32> and a u32.
         assert_eq!(std::mem::size_of::<Uniforms>(), 256);
         assert_eq!(std::mem::size_of::<GpuPoint>(), 20);
+    }
+
+    #[test]
+    fn one_binding_holds_the_points_its_size_allows() {
+        // wgpu's defaults: 128 MiB per storage binding, 256 MiB per buffer.
+        let limits = wgpu::Limits::default();
+        assert_eq!(max_points(&limits), (128 << 20) / 20);
+        let small = wgpu::Limits {
+            max_buffer_size: 100,
+            ..limits
+        };
+        assert_eq!(max_points(&small), 5);
     }
 }
 

@@ -20,6 +20,20 @@ use std::path::PathBuf;
 
 pub use state::Studio;
 
+/// Everything waiting in `rx`, and whether its sender is gone (a worker that ended, normally
+/// or by panicking): a panel that waits for a worker's last message checks the second so it
+/// never waits forever.
+pub(crate) fn drain<T>(rx: &std::sync::mpsc::Receiver<T>) -> (Vec<T>, bool) {
+    let mut messages = Vec::new();
+    loop {
+        match rx.try_recv() {
+            Ok(m) => messages.push(m),
+            Err(std::sync::mpsc::TryRecvError::Empty) => return (messages, false),
+            Err(std::sync::mpsc::TryRecvError::Disconnected) => return (messages, true),
+        }
+    }
+}
+
 /// Open the studio window (blocks until it is closed).
 pub fn run(
     log: Option<PathBuf>,

@@ -120,8 +120,16 @@ pub fn poll(studio: &mut Studio, ctx: &egui::Context) {
     let Some(run) = studio.optimiser.run.as_ref() else {
         return;
     };
-    let packets: Vec<_> = run.packets.try_iter().collect();
+    let (packets, worker_gone) = super::drain(&run.packets);
     let mut finished = false;
+    if worker_gone && !packets.iter().any(|p| p.finished || p.error.is_some()) {
+        // The worker ended without its last packet (it panicked): end the run here, keeping
+        // the best result it sent, rather than a progress bar forever.
+        let e = "the optimiser's worker stopped without a result; the best it sent is kept";
+        studio.optimiser.message = Some(format!("error: {e}"));
+        studio.status.push(format!("error: {e}"));
+        finished = true;
+    }
     for p in packets {
         if let Some(e) = p.error {
             studio.optimiser.message = Some(format!("error: {e}"));
@@ -130,7 +138,10 @@ pub fn poll(studio: &mut Studio, ctx: &egui::Context) {
             continue;
         }
         studio.optimiser.progress = (p.step, p.max_steps, p.steps_per_sec);
-        studio.optimiser.history.push((p.step, p.losses.clone()));
+        // The Stop packet carries no losses: the curves and the table keep the last ones.
+        if !p.losses.is_empty() {
+            studio.optimiser.history.push((p.step, p.losses.clone()));
+        }
         if let Some(start) = &studio.optimiser.started_from {
             for s in p.current.sensors.iter() {
                 if let Some(s0) = start.sensor(&s.name) {

@@ -63,6 +63,9 @@ struct CpuPoint {
 /// Per camera: its texture, the sweeps drawn over it and their projections.
 #[derive(Default)]
 pub(crate) struct OverlayCache {
+    /// The camera this slot holds: the camera list shifts when a loaded calibration gives a
+    /// camera intrinsics (or an undo takes them away), and a slot must not keep another's.
+    camera: String,
     key: Option<(usize, usize, usize)>,
     rig: Option<Rig>,
     texture: Option<(usize, egui::TextureHandle)>,
@@ -90,6 +93,25 @@ impl OverlayCache {
             self.cpu.iter().map(|p| p.p.pixel).collect(),
         )
     }
+}
+
+/// `img` shrunk (keeping its aspect) so neither side exceeds `max_side` px, if it must be: the
+/// GPU refuses larger textures, and the overlay maps the image by normalised coordinates, so a
+/// smaller picture lines up the same.
+fn fit_texture_side(img: &image::RgbImage, max_side: usize) -> Option<image::RgbImage> {
+    let longest = img.width().max(img.height()) as usize;
+    if longest <= max_side || max_side == 0 {
+        return None;
+    }
+    let scale = max_side as f64 / longest as f64;
+    let w = ((img.width() as f64 * scale).floor() as u32).clamp(1, max_side as u32);
+    let h = ((img.height() as f64 * scale).floor() as u32).clamp(1, max_side as u32);
+    Some(image::imageops::resize(
+        img,
+        w,
+        h,
+        image::imageops::FilterType::Triangle,
+    ))
 }
 
 /// A perceptual rainbow (turbo-like) for t in [0, 1].
@@ -605,6 +627,14 @@ fn refresh(
     drive: &Drive,
     ctx: &egui::Context,
 ) -> Result<(), String> {
+    if let Some(cache) = studio.overlays.get_mut(index)
+        && cache.camera != camera
+    {
+        *cache = OverlayCache {
+            camera: camera.to_string(),
+            ..Default::default()
+        };
+    }
     let key = (frame, studio.overlay.stride, studio.overlay.accumulate);
     // Every frame: compare without cloning the rig.
     let unchanged = studio
@@ -626,6 +656,8 @@ fn refresh(
         .stamp_nanos;
     if cache.texture.as_ref().map(|(f, _)| *f) != Some(frame) {
         let img = drive.load_image(camera, frame).map_err(|e| e.to_string())?;
+        let smaller = fit_texture_side(&img, ctx.input(|i| i.max_texture_side));
+        let img = smaller.as_ref().unwrap_or(&img);
         let color =
             egui::ColorImage::from_rgb([img.width() as usize, img.height() as usize], img.as_raw());
         let tex = ctx.load_texture(
@@ -903,4 +935,17 @@ fn ensure_cpu(
     cache.cpu = cpu;
     cache.cpu_key = Some(occlusion);
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn an_image_larger_than_the_gpu_allows_is_shrunk_keeping_its_aspect() {
+        let img = image::RgbImage::new(10_000, 5_000);
+        let small = fit_texture_side(&img, 8192).unwrap();
+        assert_eq!((small.width(), small.height()), (8192, 4096));
+        assert!(fit_texture_side(&image::RgbImage::new(1920, 1080), 8192).is_none());
+    }
 }

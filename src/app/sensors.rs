@@ -130,6 +130,7 @@ fn sensor_ui(studio: &mut Studio, ui: &mut egui::Ui, name: &str) {
     let kind = sensor.kind.as_str();
     let mut locks = studio.locks.get(name).copied().unwrap_or_default();
     let mut changed = false;
+    let mut dragging = false;
     let locked = locks.iter().any(|&l| l);
     let title = if locked {
         format!("{name} ({kind}) [locked]")
@@ -144,22 +145,24 @@ fn sensor_ui(studio: &mut Studio, ui: &mut egui::Ui, name: &str) {
                 .num_columns(5)
                 .show(ui, |ui| {
                     let rows = ["x m", "y m", "z m", "roll °", "pitch °", "yaw °"];
+                    let offset_m = crate::calib::file::MAX_SENSOR_OFFSET_M;
                     for (axis, label) in rows.iter().enumerate() {
-                        let (v, step, speed, decimals) = if axis < 3 {
-                            (&mut xyz[axis], step_m, 0.001, 4)
+                        let (v, step, speed, decimals, range) = if axis < 3 {
+                            (&mut xyz[axis], step_m, 0.001, 4, -offset_m..=offset_m)
                         } else {
-                            (&mut rpy[axis - 3], step_deg, 0.01, 3)
+                            (&mut rpy[axis - 3], step_deg, 0.01, 3, -360.0..=360.0)
                         };
                         ui.label(*label);
                         let free = !locks[axis];
-                        changed |= ui
-                            .add_enabled(
-                                free,
-                                egui::DragValue::new(v)
-                                    .speed(speed)
-                                    .fixed_decimals(decimals),
-                            )
-                            .changed();
+                        let field = ui.add_enabled(
+                            free,
+                            egui::DragValue::new(v)
+                                .speed(speed)
+                                .range(range)
+                                .fixed_decimals(decimals),
+                        );
+                        changed |= field.changed();
+                        dragging |= field.dragged();
                         if ui
                             .add_enabled(free, egui::Button::new("−").small())
                             .clicked()
@@ -225,7 +228,20 @@ fn sensor_ui(studio: &mut Studio, ui: &mut egui::Ui, name: &str) {
     } else {
         studio.locks.remove(name);
     }
+    // A drag is one edit: the first frame that changes a value adds an undo entry, the later
+    // frames of the same drag amend it.
+    let drag_open = studio.drag_undo_open.as_deref() == Some(name);
     if changed {
-        studio.set_extrinsic(name, from_xyz_rpy(xyz, rpy));
+        let next = from_xyz_rpy(xyz, rpy);
+        if dragging && drag_open {
+            studio.amend_extrinsic(name, next);
+        } else {
+            studio.set_extrinsic(name, next);
+        }
+    }
+    if dragging && changed {
+        studio.drag_undo_open = Some(name.to_string());
+    } else if !dragging && drag_open {
+        studio.drag_undo_open = None;
     }
 }

@@ -120,6 +120,8 @@ pub struct Studio {
     pub current: Rig,
     pub undo: Vec<Rig>,
     pub redo: Vec<Rig>,
+    /// The sensor whose field is being dragged, once the drag has made its undo entry.
+    pub(crate) drag_undo_open: Option<String>,
     /// Index into the cameras with intrinsics, and the frame of that camera.
     pub camera: usize,
     pub frame: usize,
@@ -164,6 +166,8 @@ pub struct Studio {
     pub(crate) saved_session: Option<Session>,
     /// When the autosave last compared the session (it runs at most once a second).
     pub(crate) autosave_checked: Option<std::time::Instant>,
+    /// The last autosave write failed (retried every second).
+    pub(crate) autosave_failing: bool,
     /// Frame-time measurement (RIGCAL_PROFILE_FRAMES).
     pub profile: Option<super::profile::Profile>,
     /// Camera views drawn with their overlay this frame, and the LiDAR points they submitted.
@@ -178,6 +182,7 @@ impl Default for Studio {
             current: Rig::default(),
             undo: Vec::new(),
             redo: Vec::new(),
+            drag_undo_open: None,
             camera: 0,
             frame: 0,
             view: ExtrinsicsView::Current,
@@ -210,6 +215,7 @@ impl Default for Studio {
             autosave: None,
             saved_session: None,
             autosave_checked: None,
+            autosave_failing: false,
             profile: None,
             pictures: (0, 0),
         }
@@ -222,6 +228,9 @@ impl Studio {
     pub fn open_log(&mut self, path: &Path) {
         match Drive::open(path) {
             Ok(drive) => {
+                self.set_edits_aside(path);
+                // A demo still being generated would replace this drive when ready.
+                self.demo = None;
                 self.initial = drive.rig.clone();
                 self.current = drive.rig.clone();
                 self.undo.clear();
@@ -249,6 +258,32 @@ impl Studio {
         }
     }
 
+    /// Before another log replaces the open one: if the open one has edits, an optimiser
+    /// result or segments, keep its session beside the autosave (which the new log's session
+    /// overwrites within a second) and say where. Only with persistence on.
+    fn set_edits_aside(&mut self, next_log: &Path) {
+        let Some(drive) = &self.drive else { return };
+        let edited = !self.undo.is_empty()
+            || self.current != self.initial
+            || self.optimiser.best.is_some()
+            || !self.segments.is_empty();
+        if self.autosave.is_none() || !edited || drive.path() == next_log {
+            return;
+        }
+        let path = crate::session::set_aside_path(drive.path());
+        match self.session().save(&path) {
+            Ok(()) => self.status.push(format!(
+                "the session of {} (with your edits) is kept in {}: File ▸ Open session… restores it",
+                drive.path().display(),
+                path.display()
+            )),
+            Err(e) => self.status.push(format!(
+                "error: could not keep the session of {}: {e}",
+                drive.path().display()
+            )),
+        }
+    }
+
     pub(crate) fn remember(&mut self, path: &Path) {
         self.recent.push(path);
         if self.autosave.is_some() {
@@ -260,6 +295,9 @@ impl Studio {
     /// edit: the native file, a URDF, a ROS camera_info YAML or the /tf_static of an MCAP
     /// (sensors matched by name or frame id, see [`crate::interop::import`]).
     pub fn load_calibration(&mut self, path: &Path) {
+        if self.optimiser_owns_the_rig() {
+            return;
+        }
         match crate::interop::import::load_initial_guess(path, &self.current) {
             Ok(imported) => {
                 self.apply_rig(&imported.rig);
@@ -289,24 +327,69 @@ impl Studio {
         matched
     }
 
-    /// Apply an edit to the current rig, recording undo.
+    /// Whether an optimiser run owns the current rig (it replaces it with every packet, so an
+    /// edit now would be lost); says so in the status line when it does.
+    fn optimiser_owns_the_rig(&mut self) -> bool {
+        let running = self.optimiser.run.is_some();
+        if running {
+            self.status
+                .push("error: the optimiser is running; stop it (or let it finish) to edit".into());
+        }
+        running
+    }
+
+    /// Apply an edit to the current rig, recording undo (refused while an optimiser runs).
     pub fn edit(&mut self, next: Rig) {
+        if self.optimiser_owns_the_rig() {
+            return;
+        }
         if next != self.current {
             self.undo.push(std::mem::replace(&mut self.current, next));
             self.redo.clear();
         }
     }
 
-    /// Set a sensor's extrinsic; locked axes keep their current values.
+    /// Set a sensor's extrinsic; locked axes keep their current values. A transform that is
+    /// not finite, or puts the sensor farther from the vehicle frame than a calibration file
+    /// may ([`crate::calib::file::MAX_SENSOR_OFFSET_M`]), is refused with an error in the
+    /// status line: the rig could not be saved or autosaved.
     pub fn set_extrinsic(&mut self, sensor: &str, vehicle_from_sensor: Rigid) {
-        let mut next = self.current.clone();
-        if let Some(s) = next.sensor_mut(sensor) {
-            s.vehicle_from_sensor = match self.locks.get(sensor) {
-                Some(locks) => apply_locks(s.vehicle_from_sensor, vehicle_from_sensor, locks),
-                None => vehicle_from_sensor,
-            };
+        if let Some(next) = self.with_extrinsic(sensor, vehicle_from_sensor) {
             self.edit(next);
         }
+    }
+
+    /// As [`Self::set_extrinsic`], but without an undo entry of its own: the later frames of
+    /// one drag, whose first frame made the entry.
+    pub fn amend_extrinsic(&mut self, sensor: &str, vehicle_from_sensor: Rigid) {
+        if let Some(next) = self.with_extrinsic(sensor, vehicle_from_sensor) {
+            if self.undo.is_empty() || self.optimiser.run.is_some() {
+                self.edit(next);
+            } else {
+                self.current = next;
+                self.redo.clear();
+            }
+        }
+    }
+
+    /// The current rig with `sensor`'s extrinsic set (locks respected), if it is usable.
+    fn with_extrinsic(&mut self, sensor: &str, vehicle_from_sensor: Rigid) -> Option<Rig> {
+        let offset_m = vehicle_from_sensor.translation.length();
+        let finite = vehicle_from_sensor.rotation.is_finite() && offset_m.is_finite();
+        if !finite || offset_m > crate::calib::file::MAX_SENSOR_OFFSET_M {
+            self.status.push(format!(
+                "error: {sensor}: a transform that is not finite or puts the sensor more than {} m from the vehicle frame is not taken",
+                crate::calib::file::MAX_SENSOR_OFFSET_M
+            ));
+            return None;
+        }
+        let mut next = self.current.clone();
+        let s = next.sensor_mut(sensor)?;
+        s.vehicle_from_sensor = match self.locks.get(sensor) {
+            Some(locks) => apply_locks(s.vehicle_from_sensor, vehicle_from_sensor, locks),
+            None => vehicle_from_sensor,
+        };
+        Some(next)
     }
 
     /// `candidate` with every locked axis of every sensor taken from `reference`.
@@ -333,12 +416,20 @@ impl Studio {
     }
 
     pub fn undo(&mut self) {
+        self.drag_undo_open = None;
+        if self.optimiser_owns_the_rig() {
+            return;
+        }
         if let Some(prev) = self.undo.pop() {
             self.redo.push(std::mem::replace(&mut self.current, prev));
         }
     }
 
     pub fn redo(&mut self) {
+        self.drag_undo_open = None;
+        if self.optimiser_owns_the_rig() {
+            return;
+        }
         if let Some(next) = self.redo.pop() {
             self.undo.push(std::mem::replace(&mut self.current, next));
         }
@@ -385,7 +476,11 @@ impl Studio {
     /// The session as it stands.
     pub fn session(&self) -> Session {
         let mut s = Session::new();
-        s.log = self.drive.as_ref().map(|d| d.path().to_path_buf());
+        // An absolute path: a session restored from another directory still finds its log.
+        s.log = self
+            .drive
+            .as_ref()
+            .map(|d| std::path::absolute(d.path()).unwrap_or_else(|_| d.path().to_path_buf()));
         s.segments_nanos = self.segments.iter().map(|&(a, b)| [a, b]).collect();
         s.set_rigs(&self.initial, &self.current, self.optimiser.best.as_ref());
         s.locks = self.locks.clone();
@@ -453,28 +548,55 @@ impl Studio {
             ));
             return;
         };
-        let opened_before = self.drive.as_ref().map(|d| d.path().to_path_buf());
-        if opened_before.as_deref() != Some(log.as_path()) {
+        let absolute = |p: &Path| std::path::absolute(p).unwrap_or_else(|_| p.to_path_buf());
+        let opened_before = self.drive.as_ref().map(|d| absolute(d.path()));
+        if opened_before != Some(absolute(log)) {
             let n = self.status.len();
             self.open_log(log);
             if self.status[n..].iter().any(|s| s.starts_with("error")) {
                 return;
             }
         }
-        let rig = |doc: &Option<CalibrationFile>| doc.as_ref().and_then(|d| d.to_rig(path).ok());
-        if let Some(r) = rig(&session.initial) {
+        // A rig the session holds but that does not validate is named, not silently skipped.
+        let mut unusable = Vec::new();
+        let mut rig = |which: &str, doc: &Option<CalibrationFile>| match doc {
+            Some(d) => d
+                .to_rig(path)
+                .map_err(|e| unusable.push(format!("its {which} rig: {e}")))
+                .ok(),
+            None => None,
+        };
+        let (initial, current, best) = (
+            rig("initial", &session.initial),
+            rig("current", &session.current),
+            rig("best", &session.best),
+        );
+        for what in unusable {
+            self.status.push(format!("error: {what}"));
+        }
+        if let Some(r) = initial {
             self.initial = self.merged(&r);
         }
-        if let Some(r) = rig(&session.current) {
+        if let Some(r) = current {
             let merged = self.merged(&r);
             self.edit(merged);
         }
-        self.optimiser.best = rig(&session.best).map(|r| self.merged(&r));
-        self.segments = session
+        self.optimiser.best = best.map(|r| self.merged(&r));
+        // Segments within the drive and in order; others are dropped with a word.
+        let range = self.drive.as_ref().and_then(|d| d.time_range_nanos());
+        let (segments, dropped): (Vec<(i64, i64)>, Vec<(i64, i64)>) = session
             .segments_nanos
             .iter()
             .map(|s| (s[0], s[1]))
-            .collect();
+            .partition(|&(a, b)| a <= b && range.is_some_and(|(t0, t1)| a >= t0 && b <= t1));
+        if !dropped.is_empty() {
+            self.status.push(format!(
+                "error: {}: {} segment(s) outside the drive or reversed were dropped",
+                path.display(),
+                dropped.len()
+            ));
+        }
+        self.segments = segments;
         self.locks = session.locks.clone();
         self.camera = session.camera;
         self.frame = session.frame;
@@ -551,13 +673,30 @@ impl Studio {
         if self.saved_session.as_ref() == Some(&session) {
             return;
         }
+        // A failed write (a full disk) is said once and retried every second; the status
+        // line shows that autosave is failing until a write succeeds again.
         match session.save(&path) {
-            Ok(()) => self.saved_session = Some(session),
+            Ok(()) => {
+                self.saved_session = Some(session);
+                if std::mem::take(&mut self.autosave_failing) {
+                    self.status.push("autosave works again".into());
+                }
+            }
             Err(e) => {
-                self.status.push(format!("error: autosave: {e}"));
-                self.autosave = None;
+                if !self.autosave_failing {
+                    self.status.push(format!("error: autosave: {e}"));
+                }
+                self.autosave_failing = true;
             }
         }
+    }
+
+    /// On closing the window: write the autosave now, whatever the one-second throttle or a
+    /// running optimiser (whose live extrinsics are saved as the current rig).
+    pub fn autosave_on_exit(&mut self) {
+        self.autosave_checked = None;
+        self.optimiser.run = None;
+        self.autosave_if_changed();
     }
 }
 

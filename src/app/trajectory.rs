@@ -13,6 +13,7 @@ use egui_plot::{Line, Plot, PlotImage, PlotPoint, PlotPoints, Points};
 use super::Studio;
 use super::overlay::colormap;
 use crate::calib::Rig;
+use crate::geometry::Trajectory;
 use crate::geometry::motion::MotionSummary;
 use crate::geometry::projection::world_points;
 use crate::log::Drive;
@@ -20,7 +21,7 @@ use crate::log::Drive;
 /// The top-down map: aggregated LiDAR points rasterised into a density image (drawn as one
 /// texture, cheap on software renderers), and the trajectory.
 pub struct MapData {
-    /// (stamp, x, y) every 0.1 s.
+    /// (stamp, x, y) every 0.1 s (more sparsely past 20 000 samples).
     pub trajectory: Vec<(i64, [f64; 2])>,
     /// World rectangle the raster covers: min x, min y, size (square), and the raster.
     pub raster_min: [f64; 2],
@@ -89,9 +90,8 @@ pub fn build_map(drive: &Drive, rig: &Rig) -> Result<MapData, String> {
         .trajectory
         .time_range_nanos()
         .ok_or("the drive has no trajectory")?;
-    let trajectory: Vec<(i64, [f64; 2])> = (0..)
-        .map(|k| t0 + k * 100_000_000)
-        .take_while(|&t| t <= t1)
+    let trajectory: Vec<(i64, [f64; 2])> = Trajectory::sample_stamps(t0, t1, 100_000_000, 20_000)
+        .into_iter()
         .filter_map(|t| {
             let p = drive.trajectory.world_from_vehicle(t).ok()?.translation;
             Some((t, [p.x, p.y]))
@@ -152,7 +152,11 @@ pub fn poll(studio: &mut Studio, ctx: &egui::Context) {
                 panel.map = Some(Arc::new(map));
                 panel.job = None;
             }
-            Ok(Err(e)) => {
+            result @ (Ok(Err(_)) | Err(std::sync::mpsc::TryRecvError::Disconnected)) => {
+                let e = match result {
+                    Ok(Err(e)) => e,
+                    _ => "its worker stopped without a result".to_string(),
+                };
                 studio.status.push(format!("error: trajectory map: {e}"));
                 panel.map = Some(Arc::new(MapData {
                     trajectory: Vec::new(),
@@ -162,7 +166,9 @@ pub fn poll(studio: &mut Studio, ctx: &egui::Context) {
                 }));
                 panel.job = None;
             }
-            Err(_) => ctx.request_repaint_after(std::time::Duration::from_millis(200)),
+            Err(std::sync::mpsc::TryRecvError::Empty) => {
+                ctx.request_repaint_after(std::time::Duration::from_millis(200))
+            }
         }
     }
 }

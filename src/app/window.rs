@@ -9,6 +9,10 @@ use crate::calib::CalibrationFile;
 use crate::session::Session;
 
 impl eframe::App for Studio {
+    fn on_exit(&mut self) {
+        self.autosave_on_exit();
+    }
+
     fn ui(&mut self, ui: &mut egui::Ui, _frame: &mut eframe::Frame) {
         self.pictures = (0, 0);
         self.handle_dropped_files(ui.ctx());
@@ -148,8 +152,10 @@ impl Studio {
         if ui
             .add_enabled(previous.exists(), egui::Button::new("Restore last session"))
             .on_hover_text(format!(
-                "the previous run's session, autosaved after every change: {}",
-                previous.display()
+                "the previous run's session, autosaved after every change: {} (the {} runs before it: previous-1 … previous-{} beside it, with File ▸ Open session)",
+                previous.display(),
+                crate::session::EARLIER_SESSIONS_KEPT,
+                crate::session::EARLIER_SESSIONS_KEPT
             ))
             .clicked()
         {
@@ -181,6 +187,11 @@ impl Studio {
                 Some(s) => ui.label(s),
                 None => ui.label("ready"),
             };
+            if self.autosave_failing {
+                ui.separator();
+                ui.colored_label(egui::Color32::LIGHT_RED, "autosave failing")
+                    .on_hover_text("the session could not be written (a full disk?); retried every second; File ▸ Save session… elsewhere keeps your work");
+            }
             if let Some(d) = &self.drive {
                 ui.separator();
                 ui.label(format!("{} · {}", d.path().display(), d.trajectory_source));
@@ -235,13 +246,17 @@ impl Studio {
     /// At start-up: remember recent files, set the previous run's autosave aside for File ▸
     /// Restore last session, and autosave from now on.
     pub fn enable_persistence(&mut self) {
-        use crate::session::{RecentFiles, autosave_path, previous_session_path};
+        use crate::session::{
+            RecentFiles, autosave_path, previous_session_path, set_autosave_aside,
+        };
         self.recent = RecentFiles::load(&RecentFiles::default_path());
-        let autosave = autosave_path();
-        if autosave.exists() {
-            let _ = std::fs::rename(&autosave, previous_session_path());
+        match set_autosave_aside() {
+            Ok(()) => self.autosave = Some(autosave_path()),
+            Err(e) => self.status.push(format!(
+                "error: could not set the last run's autosave aside ({e}), so this run does not autosave; the last run's is still at {}",
+                autosave_path().display()
+            )),
         }
-        self.autosave = Some(autosave);
         if let Some(d) = self.drive.clone() {
             self.remember(d.path());
         }

@@ -22,6 +22,8 @@ pub struct MotionSummary {
 }
 
 const STEP_NANOS: i64 = 100_000_000;
+/// Longer segments are sampled more sparsely (a day-long log every 4.3 s).
+const MOST_SAMPLES: usize = 20_000;
 const TURN_RATE_DEG_S: f64 = 5.0;
 const TURN_MIN_DEG: f64 = 20.0;
 
@@ -33,11 +35,7 @@ impl MotionSummary {
         if t1 <= t0 {
             return None;
         }
-        let mut stamps: Vec<i64> = (0..)
-            .map(|k| t0 + k * STEP_NANOS)
-            .take_while(|&t| t < t1)
-            .collect();
-        stamps.push(t1);
+        let stamps = Trajectory::sample_stamps(t0, t1, STEP_NANOS, MOST_SAMPLES);
         let poses: Vec<_> = stamps
             .iter()
             .filter_map(|&t| trajectory.world_from_vehicle(t).ok().map(|p| (t, p)))

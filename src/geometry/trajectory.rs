@@ -145,6 +145,50 @@ impl Trajectory {
         removed
     }
 
+    /// Remove poses at either end whose stamp lies apart from the rest by more than an hour and
+    /// more than a thousand times the drive's median step: a stamp of 0, or one in another
+    /// epoch, in a log stamped otherwise. Such a pose stretches the drive over years, and
+    /// everything that samples it in time would sample that span. Returns the removed stamps.
+    pub fn remove_time_outliers(&mut self) -> Vec<i64> {
+        const HOUR_NANOS: i64 = 3_600_000_000_000;
+        let mut steps: Vec<i64> = self.stamps_nanos.windows(2).map(|w| w[1] - w[0]).collect();
+        steps.sort_unstable();
+        let Some(&median) = steps.get(steps.len() / 2) else {
+            return Vec::new();
+        };
+        let apart = |gap: i64| gap > HOUR_NANOS && gap / 1000 > median;
+        let mut removed = Vec::new();
+        while self.len() > 2 && apart(self.stamps_nanos[1] - self.stamps_nanos[0]) {
+            removed.push(self.stamps_nanos.remove(0));
+            self.world_from_vehicle.remove(0);
+        }
+        while self.len() > 2
+            && apart(self.stamps_nanos[self.len() - 1] - self.stamps_nanos[self.len() - 2])
+        {
+            removed.extend(self.stamps_nanos.pop());
+            self.world_from_vehicle.pop();
+        }
+        removed
+    }
+
+    /// Stamps from `start` to `end` (inclusive of both) every `step` ns, or at most `most` of
+    /// them, evenly spread, where the span would take more: what plots and summaries sample,
+    /// bounded whatever the span.
+    pub fn sample_stamps(start: i64, end: i64, step: i64, most: usize) -> Vec<i64> {
+        if end < start || most == 0 {
+            return Vec::new();
+        }
+        let span = (end - start) as u128;
+        let step = (step.max(1) as u128).max(span.div_ceil(most.max(2) as u128 - 1));
+        let mut stamps: Vec<i64> = (0..)
+            .map(|k: u128| k * step)
+            .take_while(|&offset| offset < span)
+            .map(|offset| start + offset as i64)
+            .collect();
+        stamps.push(end);
+        stamps
+    }
+
     pub fn with_max_extrapolation_nanos(mut self, nanos: i64) -> Self {
         self.max_extrapolation_nanos = nanos.max(0);
         self
@@ -260,6 +304,44 @@ mod tests {
         let conflicts = conflicting_stamps(&[(0, Rigid::IDENTITY), (0, turned)]);
         assert!((conflicts[0].rotation_rad - 0.01).abs() < 1e-9);
         assert!(conflicting_stamps(&[(0, moved), (0, moved)]).is_empty());
+    }
+
+    #[test]
+    fn a_pose_stamped_in_another_epoch_is_removed_and_a_paused_recording_kept() {
+        let day = 86_400_000_000_000i64;
+        let mut poses: Vec<(i64, Rigid)> = (0..50)
+            .map(|k| (day * 20_000 + k * 100_000_000, Rigid::IDENTITY))
+            .collect();
+        // A 90-minute pause in the middle is a drive, not an outlier.
+        poses.extend((0..50).map(|k| {
+            (
+                day * 20_000 + 5_400_000_000_000 + k * 100_000_000,
+                Rigid::IDENTITY,
+            )
+        }));
+        poses.push((0, Rigid::IDENTITY));
+        poses.push((i64::MAX / 2, Rigid::IDENTITY));
+        let mut t = Trajectory::new(poses);
+        assert_eq!(t.remove_time_outliers(), vec![0, i64::MAX / 2]);
+        assert_eq!(t.len(), 100);
+        assert!(t.remove_time_outliers().is_empty());
+    }
+
+    #[test]
+    fn samples_are_every_step_or_at_most_so_many() {
+        assert_eq!(
+            Trajectory::sample_stamps(0, 250, 100, 1000),
+            vec![0, 100, 200, 250]
+        );
+        assert_eq!(
+            Trajectory::sample_stamps(0, 200, 100, 1000),
+            vec![0, 100, 200]
+        );
+        let many = Trajectory::sample_stamps(0, i64::MAX, 100, 1000);
+        assert!(many.len() <= 1001 && many.len() >= 999, "{}", many.len());
+        assert_eq!(many.last(), Some(&i64::MAX));
+        assert!(many.windows(2).all(|w| w[1] > w[0]));
+        assert!(Trajectory::sample_stamps(5, 4, 1, 10).is_empty());
     }
 
     #[test]

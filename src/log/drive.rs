@@ -342,6 +342,14 @@ impl Drive {
             }
             trajectory = Trajectory::new(poses);
         }
+        // A pose stamped far apart from the rest (0, another epoch) would stretch the drive
+        // over years: drop it and say so.
+        for stamp in trajectory.remove_time_outliers() {
+            problems.push(Problem::file(format!(
+                "trajectory pose stamped {:.3} s lies more than an hour apart from the rest of the trajectory, at an end: dropped",
+                stamp as f64 * 1e-9
+            )));
+        }
         // A pose far from most of its neighbours is a corrupt message, not a drive: drop it and
         // say so.
         for (stamp, jump_m) in trajectory.remove_jumps(MAX_VEHICLE_SPEED_MPS) {
