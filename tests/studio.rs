@@ -767,3 +767,41 @@ fn the_checkerboard_method_runs_from_the_optimiser_panel_and_says_when_there_are
     );
     assert_eq!(h.state().current, before);
 }
+
+/// File ▸ Open, Open recent and drag and drop open a log on a worker: the window keeps
+/// drawing, the log is installed when ready, and a bad file is an error that leaves the open
+/// drive alone.
+#[test]
+fn a_log_opens_in_the_background() {
+    let mut studio = Studio::default();
+    let ctx = egui::Context::default();
+    let wait = |studio: &mut Studio| {
+        let t0 = std::time::Instant::now();
+        while studio.opening.is_some() && t0.elapsed().as_secs() < 60 {
+            studio.poll_opening(&ctx);
+            std::thread::sleep(Duration::from_millis(20));
+        }
+    };
+    studio.open_log_in_background(&pandaset());
+    assert!(studio.drive.is_none() && studio.opening.is_some());
+    wait(&mut studio);
+    assert_eq!(
+        studio.drive.as_ref().map(|d| d.path().to_path_buf()),
+        Some(pandaset()),
+        "{:?}",
+        studio.status
+    );
+    let dir = std::env::temp_dir().join(format!("rigcal-bg-open-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let bad = dir.join("not-a-log.mcap");
+    std::fs::write(&bad, "hello").unwrap();
+    studio.open_any(bad);
+    wait(&mut studio);
+    let last = studio.status.last().unwrap();
+    assert!(
+        last.starts_with("error") && last.contains("not-a-log.mcap"),
+        "{last}"
+    );
+    assert_eq!(studio.drive.as_ref().unwrap().path(), pandaset());
+    let _ = std::fs::remove_dir_all(dir);
+}

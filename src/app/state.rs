@@ -158,6 +158,11 @@ pub struct Studio {
     /// Known ground truth (the simulator's demo), for the overlay and pose errors.
     pub ground_truth: Option<Rig>,
     pub demo: Option<super::demo::DemoJob>,
+    /// A log being opened on a worker thread ([`Self::open_log_in_background`]).
+    pub opening: Option<(
+        PathBuf,
+        std::sync::mpsc::Receiver<Result<Drive, crate::log::LogError>>,
+    )>,
     /// The overlay is drawn by the wgpu paint callback (false: CPU-projected egui mesh).
     pub gpu: bool,
     pub recent: RecentFiles,
@@ -210,6 +215,7 @@ impl Default for Studio {
             export: Default::default(),
             ground_truth: None,
             demo: None,
+            opening: None,
             gpu: false,
             recent: RecentFiles::default(),
             autosave: None,
@@ -225,8 +231,50 @@ impl Default for Studio {
 const AXES: [&str; 6] = ["x", "y", "z", "roll", "pitch", "yaw"];
 
 impl Studio {
+    /// Open a log now (blocking: start-up, sessions, tests).
     pub fn open_log(&mut self, path: &Path) {
-        match Drive::open(path) {
+        let opened = Drive::open(path);
+        self.install_drive(path, opened);
+    }
+
+    /// Open a log on a worker thread, the window staying responsive (a large log takes a
+    /// while to index); [`Self::poll_opening`] installs it when it is ready. A second request
+    /// replaces the first.
+    pub fn open_log_in_background(&mut self, path: &Path) {
+        let (tx, rx) = std::sync::mpsc::channel();
+        let worker_path = path.to_path_buf();
+        std::thread::spawn(move || {
+            let _ = tx.send(Drive::open(&worker_path));
+        });
+        self.opening = Some((path.to_path_buf(), rx));
+    }
+
+    /// Install a log opened in the background once its worker is done.
+    pub fn poll_opening(&mut self, ctx: &egui::Context) {
+        let Some((path, rx)) = &self.opening else {
+            return;
+        };
+        match rx.try_recv() {
+            Ok(opened) => {
+                let path = path.clone();
+                self.opening = None;
+                self.install_drive(&path, opened);
+            }
+            Err(std::sync::mpsc::TryRecvError::Empty) => {
+                ctx.request_repaint_after(std::time::Duration::from_millis(100));
+            }
+            Err(std::sync::mpsc::TryRecvError::Disconnected) => {
+                self.status.push(format!(
+                    "error: opening {} stopped without a result",
+                    path.display()
+                ));
+                self.opening = None;
+            }
+        }
+    }
+
+    fn install_drive(&mut self, path: &Path, opened: Result<Drive, crate::log::LogError>) {
+        match opened {
             Ok(drive) => {
                 self.set_edits_aside(path);
                 // A demo still being generated would replace this drive when ready.

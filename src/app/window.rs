@@ -21,6 +21,7 @@ impl eframe::App for Studio {
         super::checks::poll(self, ui.ctx());
         super::trajectory::poll(self, ui.ctx());
         super::demo::poll(self, ui.ctx());
+        self.poll_opening(ui.ctx());
         egui::Panel::top("menu").show(ui, |ui| self.menu_ui(ui));
         egui::Panel::bottom("status").show(ui, |ui| self.status_ui(ui));
         egui::Panel::bottom("trajectory")
@@ -94,7 +95,7 @@ impl Studio {
                 .add_filter("MCAP", &["mcap"])
                 .pick_file()
         {
-            self.open_log(&path);
+            self.open_log_in_background(&path);
         }
         ui.menu_button("Open recent", |ui| {
             if self.recent.paths.is_empty() {
@@ -167,7 +168,7 @@ impl Studio {
     pub fn open_any(&mut self, path: PathBuf) {
         let name = path.to_string_lossy().to_lowercase();
         if name.ends_with(".mcap") {
-            self.open_log(&path);
+            self.open_log_in_background(&path);
         } else if [".yaml", ".yml", ".urdf"].iter().any(|e| name.ends_with(e)) {
             self.load_calibration(&path);
         } else if name.ends_with(".json") {
@@ -187,6 +188,11 @@ impl Studio {
                 Some(s) => ui.label(s),
                 None => ui.label("ready"),
             };
+            if let Some((path, _)) = &self.opening {
+                ui.separator();
+                ui.spinner();
+                ui.label(format!("opening {}…", path.display()));
+            }
             if self.autosave_failing {
                 ui.separator();
                 ui.colored_label(egui::Color32::LIGHT_RED, "autosave failing")
