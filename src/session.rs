@@ -222,8 +222,14 @@ fn set_autosave_aside_in(dir: &Path) -> std::io::Result<()> {
     std::fs::rename(&autosave, previous)
 }
 
-/// Where the session of `log` is kept when another log is opened over its edits.
+/// Where the session of `log` is kept when another log is opened over its edits: named by the
+/// log's file stem and a hash of its whole path (two logs with one name keep two files).
 pub fn set_aside_path(log: &Path) -> PathBuf {
+    use std::hash::{Hash, Hasher};
+    let mut hasher = std::collections::hash_map::DefaultHasher::new();
+    std::path::absolute(log)
+        .unwrap_or_else(|_| log.to_path_buf())
+        .hash(&mut hasher);
     let stem: String = log
         .file_stem()
         .map(|s| s.to_string_lossy().into_owned())
@@ -237,7 +243,10 @@ pub fn set_aside_path(log: &Path) -> PathBuf {
             }
         })
         .collect();
-    state_dir().join(format!("set-aside-{stem}.rigcal-session.json"))
+    state_dir().join(format!(
+        "set-aside-{stem}-{:08x}.rigcal-session.json",
+        hasher.finish() as u32
+    ))
 }
 
 /// Most recently opened files, newest first, kept in a small text file.

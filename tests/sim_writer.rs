@@ -644,6 +644,15 @@ fn odd_frame_ids_and_a_blank_vehicle_frame_give_a_rig_that_saves_and_loads() {
             &[0.0; 4],
         )
         .unwrap();
+        w.write_pointcloud(
+            "/c/points",
+            T0 + i * 100 * MS,
+            "  ",
+            &points,
+            &[1.0; 4],
+            &[0.0; 4],
+        )
+        .unwrap();
     }
     w.finish().unwrap();
     let options = rigcal::log::DriveOptions {
@@ -659,7 +668,10 @@ fn odd_frame_ids_and_a_blank_vehicle_frame_give_a_rig_that_saves_and_loads() {
         .map(|s| (s.name.as_str(), s.frame_id.as_str()))
         .collect();
     names.sort();
-    assert_eq!(names, [("b_points", ""), ("lidar_a", "lidar_a")]);
+    assert_eq!(
+        names,
+        [("b_points", ""), ("c_points", ""), ("lidar_a", "lidar_a")]
+    );
     let file = rigcal::calib::file::CalibrationFile::from_rig(&drive.rig);
     let saved = dir.join("calib.yaml");
     file.save(&saved).unwrap();

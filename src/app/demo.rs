@@ -1,7 +1,7 @@
 //! First start: generate (or reuse) the simulator's demo drive on a background thread, with
 //! progress in the viewport, then open it with its ground truth. A log or session the user
-//! opens meanwhile cancels it ([`Studio::open_log`] drops the job), so the demo never replaces
-//! their drive.
+//! opens meanwhile drops the job ([`Studio::open_log`]): the simulator still finishes the drive
+//! (cached for the next start), but it never replaces the user's.
 
 use std::path::PathBuf;
 use std::sync::mpsc::{Receiver, TryRecvError, channel};

@@ -125,7 +125,7 @@ pub fn poll(studio: &mut Studio, ctx: &egui::Context) {
     if worker_gone && !packets.iter().any(|p| p.finished || p.error.is_some()) {
         // The worker ended without its last packet (it panicked): end the run here, keeping
         // the best result it sent, rather than a progress bar forever.
-        let e = "the optimiser's worker stopped without a result; the best it sent is kept";
+        let e = "the optimiser's worker stopped without a result; the last extrinsics it sent stay (Undo restores the start)";
         studio.optimiser.message = Some(format!("error: {e}"));
         studio.status.push(format!("error: {e}"));
         finished = true;

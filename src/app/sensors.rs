@@ -131,6 +131,7 @@ fn sensor_ui(studio: &mut Studio, ui: &mut egui::Ui, name: &str) {
     let mut locks = studio.locks.get(name).copied().unwrap_or_default();
     let mut changed = false;
     let mut dragging = false;
+    let running = studio.optimiser.run.is_some();
     let locked = locks.iter().any(|&l| l);
     let title = if locked {
         format!("{name} ({kind}) [locked]")
@@ -153,12 +154,16 @@ fn sensor_ui(studio: &mut Studio, ui: &mut egui::Ui, name: &str) {
                             (&mut rpy[axis - 3], step_deg, 0.01, 3, -360.0..=360.0)
                         };
                         ui.label(*label);
-                        let free = !locks[axis];
+                        // While an optimiser run owns the rig, its fields show it live.
+                        let free = !locks[axis] && !running;
                         let field = ui.add_enabled(
                             free,
                             egui::DragValue::new(v)
                                 .speed(speed)
                                 .range(range)
+                                // Typed values are clamped; a log's own value beyond the range
+                                // is shown as it is, not changed by being drawn.
+                                .clamp_existing_to_range(false)
                                 .fixed_decimals(decimals),
                         );
                         changed |= field.changed();
@@ -235,13 +240,11 @@ fn sensor_ui(studio: &mut Studio, ui: &mut egui::Ui, name: &str) {
         let next = from_xyz_rpy(xyz, rpy);
         if dragging && drag_open {
             studio.amend_extrinsic(name, next);
-        } else {
-            studio.set_extrinsic(name, next);
+        } else if studio.set_extrinsic(name, next) && dragging {
+            studio.drag_undo_open = Some(name.to_string());
         }
     }
-    if dragging && changed {
-        studio.drag_undo_open = Some(name.to_string());
-    } else if !dragging && drag_open {
+    if !dragging && drag_open {
         studio.drag_undo_open = None;
     }
 }

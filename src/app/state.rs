@@ -387,23 +387,27 @@ impl Studio {
     }
 
     /// Apply an edit to the current rig, recording undo (refused while an optimiser runs).
-    pub fn edit(&mut self, next: Rig) {
+    /// Returns whether it was taken (an edit that changes nothing is, without an undo entry).
+    pub fn edit(&mut self, next: Rig) -> bool {
         if self.optimiser_owns_the_rig() {
-            return;
+            return false;
         }
         if next != self.current {
             self.undo.push(std::mem::replace(&mut self.current, next));
             self.redo.clear();
         }
+        true
     }
 
     /// Set a sensor's extrinsic; locked axes keep their current values. A transform that is
     /// not finite, or puts the sensor farther from the vehicle frame than a calibration file
     /// may ([`crate::calib::file::MAX_SENSOR_OFFSET_M`]), is refused with an error in the
     /// status line: the rig could not be saved or autosaved.
-    pub fn set_extrinsic(&mut self, sensor: &str, vehicle_from_sensor: Rigid) {
-        if let Some(next) = self.with_extrinsic(sensor, vehicle_from_sensor) {
-            self.edit(next);
+    /// Returns whether the edit was taken.
+    pub fn set_extrinsic(&mut self, sensor: &str, vehicle_from_sensor: Rigid) -> bool {
+        match self.with_extrinsic(sensor, vehicle_from_sensor) {
+            Some(next) => self.edit(next),
+            None => false,
         }
     }
 
@@ -589,6 +593,10 @@ impl Studio {
     }
 
     pub(crate) fn apply_session(&mut self, session: &Session, path: &Path) {
+        // A run owns the rig; restoring half a session beside it would mislead.
+        if self.optimiser_owns_the_rig() {
+            return;
+        }
         let Some(log) = &session.log else {
             self.status.push(format!(
                 "error: {}: the session names no log",
@@ -630,8 +638,20 @@ impl Studio {
             self.edit(merged);
         }
         self.optimiser.best = best.map(|r| self.merged(&r));
-        // Segments within the drive and in order; others are dropped with a word.
-        let range = self.drive.as_ref().and_then(|d| d.time_range_nanos());
+        // Segments in order and within the drive (its sensors' and its trajectory's span);
+        // others are dropped with a word.
+        let spans: Vec<(i64, i64)> = self
+            .drive
+            .as_ref()
+            .map(|d| [d.time_range_nanos(), d.trajectory.time_range_nanos()])
+            .into_iter()
+            .flatten()
+            .flatten()
+            .collect();
+        let range = spans
+            .iter()
+            .copied()
+            .reduce(|(a0, a1), (b0, b1)| (a0.min(b0), a1.max(b1)));
         let (segments, dropped): (Vec<(i64, i64)>, Vec<(i64, i64)>) = session
             .segments_nanos
             .iter()

@@ -145,29 +145,43 @@ impl Trajectory {
         removed
     }
 
-    /// Remove poses at either end whose stamp lies apart from the rest by more than an hour and
-    /// more than a thousand times the drive's median step: a stamp of 0, or one in another
-    /// epoch, in a log stamped otherwise. Such a pose stretches the drive over years, and
-    /// everything that samples it in time would sample that span. Returns the removed stamps.
+    /// Remove poses at either end that lie apart from the rest by a gap of more than an hour
+    /// and more than a thousand times the drive's median step, when they are few (at most a
+    /// twentieth of the poses, or one): a stamp of 0, or one in another epoch, in a log
+    /// stamped otherwise. Such poses stretch the drive over years, and everything that samples
+    /// it in time would sample that span. A pause in the middle of a drive is kept. Returns
+    /// the removed stamps.
     pub fn remove_time_outliers(&mut self) -> Vec<i64> {
         const HOUR_NANOS: i64 = 3_600_000_000_000;
-        let mut steps: Vec<i64> = self.stamps_nanos.windows(2).map(|w| w[1] - w[0]).collect();
-        steps.sort_unstable();
-        let Some(&median) = steps.get(steps.len() / 2) else {
+        let gaps: Vec<i64> = self
+            .stamps_nanos
+            .windows(2)
+            .map(|w| w[1].saturating_sub(w[0]))
+            .collect();
+        let mut sorted = gaps.clone();
+        sorted.sort_unstable();
+        let Some(&median) = sorted.get(sorted.len() / 2) else {
             return Vec::new();
         };
         let apart = |gap: i64| gap > HOUR_NANOS && gap / 1000 > median;
-        let mut removed = Vec::new();
-        while self.len() > 2 && apart(self.stamps_nanos[1] - self.stamps_nanos[0]) {
-            removed.push(self.stamps_nanos.remove(0));
-            self.world_from_vehicle.remove(0);
-        }
-        while self.len() > 2
-            && apart(self.stamps_nanos[self.len() - 1] - self.stamps_nanos[self.len() - 2])
-        {
-            removed.extend(self.stamps_nanos.pop());
-            self.world_from_vehicle.pop();
-        }
+        let few = (self.len() / 20).max(1);
+        // Poses before the first wide gap, and after the last, if they are few.
+        let head = gaps.iter().position(|&g| apart(g)).map_or(0, |i| i + 1);
+        let tail = gaps
+            .iter()
+            .rposition(|&g| apart(g))
+            .map_or(0, |i| self.len() - i - 1);
+        let head = if head <= few { head } else { 0 };
+        let tail = if tail <= few && head + tail < self.len() {
+            tail
+        } else {
+            0
+        };
+        let keep = head..self.len() - tail;
+        let mut removed: Vec<i64> = self.stamps_nanos[..head].to_vec();
+        removed.extend_from_slice(&self.stamps_nanos[keep.end..]);
+        self.stamps_nanos = self.stamps_nanos[keep.clone()].to_vec();
+        self.world_from_vehicle = self.world_from_vehicle[keep].to_vec();
         removed
     }
 
@@ -178,12 +192,12 @@ impl Trajectory {
         if end < start || most == 0 {
             return Vec::new();
         }
-        let span = (end - start) as u128;
+        let span = (i128::from(end) - i128::from(start)) as u128;
         let step = (step.max(1) as u128).max(span.div_ceil(most.max(2) as u128 - 1));
         let mut stamps: Vec<i64> = (0..)
             .map(|k: u128| k * step)
             .take_while(|&offset| offset < span)
-            .map(|offset| start + offset as i64)
+            .map(|offset| (i128::from(start) + offset as i128) as i64)
             .collect();
         stamps.push(end);
         stamps
@@ -320,11 +334,21 @@ mod tests {
             )
         }));
         poses.push((0, Rigid::IDENTITY));
+        poses.push((100_000_000, Rigid::IDENTITY));
         poses.push((i64::MAX / 2, Rigid::IDENTITY));
         let mut t = Trajectory::new(poses);
-        assert_eq!(t.remove_time_outliers(), vec![0, i64::MAX / 2]);
+        // Two bad poses together at the start go as well as one.
+        assert_eq!(t.remove_time_outliers(), vec![0, 100_000_000, i64::MAX / 2]);
         assert_eq!(t.len(), 100);
         assert!(t.remove_time_outliers().is_empty());
+        // Stamps from i64::MIN to i64::MAX do not overflow.
+        let mut wide = Trajectory::new(vec![
+            (i64::MIN, Rigid::IDENTITY),
+            (0, Rigid::IDENTITY),
+            (1, Rigid::IDENTITY),
+            (i64::MAX, Rigid::IDENTITY),
+        ]);
+        let _ = wide.remove_time_outliers();
     }
 
     #[test]
@@ -342,6 +366,11 @@ mod tests {
         assert_eq!(many.last(), Some(&i64::MAX));
         assert!(many.windows(2).all(|w| w[1] > w[0]));
         assert!(Trajectory::sample_stamps(5, 4, 1, 10).is_empty());
+        let whole = Trajectory::sample_stamps(i64::MIN, i64::MAX, 1, 100);
+        assert_eq!(
+            (whole.first(), whole.last()),
+            (Some(&i64::MIN), Some(&i64::MAX))
+        );
     }
 
     #[test]

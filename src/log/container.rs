@@ -395,7 +395,10 @@ impl McapContainer {
                         )));
                     }
                 }
-                op::FOOTER | op::DATA_END => break,
+                // The summary section after the data end repeats every schema and channel: a
+                // walk that skipped a damaged chunk (or met one that defined them) finds them
+                // there.
+                op::FOOTER => break,
                 0 => {
                     let what = format!("invalid opcode 0 at byte {offset}");
                     match self.resync(offset, what) {

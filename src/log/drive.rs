@@ -398,13 +398,16 @@ impl Drive {
                 }
             }
             frames.sort_by_key(|f| f.stamp_nanos);
-            let mut name = if frame_id.is_empty() {
-                ch.topic.trim_matches('/').replace('/', "_")
+            // What the calibration file and the exports can carry: no line breaks, no white
+            // space around (the lookups below use the log's own frame id).
+            let clean_frame_id = exportable_name(&frame_id);
+            let mut name = if clean_frame_id.is_empty() {
+                exportable_name(&ch.topic.trim_matches('/').replace('/', "_"))
             } else {
-                frame_id.clone()
+                clean_frame_id.clone()
             };
             if rig.sensor(&name).is_some() {
-                name = format!("{name}{}", ch.topic.replace('/', "_"));
+                name = exportable_name(&format!("{name}{}", ch.topic.replace('/', "_")));
             }
             let vehicle_from_sensor = match tf.static_transform(&vehicle_frame, &frame_id) {
                 Some(t) => t,
@@ -433,12 +436,12 @@ impl Drive {
             } else {
                 None
             };
-            // What the calibration file and the exports can carry: no line breaks, no white
-            // space around (the lookups above used the log's own frame id).
-            let (name, frame_id) = (exportable_name(&name), exportable_name(&frame_id));
-            if rig.sensor(&name).is_some() || name.is_empty() {
+            let frame_id = clean_frame_id;
+            let frame_taken =
+                !frame_id.is_empty() && rig.sensors.iter().any(|s| s.frame_id == frame_id);
+            if rig.sensor(&name).is_some() || name.is_empty() || frame_taken {
                 problems.push(Problem::file(format!(
-                    "{}: its frame id or name is blank or repeats another once cleaned of white space and control characters; skipped",
+                    "{}: its frame id or name is blank or repeats another's once cleaned of white space and control characters; skipped",
                     ch.topic
                 )));
                 continue;

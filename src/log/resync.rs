@@ -126,17 +126,27 @@ mod tests {
 
     #[test]
     fn a_chunk_that_would_run_past_the_end_or_names_another_compression_is_not_one() {
-        let mut whole = chunk(b"records", "lz4");
-        let cut = whole.len() as u64 - 1;
-        assert_eq!(next_chunk_after(reader(&whole), 0, cut), None);
-        whole.truncate(cut as usize);
-        assert_eq!(next_chunk_after(reader(&whole), 0, cut), None);
-        let odd = chunk(b"records", "gzip");
+        // Each after one byte, where the search (from byte 0, so starting at 1) looks first.
+        let after_a_byte = |record: Vec<u8>| [vec![0u8], record].concat();
+        let whole = after_a_byte(chunk(b"records", "lz4"));
+        let len = whole.len() as u64;
+        assert_eq!(next_chunk_after(reader(&whole), 0, len), Some(1));
+        // The file one byte shorter than the record needs.
+        assert_eq!(next_chunk_after(reader(&whole), 0, len - 1), None);
+        assert_eq!(
+            next_chunk_after(reader(&whole[..whole.len() - 1]), 0, len - 1),
+            None
+        );
+        let odd = after_a_byte(chunk(b"records", "gzip"));
         assert_eq!(next_chunk_after(reader(&odd), 0, odd.len() as u64), None);
-        // Found from before its own start (the search starts one byte after `from`).
-        let mut shifted = vec![0u8];
-        shifted.extend(chunk(b"records", "lz4"));
-        let len = shifted.len() as u64;
-        assert_eq!(next_chunk_after(reader(&shifted), 0, len), Some(1));
+        // A records length one short of what the record length says.
+        let mut short = after_a_byte(chunk(b"records", ""));
+        let at = 1 + FIXED_HEAD;
+        let records_len = u64::from_le_bytes(short[at..at + 8].try_into().unwrap());
+        short[at..at + 8].copy_from_slice(&(records_len - 1).to_le_bytes());
+        assert_eq!(
+            next_chunk_after(reader(&short), 0, short.len() as u64),
+            None
+        );
     }
 }
