@@ -357,7 +357,14 @@ impl Studio {
                     self.current.sensors.len(),
                     imported.matched.join(", ")
                 ));
-                self.remember(path);
+                // An MCAP read for its /tf_static is not listed: Open recent opens an MCAP as
+                // a log, which would replace the drive this calibration was loaded into.
+                let is_mcap = path
+                    .extension()
+                    .is_some_and(|e| e.eq_ignore_ascii_case("mcap"));
+                if !is_mcap {
+                    self.remember(path);
+                }
             }
             Err(e) => self.status.push(format!("error: {e}")),
         }
