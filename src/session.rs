@@ -189,11 +189,7 @@ pub fn previous_session_path() -> PathBuf {
 /// How many runs' autosaves are kept before the previous one's (`previous-1` … `previous-5`).
 pub const EARLIER_SESSIONS_KEPT: usize = 5;
 
-/// The autosave set aside `n` runs before the previous one (`n` from 1).
-pub fn earlier_session_path(n: usize) -> PathBuf {
-    state_dir().join(earlier_session_name(n))
-}
-
+/// The name of the autosave set aside `n` runs before the previous one (`n` from 1).
 fn earlier_session_name(n: usize) -> String {
     format!("previous-{n}.rigcal-session.json")
 }

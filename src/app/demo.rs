@@ -4,7 +4,7 @@
 //! (cached for the next start), but it never replaces the user's.
 
 use std::path::PathBuf;
-use std::sync::mpsc::{Receiver, TryRecvError, channel};
+use std::sync::mpsc::{Receiver, channel};
 
 use crate::calib::CalibrationFile;
 use crate::sim::demo;
@@ -54,18 +54,17 @@ pub fn poll(studio: &mut Studio, ctx: &egui::Context) {
         return;
     };
     let mut ready = None;
-    loop {
-        match job.rx.try_recv() {
-            Ok(DemoMessage::Progress(d, n)) => job.progress = (d, n),
-            Ok(DemoMessage::Ready(mcap, gt)) => ready = Some(Ok((mcap, gt))),
-            Ok(DemoMessage::Failed(e)) => ready = Some(Err(e)),
-            Err(TryRecvError::Empty) => break,
-            Err(TryRecvError::Disconnected) => {
-                // The worker is gone without a word (it panicked): say so, not a bar forever.
-                ready = ready.or(Some(Err("its worker stopped without a result".into())));
-                break;
-            }
+    let (messages, gone) = super::drain(&job.rx);
+    for m in messages {
+        match m {
+            DemoMessage::Progress(d, n) => job.progress = (d, n),
+            DemoMessage::Ready(mcap, gt) => ready = Some(Ok((mcap, gt))),
+            DemoMessage::Failed(e) => ready = Some(Err(e)),
         }
+    }
+    if gone && ready.is_none() {
+        // The worker is gone without a word (it panicked): say so, not a bar forever.
+        ready = Some(Err("its worker stopped without a result".into()));
     }
     match ready {
         None => ctx.request_repaint_after(std::time::Duration::from_millis(100)),

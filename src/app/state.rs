@@ -647,18 +647,12 @@ impl Studio {
         self.optimiser.best = best.map(|r| self.merged(&r));
         // Segments in order and within the drive (its sensors' and its trajectory's span);
         // others are dropped with a word.
-        let spans: Vec<(i64, i64)> = self
-            .drive
-            .as_ref()
-            .map(|d| [d.time_range_nanos(), d.trajectory.time_range_nanos()])
-            .into_iter()
-            .flatten()
-            .flatten()
-            .collect();
-        let range = spans
-            .iter()
-            .copied()
-            .reduce(|(a0, a1), (b0, b1)| (a0.min(b0), a1.max(b1)));
+        let range = self.drive.as_ref().and_then(|d| {
+            [d.time_range_nanos(), d.trajectory.time_range_nanos()]
+                .into_iter()
+                .flatten()
+                .reduce(|(a0, a1), (b0, b1)| (a0.min(b0), a1.max(b1)))
+        });
         let (segments, dropped): (Vec<(i64, i64)>, Vec<(i64, i64)>) = session
             .segments_nanos
             .iter()

@@ -144,19 +144,24 @@ pub fn poll(studio: &mut Studio, ctx: &egui::Context) {
         panel.job = Some(rx);
     }
     if let Some(rx) = &panel.job {
-        match rx.try_recv() {
-            Ok(Ok(map)) => {
+        let result = match rx.try_recv() {
+            Ok(result) => result,
+            Err(std::sync::mpsc::TryRecvError::Empty) => {
+                ctx.request_repaint_after(std::time::Duration::from_millis(200));
+                return;
+            }
+            Err(std::sync::mpsc::TryRecvError::Disconnected) => {
+                Err("its worker stopped without a result".to_string())
+            }
+        };
+        match result {
+            Ok(map) => {
                 panel.texture = map.raster.clone().map(|img| {
                     ctx.load_texture("trajectory-map", img, egui::TextureOptions::NEAREST)
                 });
                 panel.map = Some(Arc::new(map));
-                panel.job = None;
             }
-            result @ (Ok(Err(_)) | Err(std::sync::mpsc::TryRecvError::Disconnected)) => {
-                let e = match result {
-                    Ok(Err(e)) => e,
-                    _ => "its worker stopped without a result".to_string(),
-                };
+            Err(e) => {
                 studio.status.push(format!("error: trajectory map: {e}"));
                 panel.map = Some(Arc::new(MapData {
                     trajectory: Vec::new(),
@@ -164,12 +169,9 @@ pub fn poll(studio: &mut Studio, ctx: &egui::Context) {
                     raster_size_m: 1.0,
                     raster: None,
                 }));
-                panel.job = None;
-            }
-            Err(std::sync::mpsc::TryRecvError::Empty) => {
-                ctx.request_repaint_after(std::time::Duration::from_millis(200))
             }
         }
+        panel.job = None;
     }
 }
 

@@ -122,14 +122,17 @@ impl Trajectory {
             .collect();
         let mut removed = Vec::new();
         for i in (0..n).filter(|&i| bad[i]) {
-            let distance_m = (0..n)
-                .filter(|&j| !bad[j])
-                .min_by_key(|&j| j.abs_diff(i))
-                .map_or(f64::NAN, |j| {
-                    (self.world_from_vehicle[i].translation
-                        - self.world_from_vehicle[j].translation)
-                        .length()
-                });
+            // The nearest good pose, searched outward from i (not over every pose per bad one).
+            let nearest_good = (1..n).find_map(|d| {
+                [i.checked_sub(d), Some(i + d).filter(|&j| j < n)]
+                    .into_iter()
+                    .flatten()
+                    .find(|&j| !bad[j])
+            });
+            let distance_m = nearest_good.map_or(f64::NAN, |j| {
+                (self.world_from_vehicle[i].translation - self.world_from_vehicle[j].translation)
+                    .length()
+            });
             removed.push((self.stamps_nanos[i], distance_m));
         }
         let (stamps_nanos, world_from_vehicle) = self
