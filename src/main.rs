@@ -36,7 +36,7 @@ Examples:
   rigcal calibrate drive.mcap --method icp --out lidars.yaml
   # Then measure and export
   rigcal eval --ground-truth gt.yaml --calibration calib.yaml drive.mcap
-  rigcal export calib.yaml --format ros2-launch --out static_tf.launch.py
+  rigcal export calib.yaml --format ros2-launch --out static_tf.launch.xml
 
 The output is written before the first step and every 30 s (status: running: step k of n),
 so an interrupted run keeps its latest result.";
@@ -69,7 +69,7 @@ enum Command {
         vehicle_frame: Option<String>,
     },
     /// Calibrate a drive and write the native calibration file.
-    #[command(after_help = CALIBRATE_EXAMPLES)]
+    #[command(after_help = CALIBRATE_EXAMPLES, allow_negative_numbers = true)]
     Calibrate {
         /// The drive (MCAP, ROS 2 or Foxglove schemas).
         log: PathBuf,
@@ -82,7 +82,7 @@ enum Command {
         #[arg(long)]
         init: Option<PathBuf>,
         /// Time range in seconds from the start of the log, START..END.
-        #[arg(long)]
+        #[arg(long, allow_hyphen_values = true)]
         segment: Option<String>,
         /// Sensors to optimise, comma-separated (default: all the method handles).
         #[arg(long, value_delimiter = ',')]
@@ -102,7 +102,7 @@ enum Command {
         camera_frames: usize,
         /// LiDAR sweeps per LiDAR that shape the scene (spread over the drive or the
         /// segments; more: denser geometry under the cameras' rays, a longer preparation)
-        #[arg(help_heading = HEADING_UNICAL, long, default_value_t = 4)]
+        #[arg(help_heading = HEADING_UNICAL, long, default_value_t = rigcal::cli::calibrate::DEFAULT_LIDAR_SWEEPS)]
         lidar_sweeps: usize,
         /// Drop LiDAR returns farther than this many metres (horizontally) from the
         /// drive before the scene box is formed: the scene spans the drive's surroundings, not
@@ -132,11 +132,11 @@ enum Command {
         #[arg(long, help_heading = HEADING_UNICAL)]
         camera_hand_eye: bool,
         /// With --camera-frames: the scale images are used at (0.125: 1920×1080 → 240×135)
-        #[arg(help_heading = HEADING_UNICAL, long, default_value_t = 0.125)]
+        #[arg(help_heading = HEADING_UNICAL, long, default_value_t = rigcal::cli::calibrate::DEFAULT_CAMERA_SCALE)]
         camera_scale: f64,
         /// With --camera-frames: rays per camera and step (more: less noisy pose gradients,
         /// slower steps)
-        #[arg(help_heading = HEADING_UNICAL, long, default_value_t = 512)]
+        #[arg(help_heading = HEADING_UNICAL, long, default_value_t = rigcal::cli::calibrate::DEFAULT_CAMERA_RAYS)]
         camera_rays: usize,
         /// With --camera-frames: the camera pose rate (Adam; it decays to 1 % over the run and
         /// bounds how far a camera can move)
@@ -317,6 +317,8 @@ enum Command {
         camera: Option<String>,
     },
     /// Simulate a drive with known ground truth and write it as a ROS 2 MCAP.
+    // A negative number is a value to check, not an unknown flag.
+    #[command(allow_negative_numbers = true)]
     Synth {
         /// urban | parking-lot | featureless | checkerboard
         #[arg(long, default_value = "urban")]
@@ -365,6 +367,19 @@ fn main() -> ExitCode {
     }
 }
 
+/// `text` on standard output. A reader that went away (`rigcal inspect LOG | head`) ends the
+/// output quietly; any other failure (a full disk) is an error, not a panic as `print!` gives.
+fn print_stdout(text: &str) -> anyhow::Result<()> {
+    use std::io::Write;
+    let mut out = std::io::stdout().lock();
+    match out.write_all(text.as_bytes()).and_then(|()| out.flush()) {
+        Err(e) if e.kind() != std::io::ErrorKind::BrokenPipe => {
+            Err(anyhow::anyhow!("cannot write to standard output: {e}"))
+        }
+        _ => Ok(()),
+    }
+}
+
 /// The error and its causes on one line, leaving out a cause whose text an outer message
 /// already holds (the library's errors name their source in their own message).
 fn one_line(error: &anyhow::Error) -> String {
@@ -403,8 +418,7 @@ fn run() -> Result<()> {
             };
             let drive = rigcal::log::Drive::open_with(&log, &options)
                 .with_context(|| format!("cannot inspect {}", log.display()))?;
-            print!("{}", rigcal::cli::inspect::report(&drive));
-            Ok(())
+            print_stdout(&rigcal::cli::inspect::report(&drive))
         }
         Some(Command::Calibrate {
             log,
@@ -488,10 +502,14 @@ fn run() -> Result<()> {
             };
             let started = std::time::Instant::now();
             let mut bar = rigcal::cli::progress::Progress::new("calibrate", 1);
-            rigcal::cli::calibrate::calibrate(&args, &mut |done, total| bar.report(done, total))
-                .map_err(anyhow::Error::msg)
-                .with_context(|| format!("cannot calibrate {}", log.display()))?;
+            let (_, moves) = rigcal::cli::calibrate::calibrate(&args, &mut |done, total| {
+                bar.report(done, total)
+            })
+            .map_err(anyhow::Error::msg)
+            .with_context(|| format!("cannot calibrate {}", log.display()))?;
             bar.finish();
+            // After the bar: on a terminal it would be drawn over the report.
+            eprint!("{moves}");
             eprintln!(
                 "wrote {} in {:.1} s",
                 out.display(),
@@ -524,7 +542,7 @@ fn run() -> Result<()> {
                     .map_err(anyhow::Error::msg)
                     .context("cannot evaluate")?;
             bar.finish();
-            print!("{}", report.to_markdown());
+            print_stdout(&report.to_markdown())?;
             if let Some(path) = json {
                 let text = serde_json::to_string_pretty(&report)?;
                 rigcal::util::write_atomic(&path, text.as_bytes())
@@ -542,6 +560,12 @@ fn run() -> Result<()> {
         }) => {
             use rigcal::interop;
             let format: interop::ExportFormat = format.parse()?;
+            if rigcal::util::same_file(&calibration, &out) {
+                anyhow::bail!(
+                    "--out {} is the calibration being exported; choose another path",
+                    out.display()
+                );
+            }
             // The library's errors already name the file and the cause: print them once.
             let doc = rigcal::calib::CalibrationFile::load(&calibration)
                 .map_err(|e| anyhow::Error::msg(e.to_string()))?;
@@ -660,7 +684,7 @@ fn bench(suite: &str, out: &std::path::Path, pandaset: PathBuf, seeds: Option<u6
     if let Some((_, b)) = bar.as_mut() {
         b.finish();
     }
-    print!("{}", report.to_markdown());
+    print_stdout(&report.to_markdown())?;
     eprintln!(
         "wrote tables.md, results.csv, results.json, convergence.png and error-vs-perturbation.png into {} ({:.0} s)",
         out.display(),

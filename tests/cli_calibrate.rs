@@ -52,6 +52,22 @@ fn calibrate_recovers_a_rotated_camera_and_writes_the_native_file() {
     assert!(err.contains("first extrinsic update: step "), "{err}");
     let doc = CalibrationFile::load(&out).unwrap();
     assert!(doc.provenance.contains_key("method") && doc.provenance.contains_key("input"));
+    // The provenance says what was asked (to repeat the run) and when.
+    let config = doc.provenance.get("config").and_then(|v| v.as_mapping());
+    let get = |key: &str| config.and_then(|c| c.get(key)).and_then(|v| v.as_str());
+    assert_eq!(get("method"), Some("edge"), "{config:?}");
+    assert_eq!(get("sensors"), Some("front_camera"), "{config:?}");
+    let date = doc.provenance.get("date").and_then(|v| v.as_str()).unwrap();
+    assert!(
+        date.len() == 20 && date.ends_with('Z') && date.starts_with("20"),
+        "{date}"
+    );
+    let input = doc
+        .provenance
+        .get("input")
+        .and_then(|v| v.as_str())
+        .unwrap();
+    assert!(std::path::Path::new(input).is_absolute(), "{input}");
     assert_eq!(
         doc.provenance.get("status").and_then(|v| v.as_str()),
         Some("complete")
@@ -105,6 +121,22 @@ fn bad_arguments_fail_with_one_line() {
     );
     let (ok, err) = run(&["--method", "edge", "--sensors", "nope"]);
     assert!(!ok && err.contains("'nope'"), "{err}");
+    // Options another method would ignore, and sensors it does not calibrate.
+    let (ok, err) = run(&["--method", "icp", "--camera-frames", "16", "--lidar-icp"]);
+    assert!(
+        !ok && err.contains("--camera-frames, --lidar-icp apply to --method unical only"),
+        "{err}"
+    );
+    let (ok, err) = run(&["--method", "icp", "--sensors", "front_camera"]);
+    assert!(
+        !ok && err.contains("calibrates LiDARs; 'front_camera'"),
+        "{err}"
+    );
+    let (ok, err) = run(&["--method", "edge", "--sensors", "pandar_gt"]);
+    assert!(
+        !ok && err.contains("calibrates cameras; 'pandar_gt'"),
+        "{err}"
+    );
     let (ok, err) = run(&["--method", "unical", "--root", "roof"]);
     assert!(!ok && err.contains("--root: 'roof'"), "{err}");
     let (ok, err) = run(&["--method", "unical", "--camera-lr", "0"]);

@@ -48,8 +48,9 @@ pub fn document(studio: &Studio, rig: &Rig, which: ExtrinsicsView) -> Calibratio
             .segments
             .iter()
             .map(|&(a, b)| {
+                // As `rigcal calibrate --segment` takes it.
                 format!(
-                    "{:.3}-{:.3} s",
+                    "{:.3}..{:.3} s",
                     (a - t0) as f64 * 1e-9,
                     (b - t0) as f64 * 1e-9
                 )
@@ -161,11 +162,11 @@ pub(crate) fn export_ui(studio: &mut Studio, ui: &mut egui::Ui) {
     } else {
         sensors
     };
-    if matches!(format, ExportFormat::OpenCv | ExportFormat::Kitti) {
+    if format.takes_lidar() {
         let lidars: Vec<String> = rig.lidars().map(|s| s.name.clone()).collect();
         reference_combo(ui, "reference LiDAR", &mut studio.export.lidar, &lidars);
     }
-    if matches!(format, ExportFormat::Kitti | ExportFormat::Kalibr) {
+    if format.takes_camera() {
         let cameras: Vec<String> = rig.cameras().map(|s| s.name.clone()).collect();
         reference_combo(
             ui,
@@ -183,8 +184,13 @@ pub(crate) fn export_ui(studio: &mut Studio, ui: &mut egui::Ui) {
     let doc = document(studio, &rig, which);
     let options = ExportOptions {
         sensors,
-        lidar: studio.export.lidar.clone(),
-        camera: studio.export.camera.clone(),
+        // What one format chose stays for it; the others would refuse it.
+        lidar: studio.export.lidar.clone().filter(|_| format.takes_lidar()),
+        camera: studio
+            .export
+            .camera
+            .clone()
+            .filter(|_| format.takes_camera()),
     };
     let key = format!("{}|{:?}|{}", format.name(), options, doc.to_yaml());
     if studio.export.cache.as_ref().is_none_or(|(k, _)| *k != key) {

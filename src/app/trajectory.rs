@@ -343,6 +343,9 @@ fn segments_ui(
             .map(|(i, &(a, b))| (Some(i), a, b))
             .collect()
     };
+    // Seconds from the start of the log, as `rigcal calibrate --segment` counts them (the
+    // trajectory may start later than the first sensor frame).
+    let log_t0 = drive.time_range_nanos().map_or(t0, |r| r.0);
     let mut remove = None;
     egui::Grid::new("segments").striped(true).show(ui, |ui| {
         for h in ["segment", "s", "km/h", "max °/s", "turn °", "turns", "", ""] {
@@ -355,8 +358,8 @@ fn segments_ui(
             };
             ui.label(format!(
                 "{:.1}–{:.1} s",
-                (a - t0) as f64 * 1e-9,
-                (b - t0) as f64 * 1e-9
+                (a - log_t0) as f64 * 1e-9,
+                (b - log_t0) as f64 * 1e-9
             ));
             ui.label(format!("{:.1}", m.duration_s));
             ui.label(format!("{:.0}", m.mean_speed_mps * 3.6));

@@ -34,6 +34,11 @@ use crate::unical::field::FieldConfig;
 use crate::unical::hash_grid::HashGridConfig;
 use crate::unical::surface_align::AlignmentLoss;
 
+/// `--lidar-sweeps`, `--camera-scale` and `--camera-rays` when not given.
+pub const DEFAULT_LIDAR_SWEEPS: usize = 4;
+pub const DEFAULT_CAMERA_SCALE: f64 = 0.125;
+pub const DEFAULT_CAMERA_RAYS: usize = 512;
+
 /// What `rigcal calibrate` was asked to do.
 #[derive(Clone, Debug)]
 pub struct CalibrateArgs {
@@ -136,6 +141,164 @@ pub struct CalibrateArgs {
 }
 
 impl CalibrateArgs {
+    /// The UniCal options given (as the command line spells them): with another method they
+    /// would be ignored, so they are refused.
+    fn unical_options_given(&self) -> Vec<&'static str> {
+        let given = [
+            ("--camera-frames", self.camera_frames != 0),
+            ("--lidar-sweeps", self.lidar_sweeps != DEFAULT_LIDAR_SWEEPS),
+            ("--scene-radius", self.scene_radius_m.is_some()),
+            (
+                "--alignment",
+                self.alignment != AlignmentLoss::SurfaceAlignment,
+            ),
+            ("--lidar-icp", self.lidar_icp),
+            ("--camera-hand-eye", self.camera_hand_eye),
+            ("--camera-scale", self.camera_scale != DEFAULT_CAMERA_SCALE),
+            ("--camera-rays", self.camera_rays != DEFAULT_CAMERA_RAYS),
+            ("--camera-lr", self.camera_lr.is_some()),
+            (
+                "--camera-translation-rate",
+                self.camera_translation_rate.is_some(),
+            ),
+            (
+                "--camera-translation-final",
+                self.camera_translation_final.is_some(),
+            ),
+            (
+                "--camera-early-release",
+                self.camera_early_release.is_some(),
+            ),
+            ("--rounds", self.rounds != 1),
+            ("--coarse-to-fine", self.coarse_to_fine.is_some()),
+            (
+                "--shared-camera-translation",
+                self.shared_camera_translation,
+            ),
+            (
+                "--grouped-camera-translation",
+                self.grouped_camera_translation,
+            ),
+            (
+                "--camera-rays-below-lidar-top",
+                self.camera_rays_below_lidar_top,
+            ),
+            (
+                "--camera-hold-unobserved",
+                self.camera_hold_unobserved.is_some(),
+            ),
+            ("--camera-hold-axial", self.camera_hold_axial),
+            ("--silhouette-share", self.silhouette_share.is_some()),
+            ("--camera-blur", self.camera_blur.is_some()),
+            ("--colour-pose-levels", self.colour_pose_levels.is_some()),
+            ("--hash-table-log2", self.hash_table_log2.is_some()),
+            ("--pose-average", self.pose_average.is_some()),
+            ("--cubic-scene-box", self.cubic_scene_box),
+            ("--drop-moving", self.drop_moving),
+        ];
+        given
+            .into_iter()
+            .filter_map(|(name, on)| on.then_some(name))
+            .collect()
+    }
+
+    /// What the run was asked to do, for the file's provenance: the method as `--method` names
+    /// it, the seed and iteration count, and every option given (UniCal's only with
+    /// `--method unical`), so the run can be repeated from its output.
+    pub fn config(&self) -> serde_yaml::Mapping {
+        use serde_yaml::Value;
+        let mut m = serde_yaml::Mapping::new();
+        let mut put = |key: &str, value: Value| {
+            m.insert(Value::String(key.into()), value);
+        };
+        put("method", Value::String(self.method.clone()));
+        put("seed", Value::from(self.seed));
+        put(
+            "iterations",
+            self.iterations
+                .map_or(Value::String("default".into()), Value::from),
+        );
+        if !self.sensors.is_empty() {
+            put("sensors", Value::String(self.sensors.join(",")));
+        }
+        if let Some(root) = &self.root {
+            put("root", Value::String(root.clone()));
+        }
+        if self.camera_time_offset_ms != 0.0 {
+            put(
+                "camera_time_offset_ms",
+                Value::from(self.camera_time_offset_ms),
+            );
+        }
+        if self.method != "unical" {
+            return m;
+        }
+        put("camera_frames", Value::from(self.camera_frames as u64));
+        put("lidar_sweeps", Value::from(self.lidar_sweeps as u64));
+        put("camera_scale", Value::from(self.camera_scale));
+        put("camera_rays", Value::from(self.camera_rays as u64));
+        let alignment = match self.alignment {
+            AlignmentLoss::None => "none",
+            AlignmentLoss::ProjectedRayDistance => "ray-distance",
+            AlignmentLoss::SurfaceAlignment => "surface",
+        };
+        put("alignment", Value::String(alignment.into()));
+        put("rounds", Value::from(self.rounds as u64));
+        let flags = [
+            ("lidar_icp", self.lidar_icp),
+            ("camera_hand_eye", self.camera_hand_eye),
+            ("shared_camera_translation", self.shared_camera_translation),
+            (
+                "grouped_camera_translation",
+                self.grouped_camera_translation,
+            ),
+            (
+                "camera_rays_below_lidar_top",
+                self.camera_rays_below_lidar_top,
+            ),
+            ("camera_hold_axial", self.camera_hold_axial),
+            ("cubic_scene_box", self.cubic_scene_box),
+            ("drop_moving", self.drop_moving),
+        ];
+        for (key, on) in flags {
+            if on {
+                put(key, Value::Bool(true));
+            }
+        }
+        let numbers = [
+            ("scene_radius_m", self.scene_radius_m),
+            ("camera_lr", self.camera_lr.map(f64::from)),
+            (
+                "camera_translation_rate",
+                self.camera_translation_rate.map(f64::from),
+            ),
+            (
+                "camera_translation_final",
+                self.camera_translation_final.map(f64::from),
+            ),
+            ("camera_hold_unobserved", self.camera_hold_unobserved),
+            ("silhouette_share", self.silhouette_share),
+            ("camera_blur", self.camera_blur),
+            ("colour_pose_levels", self.colour_pose_levels),
+            ("hash_table_log2", self.hash_table_log2.map(f64::from)),
+            ("pose_average", self.pose_average),
+        ];
+        for (key, value) in numbers {
+            if let Some(value) = value {
+                put(key, Value::from(value));
+            }
+        }
+        for (key, text) in [
+            ("camera_early_release", &self.camera_early_release),
+            ("coarse_to_fine", &self.coarse_to_fine),
+        ] {
+            if let Some(text) = text {
+                put(key, Value::String(text.clone()));
+            }
+        }
+        m
+    }
+
     /// The perturbation of the initial guess, `None` when there is none; an error for
     /// negative, non-finite or too large values.
     fn perturbation(&self) -> Result<Option<(f64, f64)>, String> {
@@ -399,6 +562,31 @@ pub fn parse_segment(text: &str, t0_nanos: i64) -> Result<(i64, i64), String> {
     Ok((t0_nanos + (a * 1e9) as i64, t0_nanos + (b * 1e9) as i64))
 }
 
+/// `--sensors` naming a sensor the method does not calibrate (a camera for ICP, a LiDAR for
+/// mutual information) would be written back unchanged; it is refused instead.
+fn check_sensor_kinds(args: &CalibrateArgs, rig: &Rig) -> Result<(), String> {
+    use crate::calib::SensorKind;
+    let calibrates = match args.method.as_str() {
+        "icp" | "pose-graph" => Some((SensorKind::Lidar, "LiDARs")),
+        "mi" | "edge" => Some((SensorKind::Camera, "cameras")),
+        _ => None,
+    };
+    let Some((kind, what)) = calibrates else {
+        return Ok(());
+    };
+    match args
+        .sensors
+        .iter()
+        .find(|s| rig.sensor(s).is_some_and(|s| s.kind != kind))
+    {
+        Some(s) => Err(format!(
+            "--sensors: --method {} calibrates {what}; '{s}' is not one",
+            args.method
+        )),
+        None => Ok(()),
+    }
+}
+
 /// A segment must overlap the log's time range; else the error says where the log lies.
 fn check_segment_in_log(
     text: &str,
@@ -417,12 +605,20 @@ fn check_segment_in_log(
 }
 
 /// Run the calibration; `progress(step, max_steps)` is called after every step. Returns the
-/// written document.
+/// written document and how far each sensor moved from the initial guess ([`moves_report`]).
 pub fn calibrate(
     args: &CalibrateArgs,
     progress: &mut dyn FnMut(usize, usize),
-) -> Result<CalibrationFile, String> {
+) -> Result<(CalibrationFile, String), String> {
     let perturbation = args.perturbation()?;
+    let unical_only = args.unical_options_given();
+    if args.method != "unical" && !unical_only.is_empty() {
+        return Err(format!(
+            "{} appl{} to --method unical only",
+            unical_only.join(", "),
+            if unical_only.len() == 1 { "ies" } else { "y" }
+        ));
+    }
     if let Ok(crate::util::OutputTarget::Direct(_)) = crate::util::output_target(&args.out) {
         return Err(format!(
             "--out {} is not a regular file (a device or pipe); calibrate writes its file at the start and replaces it every 30 s",
@@ -487,6 +683,7 @@ pub fn calibrate(
             ));
         }
     }
+    check_sensor_kinds(args, &rig)?;
     let range = drive.time_range_nanos();
     let t0 = range.map_or(0, |r| r.0);
     let segments: Vec<(i64, i64)> = match &args.segment {
@@ -817,8 +1014,7 @@ pub fn calibrate(
         warn_at_bound(&rig, &calibrator.best());
     }
     doc.save(&args.out).map_err(|e| e.to_string())?;
-    eprint!("{}", moves_report(&initial_guess, &result));
-    Ok(doc)
+    Ok((doc, moves_report(&initial_guess, &result)))
 }
 
 /// How far each sensor of `result` lies from the initial guess, one line each, the largest
@@ -936,10 +1132,15 @@ fn document_of(
 ) -> CalibrationFile {
     let mut doc = CalibrationFile::from_rig(result);
     let v = |s: String| serde_yaml::Value::String(s);
+    let input = std::path::absolute(&args.log).unwrap_or_else(|_| args.log.clone());
     doc.provenance
-        .insert("input".into(), v(args.log.display().to_string()));
+        .insert("input".into(), v(input.display().to_string()));
     doc.provenance
         .insert("method".into(), v(calibrator.name().to_string()));
+    doc.provenance
+        .insert("config".into(), serde_yaml::Value::Mapping(args.config()));
+    doc.provenance
+        .insert("date".into(), v(crate::util::now_utc()));
     if let Some(s) = &args.segment {
         doc.provenance
             .insert("time_range".into(), v(format!("{s} s")));

@@ -156,6 +156,13 @@ impl CameraIntrinsics {
         Ok(intrinsics)
     }
 
+    /// Whether the camera projects other than a pinhole: a fisheye model (even with every
+    /// coefficient zero) or any non-zero distortion coefficient. Formats that carry K only
+    /// (KITTI, nuScenes) cannot describe such a camera.
+    pub fn has_lens_distortion(&self) -> bool {
+        self.model == CameraModel::Equidistant || self.distortion.iter().any(|&v| v != 0.0)
+    }
+
     /// Why these intrinsics cannot be used, if they cannot: focal lengths must be finite and
     /// positive (an uncalibrated ROS driver publishes K = 0), the principal point and every
     /// distortion coefficient finite, the image non-empty, and no more coefficients than the

@@ -100,6 +100,7 @@ pub fn load_initial_guess(path: &Path, base: &Rig) -> Result<Imported, ImportErr
                     "sensors are matched by frame id below the vehicle frame '{}'",
                     base.vehicle_frame
                 ),
+                "rigcal native" => "sensors are matched by name or frame id".into(),
                 _ => "sensors are matched by name".into(),
             },
         });
@@ -128,12 +129,22 @@ fn from_native(text: &str, path: &Path, base: &Rig) -> Result<(Rig, Vec<String>)
     let mut rig = base.clone();
     let mut matched = Vec::new();
     for s in &other.sensors {
-        if let Some(t) = rig.sensor_mut(&s.name) {
+        // By name, else by frame id (a file whose sensors were renamed), never twice.
+        let target = match rig.sensor(&s.name) {
+            Some(t) => Some(t.name.clone()),
+            None => rig
+                .sensors
+                .iter()
+                .find(|t| !t.frame_id.is_empty() && frame(&t.frame_id) == frame(&s.frame_id))
+                .map(|t| t.name.clone()),
+        }
+        .filter(|name| !matched.contains(name));
+        if let Some(t) = target.as_deref().and_then(|name| rig.sensor_mut(name)) {
             t.vehicle_from_sensor = s.vehicle_from_sensor;
             if s.camera.is_some() {
                 t.camera = s.camera.clone();
             }
-            matched.push(s.name.clone());
+            matched.push(t.name.clone());
         }
     }
     Ok((rig, matched))
@@ -240,6 +251,25 @@ mod tests {
             }
         }
         r
+    }
+
+    #[test]
+    fn a_native_file_with_renamed_sensors_matches_by_frame_id() {
+        let rig = test_rig::rig();
+        let mut renamed = rig.clone();
+        for s in &mut renamed.sensors {
+            s.name = format!("my_{}", s.name);
+        }
+        let dir = scratch("renamed");
+        let path = dir.join("renamed.yaml");
+        CalibrationFile::from_rig(&renamed).save(&path).unwrap();
+        let got = load_initial_guess(&path, &spoiled()).unwrap();
+        assert_eq!(got.matched.len(), rig.sensors.len(), "{:?}", got.matched);
+        let (r, t) = test_rig::max_difference(&rig, &got.rig);
+        assert!(r < 1e-12 && t < 1e-12, "{r} {t}");
+        // The names stay the rig's.
+        assert!(got.rig.sensor(&rig.sensors[0].name).is_some());
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 
     #[test]

@@ -10,8 +10,8 @@
 //! reference (`P1 = P0`, `P3 = P2`). So `y = P_i · R0_rect · Tr_velo_to_cam · x` projects a
 //! LiDAR point into camera i exactly, with `R0_rect = I`. KITTI's rectified pairs have `R = I`;
 //! for cameras that are not rectified to the reference `R` is their real rotation. The format
-//! has no distortion: a camera with non-zero distortion coefficients is refused by name (its
-//! images would have to be rectified first), and so is a fourth camera.
+//! has no distortion: a camera with non-zero distortion coefficients or a fisheye model is
+//! refused by name (its images would have to be rectified first), and so is a fourth camera.
 
 use super::numbers::{rows_3x4, spaced};
 use super::pick;
@@ -22,7 +22,7 @@ fn projection(cam: &Sensor, cam0: &Sensor) -> Result<[f64; 12], String> {
     let Some(c) = &cam.camera else {
         return Err(format!("camera '{}' has no intrinsics", cam.name));
     };
-    if c.distortion.iter().any(|&v| v != 0.0) {
+    if c.has_lens_distortion() {
         return Err(format!(
             "camera '{}' has {} distortion; KITTI calib files have none (rectify its images, or leave it out with --sensors)",
             cam.name,
@@ -193,5 +193,28 @@ mod tests {
         );
         let slots = slots(&rig, Some("left_camera"));
         assert!(slots.is_err());
+    }
+
+    #[test]
+    fn a_fisheye_is_refused_even_without_coefficients() {
+        let mut rig = test_rig::rig();
+        let names: Vec<String> = rig.cameras().skip(1).map(|c| c.name.clone()).collect();
+        rig.sensors.retain(|s| !names.contains(&s.name));
+        let cam = rig
+            .sensors
+            .iter_mut()
+            .find_map(|s| s.camera.as_mut())
+            .unwrap();
+        cam.model = crate::geometry::camera::CameraModel::Equidistant;
+        cam.distortion = vec![0.0; 4];
+        let e = export(&rig, None, None).unwrap_err();
+        assert!(e.contains("equidistant"), "{e}");
+        let cam = rig
+            .sensors
+            .iter_mut()
+            .find_map(|s| s.camera.as_mut())
+            .unwrap();
+        cam.model = crate::geometry::camera::CameraModel::PlumbBob;
+        assert!(export(&rig, None, None).is_ok());
     }
 }

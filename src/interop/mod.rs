@@ -31,6 +31,7 @@ use std::path::{Path, PathBuf};
 use thiserror::Error;
 
 use crate::calib::{CalibrationFile, Rig, Sensor, SensorKind};
+use crate::geometry::Rigid;
 
 #[derive(Debug, Error)]
 pub enum ExportError {
@@ -157,6 +158,16 @@ impl ExportFormat {
         }
     }
 
+    /// Whether the format holds one LiDAR chosen by [`ExportOptions::lidar`].
+    pub fn takes_lidar(self) -> bool {
+        matches!(self, Self::OpenCv | Self::Kitti)
+    }
+
+    /// Whether the format holds one reference camera chosen by [`ExportOptions::camera`].
+    pub fn takes_camera(self) -> bool {
+        matches!(self, Self::Kalibr | Self::Kitti)
+    }
+
     /// Default file name, or directory name for the per-camera formats.
     pub fn default_file_name(self) -> &'static str {
         match self {
@@ -250,6 +261,18 @@ pub fn export(
         format: format.name(),
         what,
     };
+    // --lidar and --camera choose within the formats that hold one pair; elsewhere they would
+    // be ignored, and a user who gave one expects it to matter.
+    for (option, given, takes) in [
+        ("--lidar", options.lidar.is_some(), format.takes_lidar()),
+        ("--camera", options.camera.is_some(), format.takes_camera()),
+    ] {
+        if given && !takes {
+            return Err(unsupported(format!(
+                "{option} does not apply to it (it writes every chosen sensor; choose them with --sensors)"
+            )));
+        }
+    }
     // The chosen sensors only: a sensor left out cannot stop the export (a camera without
     // intrinsics, a second topic on the same frame).
     let rig = {
@@ -272,6 +295,31 @@ pub fn export(
             .to_rig(Path::new("the calibration"))
             .map_err(|e| unsupported(e.to_string()))?
     };
+    // A sensor on the vehicle frame itself is the vehicle origin in every tree the formats
+    // describe: the tf and URDF writers leave it out as the identity, Autoware would key it
+    // `base_link_base_link`. Moved off the origin (a calibrated LiDAR that was the vehicle
+    // frame), it cannot be written there without losing its pose.
+    // (PandaSet's Pandar64 is its vehicle frame; `calibrate --root` keeps such a sensor put.)
+    if !matches!(format, ExportFormat::Native | ExportFormat::CameraInfo)
+        && let Some((s, r, t)) = rig
+            .sensors
+            .iter()
+            .filter(|s| s.frame_id == rig.vehicle_frame)
+            .map(|s| {
+                let (r, t) = Rigid::IDENTITY.difference(s.vehicle_from_sensor);
+                (s, r, t)
+            })
+            .find(|&(_, r, t)| r > 1e-9 || t > 1e-9)
+    {
+        return Err(unsupported(format!(
+            "sensor '{}' has the vehicle frame's id '{}' but lies {:.3}° / {:.2} cm off the vehicle origin, which a transform tree rooted at that frame cannot hold; calibrate with --root {} to keep it put, give it a frame of its own, or export --format native",
+            s.name,
+            rig.vehicle_frame,
+            r.to_degrees(),
+            t * 100.0,
+            s.name
+        )));
+    }
     let one = |text: String| {
         vec![ExportedFile {
             name: format.default_file_name().to_string(),
@@ -467,6 +515,20 @@ mod collision_tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("front_camera.yaml"), "{e}");
+        // A sensor on the vehicle frame off the origin cannot be written as a tf tree.
+        let mut on_vehicle = test_rig::rig();
+        let vehicle = on_vehicle.vehicle_frame.clone();
+        on_vehicle.sensors[0].frame_id = vehicle;
+        let doc = CalibrationFile::from_rig(&on_vehicle);
+        for format in [
+            ExportFormat::Ros2StaticTf,
+            ExportFormat::Urdf,
+            ExportFormat::Autoware,
+        ] {
+            let e = export(&doc, format, &ExportOptions::default()).unwrap_err();
+            assert!(e.to_string().contains("vehicle origin"), "{e}");
+        }
+        assert!(export(&doc, ExportFormat::Native, &ExportOptions::default()).is_ok());
         let mut links = test_rig::rig();
         let mut lidar = links.sensor("lidar_top").unwrap().clone();
         lidar.name = "lidar_link_clash".into();

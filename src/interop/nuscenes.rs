@@ -3,7 +3,9 @@
 //! nuScenes' `[w, x, y, z]` order — and, for cameras, the 3×3 intrinsic matrix (LiDARs: `[]`).
 //! Camera frames are optical, as in nuScenes. Tokens are derived from the sensor names, so an
 //! export is reproducible. `channel`, `modality` and `transform` are rigcal's additions (JSON
-//! has no comments: `transform` spells out the direction).
+//! has no comments: `transform` spells out the direction), and so are `camera_distortion_model`
+//! and `camera_distortion` for a camera with a lens model: nuScenes' images are undistorted
+//! and its records hold K only, which alone would describe a pinhole.
 
 use serde_json::json;
 
@@ -39,7 +41,7 @@ pub fn export(rig: &Rig) -> String {
                 }
                 _ => json!([]),
             };
-            json!({
+            let mut record = json!({
                 "token": token("calibrated_sensor", &s.name),
                 "sensor_token": token("sensor", &s.name),
                 "channel": s.name,
@@ -48,7 +50,14 @@ pub fn export(rig: &Rig) -> String {
                 "rotation": [q.w, q.x, q.y, q.z],
                 "camera_intrinsic": intrinsic,
                 "transform": "ego_from_sensor: p_ego = R(rotation) p_sensor + translation; metres; rotation is w, x, y, z; camera frames are optical (x right, y down, z forward)",
-            })
+            });
+            // nuScenes images are undistorted and its records carry K only: a camera with a
+            // lens model says so, so its K is not taken for a pinhole's.
+            if let Some(c) = s.camera.as_ref().filter(|c| c.has_lens_distortion()) {
+                record["camera_distortion_model"] = json!(c.model.as_str());
+                record["camera_distortion"] = json!(c.distortion);
+            }
+            record
         })
         .collect();
     // Plain data with string keys serialises.
@@ -89,5 +98,21 @@ mod tests {
             assert_eq!(k.len(), if s.kind == SensorKind::Camera { 3 } else { 0 });
         }
         assert_ne!(token("sensor", "a"), token("calibrated_sensor", "a"));
+        // A camera with a lens model says so beside its K; a pinhole does not.
+        for (r, s) in records.iter().zip(&rig.sensors) {
+            let lens = s.camera.as_ref().is_some_and(|c| c.has_lens_distortion());
+            assert_eq!(
+                r.get("camera_distortion_model").is_some(),
+                lens,
+                "{}",
+                s.name
+            );
+            if let Some(c) = s.camera.as_ref().filter(|_| lens) {
+                assert_eq!(
+                    r["camera_distortion"].as_array().unwrap().len(),
+                    c.distortion.len()
+                );
+            }
+        }
     }
 }
