@@ -547,6 +547,7 @@ fn run() -> Result<()> {
                 let text = serde_json::to_string_pretty(&report)?;
                 rigcal::util::write_atomic(&path, text.as_bytes())
                     .with_context(|| format!("cannot write {}", path.display()))?;
+                eprintln!("wrote {}", path.display());
             }
             Ok(())
         }

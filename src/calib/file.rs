@@ -176,6 +176,13 @@ impl CalibrationFile {
                         .validate()
                         .map_err(|e| invalid(format!("camera '{}': {e}", s.name)))?,
                 }
+            } else if s.camera.is_some() {
+                // Intrinsics on a LiDAR are a sensor of the wrong kind, not data to carry.
+                return Err(invalid(format!(
+                    "sensor '{}' is a {} with a camera: block (is its kind wrong?)",
+                    s.name,
+                    s.kind.as_str()
+                )));
             }
             sensors.push(Sensor {
                 name: s.name.clone(),
@@ -388,6 +395,19 @@ mod tests {
         let err = file.to_rig(p).unwrap_err().to_string();
         assert!(
             err.contains("bad.yaml") && err.contains("lidar_top") && err.contains("norm"),
+            "{err}"
+        );
+        // A LiDAR with intrinsics: a sensor of the wrong kind.
+        let mut file = CalibrationFile::from_rig(&sample_rig());
+        let camera = file.sensors.iter().find_map(|s| s.camera.clone());
+        let lidar = file
+            .sensors
+            .iter_mut()
+            .find(|s| s.kind == SensorKind::Lidar);
+        lidar.unwrap().camera = camera;
+        let err = file.to_rig(p).unwrap_err().to_string();
+        assert!(
+            err.contains("lidar_top") && err.contains("camera: block"),
             "{err}"
         );
         let mut file = CalibrationFile::from_rig(&sample_rig());
