@@ -110,8 +110,8 @@ enum Command {
         #[arg(help_heading = HEADING_EXPERIMENTAL, long = "scene-radius")]
         scene_radius_m: Option<f64>,
         /// unical: a sensor whose extrinsic stays fixed (default none: every sensor moves and
-        /// the trajectory fixes the gauge); icp, mi, target, pose-graph and --lidar-icp: the
-        /// reference LiDAR (default the first)
+        /// the trajectory fixes the gauge); icp, mi, target, pose-graph, edge and --lidar-icp:
+        /// the reference LiDAR (default the first)
         #[arg(long)]
         root: Option<String>,
         /// With --camera-frames: the correspondence term between camera images: none |
@@ -561,12 +561,6 @@ fn run() -> Result<()> {
         }) => {
             use rigcal::interop;
             let format: interop::ExportFormat = format.parse()?;
-            if rigcal::util::same_file(&calibration, &out) {
-                anyhow::bail!(
-                    "--out {} is the calibration being exported; choose another path",
-                    out.display()
-                );
-            }
             // The library's errors already name the file and the cause: print them once.
             let doc = rigcal::calib::CalibrationFile::load(&calibration)
                 .map_err(|e| anyhow::Error::msg(e.to_string()))?;
@@ -577,6 +571,16 @@ fn run() -> Result<()> {
             };
             let export = interop::export(&doc, format, &options)
                 .with_context(|| format!("cannot export {}", calibration.display()))?;
+            if let Some(p) = interop::paths(&export, &out)
+                .iter()
+                .find(|p| rigcal::util::same_file(&calibration, p))
+            {
+                anyhow::bail!(
+                    "--out {}: the export would overwrite the calibration being exported ({}); choose another path",
+                    out.display(),
+                    p.display()
+                );
+            }
             let written = interop::write(&export, &out)?;
             for path in written {
                 // On stderr: the export itself may be going to stdout.

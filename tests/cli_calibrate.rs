@@ -127,6 +127,10 @@ fn bad_arguments_fail_with_one_line() {
         !ok && err.contains("--camera-frames, --lidar-icp apply to --method unical only"),
         "{err}"
     );
+    let (ok, err) = run(&["--method", "UniCal", "--camera-frames", "8"]);
+    assert!(!ok && err.contains("unknown --method 'UniCal'"), "{err}");
+    let (ok, err) = run(&["--method", "pose-graph", "--iterations", "5"]);
+    assert!(!ok && err.contains("runs until it converges"), "{err}");
     let (ok, err) = run(&["--method", "icp", "--sensors", "front_camera"]);
     assert!(
         !ok && err.contains("calibrates LiDARs; 'front_camera'"),

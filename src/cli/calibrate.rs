@@ -213,11 +213,9 @@ impl CalibrateArgs {
         };
         put("method", Value::String(self.method.clone()));
         put("seed", Value::from(self.seed));
-        put(
-            "iterations",
-            self.iterations
-                .map_or(Value::String("default".into()), Value::from),
-        );
+        if let Some(n) = self.iterations {
+            put("iterations", Value::from(n as u64));
+        }
         if !self.sensors.is_empty() {
             put("sensors", Value::String(self.sensors.join(",")));
         }
@@ -265,28 +263,32 @@ impl CalibrateArgs {
                 put(key, Value::Bool(true));
             }
         }
+        // An f32 as the number it was typed as (1e-3, not 0.0010000000474974513).
+        let short = |v: f32| v.to_string().parse::<f64>().unwrap_or(f64::from(v));
         let numbers = [
             ("scene_radius_m", self.scene_radius_m),
-            ("camera_lr", self.camera_lr.map(f64::from)),
+            ("camera_lr", self.camera_lr.map(short)),
             (
                 "camera_translation_rate",
-                self.camera_translation_rate.map(f64::from),
+                self.camera_translation_rate.map(short),
             ),
             (
                 "camera_translation_final",
-                self.camera_translation_final.map(f64::from),
+                self.camera_translation_final.map(short),
             ),
             ("camera_hold_unobserved", self.camera_hold_unobserved),
             ("silhouette_share", self.silhouette_share),
             ("camera_blur", self.camera_blur),
             ("colour_pose_levels", self.colour_pose_levels),
-            ("hash_table_log2", self.hash_table_log2.map(f64::from)),
             ("pose_average", self.pose_average),
         ];
         for (key, value) in numbers {
             if let Some(value) = value {
                 put(key, Value::from(value));
             }
+        }
+        if let Some(bits) = self.hash_table_log2 {
+            put("hash_table_log2", Value::from(bits));
         }
         for (key, text) in [
             ("camera_early_release", &self.camera_early_release),
@@ -562,13 +564,21 @@ pub fn parse_segment(text: &str, t0_nanos: i64) -> Result<(i64, i64), String> {
     Ok((t0_nanos + (a * 1e9) as i64, t0_nanos + (b * 1e9) as i64))
 }
 
+/// The values `--method` takes.
+const METHODS: [&str; 6] = ["unical", "icp", "mi", "target", "pose-graph", "edge"];
+
+fn unknown_method(method: &str) -> String {
+    format!("unknown --method '{method}' (expected unical, icp, mi, target, pose-graph or edge)")
+}
+
 /// `--sensors` naming a sensor the method does not calibrate (a camera for ICP, a LiDAR for
 /// mutual information) would be written back unchanged; it is refused instead.
 fn check_sensor_kinds(args: &CalibrateArgs, rig: &Rig) -> Result<(), String> {
     use crate::calib::SensorKind;
     let calibrates = match args.method.as_str() {
-        "icp" | "pose-graph" => Some((SensorKind::Lidar, "LiDARs")),
-        "mi" | "edge" => Some((SensorKind::Camera, "cameras")),
+        "icp" => Some((SensorKind::Lidar, "LiDARs")),
+        "mi" | "edge" | "target" => Some((SensorKind::Camera, "cameras")),
+        // unical and pose-graph calibrate every sensor.
         _ => None,
     };
     let Some((kind, what)) = calibrates else {
@@ -611,6 +621,15 @@ pub fn calibrate(
     progress: &mut dyn FnMut(usize, usize),
 ) -> Result<(CalibrationFile, String), String> {
     let perturbation = args.perturbation()?;
+    if !METHODS.contains(&args.method.as_str()) {
+        return Err(unknown_method(&args.method));
+    }
+    if matches!(args.method.as_str(), "icp" | "pose-graph") && args.iterations.is_some() {
+        return Err(format!(
+            "--iterations: --method {} runs until it converges",
+            args.method
+        ));
+    }
     let unical_only = args.unical_options_given();
     if args.method != "unical" && !unical_only.is_empty() {
         return Err(format!(
@@ -698,12 +717,7 @@ pub fn calibrate(
     };
     let mut calibrator: Box<dyn Calibrator> = match args.method.as_str() {
         "edge" => {
-            let lidar = rig
-                .lidars()
-                .map(|l| l.name.clone())
-                .find(|l| args.sensors.is_empty() || !args.sensors.contains(l))
-                .or_else(|| rig.lidars().next().map(|l| l.name.clone()))
-                .ok_or("the log has no LiDAR")?;
+            let lidar = reference_lidar(args, &rig)?;
             let cameras = selected_cameras(args, &rig);
             Box::new(
                 EdgeRefiner::new(&drive, &rig, &lidar, &cameras, 4, &segments)
@@ -961,11 +975,7 @@ pub fn calibrate(
             }
             Box::new(cal)
         }
-        m => {
-            return Err(format!(
-                "unknown --method '{m}' (expected unical, icp, mi, target, pose-graph or edge)"
-            ));
-        }
+        m => return Err(unknown_method(m)),
     };
     let max_steps = match (args.method.as_str(), args.iterations) {
         ("edge", Some(n)) => n.min(calibrator.max_steps()),

@@ -295,12 +295,21 @@ pub fn export(
             .to_rig(Path::new("the calibration"))
             .map_err(|e| unsupported(e.to_string()))?
     };
-    // A sensor on the vehicle frame itself is the vehicle origin in every tree the formats
-    // describe: the tf and URDF writers leave it out as the identity, Autoware would key it
-    // `base_link_base_link`. Moved off the origin (a calibrated LiDAR that was the vehicle
+    // A sensor on the vehicle frame itself is the vehicle origin in the transform trees (tf,
+    // URDF, MCAP /tf_static, Autoware): their writers leave it out as the identity or, Autoware,
+    // key it `base_link_base_link`. (The formats that write each sensor's pose as numbers keep
+    // it.) Moved off the origin (a calibrated LiDAR that was the vehicle
     // frame), it cannot be written there without losing its pose.
     // (PandaSet's Pandar64 is its vehicle frame; `calibrate --root` keeps such a sensor put.)
-    if !matches!(format, ExportFormat::Native | ExportFormat::CameraInfo)
+    let tree = matches!(
+        format,
+        ExportFormat::Urdf
+            | ExportFormat::Ros2StaticTf
+            | ExportFormat::Ros2Launch
+            | ExportFormat::Mcap
+            | ExportFormat::Autoware
+    );
+    if tree
         && let Some((s, r, t)) = rig
             .sensors
             .iter()
@@ -417,6 +426,16 @@ pub(crate) fn pick<'a>(
 /// (created if missing) holding one file per camera, each written atomically. Nothing is
 /// written unless every file's directory exists or can be made and no file's name is taken by
 /// a directory.
+/// Where [`write`] puts `export`'s files for `--out` `out`: the file itself, or one file per
+/// camera inside the directory.
+pub fn paths(export: &Export, out: &Path) -> Vec<PathBuf> {
+    if export.format.is_directory() {
+        export.files.iter().map(|f| out.join(&f.name)).collect()
+    } else {
+        vec![out.to_path_buf()]
+    }
+}
+
 pub fn write(export: &Export, out: &Path) -> Result<Vec<PathBuf>, ExportError> {
     let err = |path: &Path, what: String| ExportError::Write {
         path: path.to_path_buf(),
@@ -435,17 +454,14 @@ pub fn write(export: &Export, out: &Path) -> Result<Vec<PathBuf>, ExportError> {
         std::fs::create_dir_all(out).map_err(|e| err(out, e.to_string()))?;
         // Every file's place is checked before the first is written, so a folder in the way
         // of one camera's file does not leave the others half replaced.
-        for f in &export.files {
-            let path = out.join(&f.name);
-            crate::util::check_output(&path).map_err(|e| err(&path, e.to_string()))?;
+        let paths = paths(export, out);
+        for path in &paths {
+            crate::util::check_output(path).map_err(|e| err(path, e.to_string()))?;
         }
-        let mut written = Vec::new();
-        for f in &export.files {
-            let path = out.join(&f.name);
-            crate::util::write_atomic(&path, &f.bytes).map_err(|e| err(&path, e.to_string()))?;
-            written.push(path);
+        for (path, f) in paths.iter().zip(&export.files) {
+            crate::util::write_atomic(path, &f.bytes).map_err(|e| err(path, e.to_string()))?;
         }
-        Ok(written)
+        Ok(paths)
     } else {
         if out.is_dir() {
             return Err(err(out, "is a directory; give a file name".into()));
@@ -528,7 +544,10 @@ mod collision_tests {
             let e = export(&doc, format, &ExportOptions::default()).unwrap_err();
             assert!(e.to_string().contains("vehicle origin"), "{e}");
         }
-        assert!(export(&doc, ExportFormat::Native, &ExportOptions::default()).is_ok());
+        // The formats that write each pose as numbers keep it.
+        for format in [ExportFormat::Native, ExportFormat::Nuscenes] {
+            assert!(export(&doc, format, &ExportOptions::default()).is_ok());
+        }
         let mut links = test_rig::rig();
         let mut lidar = links.sensor("lidar_top").unwrap().clone();
         lidar.name = "lidar_link_clash".into();
