@@ -390,6 +390,8 @@ fn a_session_restores_edits_segments_and_locks_and_export_round_trips() {
     use rigcal::app::state::ExtrinsicsView;
     let doc = rigcal::app::export::document(h.state(), &edited, ExtrinsicsView::Current);
     assert!(doc.provenance.contains_key("input") && doc.provenance.contains_key("time_range"));
+    let date = doc.provenance.get("date").and_then(|v| v.as_str()).unwrap();
+    assert!(date.len() == 10 && date.starts_with("20"), "{date}");
     let out = dir.join("export.yaml");
     doc.save(&out).unwrap();
     let back = rigcal::calib::CalibrationFile::load_rig(&out).unwrap();

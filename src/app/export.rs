@@ -33,8 +33,9 @@ pub fn document(studio: &Studio, rig: &Rig, which: ExtrinsicsView) -> Calibratio
     let mut doc = CalibrationFile::from_rig(rig);
     let v = |s: String| serde_yaml::Value::String(s);
     if let Some(d) = &studio.drive {
+        let input = std::path::absolute(d.path()).unwrap_or_else(|_| d.path().to_path_buf());
         doc.provenance
-            .insert("input".into(), v(d.path().display().to_string()));
+            .insert("input".into(), v(input.display().to_string()));
         doc.provenance
             .insert("trajectory".into(), v(d.trajectory_source.clone()));
     }
@@ -72,6 +73,10 @@ pub fn document(studio: &Studio, rig: &Rig, which: ExtrinsicsView) -> Calibratio
         "version".into(),
         v(format!("rigcal {}", env!("CARGO_PKG_VERSION"))),
     );
+    // The day only: the preview is made again whenever its document changes, and a time to
+    // the second would change it every second.
+    doc.provenance
+        .insert("date".into(), v(crate::util::today_utc()));
     // The checks' scores, only where they were measured on this very rig.
     let scored = studio.checks.scored.as_ref();
     let measured_initial = scored.is_some_and(|(initial, _)| initial == rig);

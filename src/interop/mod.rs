@@ -295,12 +295,12 @@ pub fn export(
             .to_rig(Path::new("the calibration"))
             .map_err(|e| unsupported(e.to_string()))?
     };
-    // A sensor on the vehicle frame itself is the vehicle origin in the transform trees (tf,
-    // URDF, MCAP /tf_static, Autoware): their writers leave it out as the identity or, Autoware,
-    // key it `base_link_base_link`. (The formats that write each sensor's pose as numbers keep
-    // it.) Moved off the origin (a calibrated LiDAR that was the vehicle
-    // frame), it cannot be written there without losing its pose.
-    // (PandaSet's Pandar64 is its vehicle frame; `calibrate --root` keeps such a sensor put.)
+    // In a transform tree (tf, URDF, MCAP /tf_static, Autoware) a sensor whose frame is the
+    // vehicle frame is the tree's root: the writers leave it out as the identity (Autoware would
+    // key it `base_link_base_link`). Moved off the origin (a calibrated LiDAR that is the
+    // vehicle frame, as PandaSet's Pandar64 is), it cannot be written there without losing its
+    // pose; the formats that write each pose as numbers keep it. `calibrate --root` keeps such
+    // a sensor put.
     let tree = matches!(
         format,
         ExportFormat::Urdf
@@ -422,10 +422,6 @@ pub(crate) fn pick<'a>(
     }
 }
 
-/// Write an export atomically: the file at `out`, or for per-camera formats the directory `out`
-/// (created if missing) holding one file per camera, each written atomically. Nothing is
-/// written unless every file's directory exists or can be made and no file's name is taken by
-/// a directory.
 /// Where [`write`] puts `export`'s files for `--out` `out`: the file itself, or one file per
 /// camera inside the directory.
 pub fn paths(export: &Export, out: &Path) -> Vec<PathBuf> {
@@ -436,6 +432,10 @@ pub fn paths(export: &Export, out: &Path) -> Vec<PathBuf> {
     }
 }
 
+/// Write an export atomically: the file at `out`, or for per-camera formats the directory `out`
+/// (created if missing) holding one file per camera, each written atomically. Nothing is
+/// written unless every file's directory exists or can be made and no file's name is taken by
+/// a directory.
 pub fn write(export: &Export, out: &Path) -> Result<Vec<PathBuf>, ExportError> {
     let err = |path: &Path, what: String| ExportError::Write {
         path: path.to_path_buf(),
