@@ -141,75 +141,100 @@ pub struct CalibrateArgs {
 }
 
 impl CalibrateArgs {
-    /// The UniCal options given (as the command line spells them): with another method they
-    /// would be ignored, so they are refused.
-    fn unical_options_given(&self) -> Vec<&'static str> {
-        let given = [
-            ("--camera-frames", self.camera_frames != 0),
-            ("--lidar-sweeps", self.lidar_sweeps != DEFAULT_LIDAR_SWEEPS),
-            ("--scene-radius", self.scene_radius_m.is_some()),
+    /// The UniCal options given, each by its flag and its value: with another method they
+    /// would be ignored (so they are refused), and the provenance records them. An option at
+    /// its default is not given.
+    fn unical_options(&self) -> Vec<(&'static str, serde_yaml::Value)> {
+        use serde_yaml::Value;
+        let flag = |on: bool| on.then_some(Value::Bool(true));
+        let number = |v: Option<f64>| v.map(Value::from);
+        // An f32 as the number it was typed as (1e-3, not 0.0010000000474974513).
+        let short =
+            |v: Option<f32>| v.map(|v| Value::from(v.to_string().parse().unwrap_or(f64::from(v))));
+        let text = |v: &Option<String>| v.clone().map(Value::String);
+        let alignment = match self.alignment {
+            AlignmentLoss::None => Some("none"),
+            AlignmentLoss::ProjectedRayDistance => Some("ray-distance"),
+            AlignmentLoss::SurfaceAlignment => None,
+        };
+        let options = [
             (
-                "--alignment",
-                self.alignment != AlignmentLoss::SurfaceAlignment,
+                "--camera-frames",
+                (self.camera_frames != 0).then(|| Value::from(self.camera_frames as u64)),
             ),
-            ("--lidar-icp", self.lidar_icp),
-            ("--camera-hand-eye", self.camera_hand_eye),
-            ("--camera-scale", self.camera_scale != DEFAULT_CAMERA_SCALE),
-            ("--camera-rays", self.camera_rays != DEFAULT_CAMERA_RAYS),
-            ("--camera-lr", self.camera_lr.is_some()),
+            (
+                "--lidar-sweeps",
+                (self.lidar_sweeps != DEFAULT_LIDAR_SWEEPS)
+                    .then(|| Value::from(self.lidar_sweeps as u64)),
+            ),
+            ("--scene-radius", number(self.scene_radius_m)),
+            ("--alignment", alignment.map(|a| Value::String(a.into()))),
+            ("--lidar-icp", flag(self.lidar_icp)),
+            ("--camera-hand-eye", flag(self.camera_hand_eye)),
+            (
+                "--camera-scale",
+                (self.camera_scale != DEFAULT_CAMERA_SCALE).then(|| Value::from(self.camera_scale)),
+            ),
+            (
+                "--camera-rays",
+                (self.camera_rays != DEFAULT_CAMERA_RAYS)
+                    .then(|| Value::from(self.camera_rays as u64)),
+            ),
+            ("--camera-lr", short(self.camera_lr)),
             (
                 "--camera-translation-rate",
-                self.camera_translation_rate.is_some(),
+                short(self.camera_translation_rate),
             ),
             (
                 "--camera-translation-final",
-                self.camera_translation_final.is_some(),
+                short(self.camera_translation_final),
             ),
+            ("--camera-early-release", text(&self.camera_early_release)),
             (
-                "--camera-early-release",
-                self.camera_early_release.is_some(),
+                "--rounds",
+                (self.rounds != 1).then(|| Value::from(self.rounds as u64)),
             ),
-            ("--rounds", self.rounds != 1),
-            ("--coarse-to-fine", self.coarse_to_fine.is_some()),
+            ("--coarse-to-fine", text(&self.coarse_to_fine)),
             (
                 "--shared-camera-translation",
-                self.shared_camera_translation,
+                flag(self.shared_camera_translation),
             ),
             (
                 "--grouped-camera-translation",
-                self.grouped_camera_translation,
+                flag(self.grouped_camera_translation),
             ),
             (
                 "--camera-rays-below-lidar-top",
-                self.camera_rays_below_lidar_top,
+                flag(self.camera_rays_below_lidar_top),
             ),
             (
                 "--camera-hold-unobserved",
-                self.camera_hold_unobserved.is_some(),
+                number(self.camera_hold_unobserved),
             ),
-            ("--camera-hold-axial", self.camera_hold_axial),
-            ("--silhouette-share", self.silhouette_share.is_some()),
-            ("--camera-blur", self.camera_blur.is_some()),
-            ("--colour-pose-levels", self.colour_pose_levels.is_some()),
-            ("--hash-table-log2", self.hash_table_log2.is_some()),
-            ("--pose-average", self.pose_average.is_some()),
-            ("--cubic-scene-box", self.cubic_scene_box),
-            ("--drop-moving", self.drop_moving),
+            ("--camera-hold-axial", flag(self.camera_hold_axial)),
+            ("--silhouette-share", number(self.silhouette_share)),
+            ("--camera-blur", number(self.camera_blur)),
+            ("--colour-pose-levels", number(self.colour_pose_levels)),
+            ("--hash-table-log2", self.hash_table_log2.map(Value::from)),
+            ("--pose-average", number(self.pose_average)),
+            ("--cubic-scene-box", flag(self.cubic_scene_box)),
+            ("--drop-moving", flag(self.drop_moving)),
         ];
-        given
+        options
             .into_iter()
-            .filter_map(|(name, on)| on.then_some(name))
+            .filter_map(|(name, value)| Some((name, value?)))
             .collect()
     }
 
     /// What the run was asked to do, for the file's provenance: the method as `--method` names
-    /// it, the seed and iteration count, and every option given (UniCal's only with
-    /// `--method unical`), so the run can be repeated from its output.
+    /// it, the seed, and every option given, keyed by the option's name with underscores
+    /// (`camera_lr` for `--camera-lr`), so the run can be repeated from its output.
     pub fn config(&self) -> serde_yaml::Mapping {
         use serde_yaml::Value;
         let mut m = serde_yaml::Mapping::new();
-        let mut put = |key: &str, value: Value| {
-            m.insert(Value::String(key.into()), value);
+        let mut put = |flag: &str, value: Value| {
+            let key = flag.trim_start_matches('-').replace('-', "_");
+            m.insert(Value::String(key), value);
         };
         put("method", Value::String(self.method.clone()));
         put("seed", Value::from(self.seed));
@@ -228,75 +253,8 @@ impl CalibrateArgs {
                 Value::from(self.camera_time_offset_ms),
             );
         }
-        if self.method != "unical" {
-            return m;
-        }
-        put("camera_frames", Value::from(self.camera_frames as u64));
-        put("lidar_sweeps", Value::from(self.lidar_sweeps as u64));
-        put("camera_scale", Value::from(self.camera_scale));
-        put("camera_rays", Value::from(self.camera_rays as u64));
-        let alignment = match self.alignment {
-            AlignmentLoss::None => "none",
-            AlignmentLoss::ProjectedRayDistance => "ray-distance",
-            AlignmentLoss::SurfaceAlignment => "surface",
-        };
-        put("alignment", Value::String(alignment.into()));
-        put("rounds", Value::from(self.rounds as u64));
-        let flags = [
-            ("lidar_icp", self.lidar_icp),
-            ("camera_hand_eye", self.camera_hand_eye),
-            ("shared_camera_translation", self.shared_camera_translation),
-            (
-                "grouped_camera_translation",
-                self.grouped_camera_translation,
-            ),
-            (
-                "camera_rays_below_lidar_top",
-                self.camera_rays_below_lidar_top,
-            ),
-            ("camera_hold_axial", self.camera_hold_axial),
-            ("cubic_scene_box", self.cubic_scene_box),
-            ("drop_moving", self.drop_moving),
-        ];
-        for (key, on) in flags {
-            if on {
-                put(key, Value::Bool(true));
-            }
-        }
-        // An f32 as the number it was typed as (1e-3, not 0.0010000000474974513).
-        let short = |v: f32| v.to_string().parse::<f64>().unwrap_or(f64::from(v));
-        let numbers = [
-            ("scene_radius_m", self.scene_radius_m),
-            ("camera_lr", self.camera_lr.map(short)),
-            (
-                "camera_translation_rate",
-                self.camera_translation_rate.map(short),
-            ),
-            (
-                "camera_translation_final",
-                self.camera_translation_final.map(short),
-            ),
-            ("camera_hold_unobserved", self.camera_hold_unobserved),
-            ("silhouette_share", self.silhouette_share),
-            ("camera_blur", self.camera_blur),
-            ("colour_pose_levels", self.colour_pose_levels),
-            ("pose_average", self.pose_average),
-        ];
-        for (key, value) in numbers {
-            if let Some(value) = value {
-                put(key, Value::from(value));
-            }
-        }
-        if let Some(bits) = self.hash_table_log2 {
-            put("hash_table_log2", Value::from(bits));
-        }
-        for (key, text) in [
-            ("camera_early_release", &self.camera_early_release),
-            ("coarse_to_fine", &self.coarse_to_fine),
-        ] {
-            if let Some(text) = text {
-                put(key, Value::String(text.clone()));
-            }
+        for (flag, value) in self.unical_options() {
+            put(flag, value);
         }
         m
     }
@@ -630,7 +588,7 @@ pub fn calibrate(
             args.method
         ));
     }
-    let unical_only = args.unical_options_given();
+    let unical_only: Vec<&str> = args.unical_options().into_iter().map(|(f, _)| f).collect();
     if args.method != "unical" && !unical_only.is_empty() {
         return Err(format!(
             "{} appl{} to --method unical only",

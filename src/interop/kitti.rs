@@ -197,24 +197,23 @@ mod tests {
 
     #[test]
     fn a_fisheye_is_refused_even_without_coefficients() {
+        use crate::geometry::camera::CameraModel;
         let mut rig = test_rig::rig();
         let names: Vec<String> = rig.cameras().skip(1).map(|c| c.name.clone()).collect();
         rig.sensors.retain(|s| !names.contains(&s.name));
-        let cam = rig
-            .sensors
-            .iter_mut()
-            .find_map(|s| s.camera.as_mut())
-            .unwrap();
-        cam.model = crate::geometry::camera::CameraModel::Equidistant;
-        cam.distortion = vec![0.0; 4];
-        let e = export(&rig, None, None).unwrap_err();
+        let with_model = |model| {
+            let mut rig = rig.clone();
+            let cam = rig
+                .sensors
+                .iter_mut()
+                .find_map(|s| s.camera.as_mut())
+                .unwrap();
+            cam.model = model;
+            cam.distortion = vec![0.0; 4];
+            export(&rig, None, None)
+        };
+        let e = with_model(CameraModel::Equidistant).unwrap_err();
         assert!(e.contains("equidistant"), "{e}");
-        let cam = rig
-            .sensors
-            .iter_mut()
-            .find_map(|s| s.camera.as_mut())
-            .unwrap();
-        cam.model = crate::geometry::camera::CameraModel::PlumbBob;
-        assert!(export(&rig, None, None).is_ok());
+        assert!(with_model(CameraModel::PlumbBob).is_ok());
     }
 }
