@@ -6,12 +6,13 @@
 //! `cargo run --release --no-default-features --example photo_refine -- LOG CALIB REFERENCE [OUT]`
 //! Environment: `RIGCAL_PHOTO_IMAGES` (16), `RIGCAL_PHOTO_WIDTH` (480), `RIGCAL_PHOTO_ROTATE_ONLY`,
 //! `RIGCAL_PHOTO_FROM_REFERENCE` (start at the reference instead), `RIGCAL_PHOTO_SCALE_SWEEP`
-//! (the cost at the reference with the focal length scaled, and moved along the optical axis).
+//! (the cost at the reference with the focal length scaled, and moved along the optical axis),
+//! `RIGCAL_PHOTO_READOUT_MS` (`FIRST..LAST`: a rolling shutter's rows, ms after the stamp).
 
 use rigcal::calib::CalibrationFile;
 use rigcal::calib::dataset_json::load_reference;
-use rigcal::geometry::Rigid;
-use rigcal::log::Drive;
+use rigcal::geometry::{Rigid, RowTimes};
+use rigcal::log::{Drive, DriveOptions};
 use rigcal::optim::edge_align::CompassSearch;
 use rigcal::optim::photo_consistency::{PhotoConfig, PhotoProblem, lidar_map, search};
 
@@ -24,7 +25,19 @@ fn env<T: std::str::FromStr>(name: &str, default: T) -> T {
 
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
-    let drive = Drive::open(std::path::Path::new(&args[0])).unwrap();
+    // A rolling shutter's readout, `FIRST..LAST` ms after the stamp.
+    let camera_readout =
+        std::env::var("RIGCAL_PHOTO_READOUT_MS")
+            .ok()
+            .map_or(RowTimes::GLOBAL, |v| {
+                let (a, b) = v.split_once("..").unwrap();
+                RowTimes::from_millis(a.parse().unwrap(), b.parse().unwrap())
+            });
+    let options = DriveOptions {
+        camera_readout,
+        ..DriveOptions::default()
+    };
+    let drive = Drive::open_with(std::path::Path::new(&args[0]), &options).unwrap();
     let calibration = CalibrationFile::load_rig(std::path::Path::new(&args[1])).unwrap();
     let reference = load_reference(std::path::Path::new(&args[2])).unwrap();
     let root = reference.lidars().next().unwrap().name.clone();

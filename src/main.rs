@@ -236,6 +236,17 @@ enum Command {
         /// cameras and the trajectory (negative: the images were taken before their stamps)
         #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
         camera_time_offset_ms: f64,
+        /// With --camera-frames: the cameras have a rolling shutter whose first and last image
+        /// rows were exposed FIRST and LAST milliseconds after each image's stamp (negative:
+        /// before it), rows in between evenly; each ray is cast from where the vehicle was
+        /// when its row was exposed (e.g. -30..10; default: a global shutter at the stamp)
+        #[arg(
+            help_heading = HEADING_UNICAL,
+            long,
+            value_name = "FIRST..LAST",
+            allow_hyphen_values = true
+        )]
+        camera_readout_ms: Option<String>,
         /// Perturb every sensor of the initial guess by this many degrees about a random axis
         /// (drawn from --seed), to measure how far a method recovers; a sensor whose frame is
         /// the vehicle frame (the trajectory's own, as PandaSet's Pandar64) is left alone
@@ -456,6 +467,7 @@ fn run() -> Result<()> {
             cubic_scene_box,
             drop_moving,
             camera_time_offset_ms,
+            camera_readout_ms,
             perturb_deg,
             perturb_cm,
             out,
@@ -497,6 +509,7 @@ fn run() -> Result<()> {
                 cubic_scene_box,
                 drop_moving,
                 camera_time_offset_ms,
+                camera_readout_ms,
                 perturb: (perturb_deg, perturb_cm),
                 out: out.clone(),
             };

@@ -127,6 +127,16 @@ fn bad_arguments_fail_with_one_line() {
         !ok && err.contains("--camera-frames, --lidar-icp apply to --method unical only"),
         "{err}"
     );
+    let (ok, err) = run(&["--method", "mi", "--camera-readout-ms", "-30..10"]);
+    assert!(
+        !ok && err.contains("--camera-readout-ms applies to --method unical only"),
+        "{err}"
+    );
+    let (ok, err) = run(&["--method", "unical", "--camera-readout-ms", "-30"]);
+    assert!(
+        !ok && err.contains("--camera-readout-ms '-30': expected FIRST..LAST"),
+        "{err}"
+    );
     let (ok, err) = run(&["--method", "UniCal", "--camera-frames", "8"]);
     assert!(!ok && err.contains("unknown --method 'UniCal'"), "{err}");
     let (ok, err) = run(&["--method", "pose-graph", "--iterations", "5"]);

@@ -134,6 +134,10 @@ pub struct CalibrateArgs {
     pub drop_moving: bool,
     /// Added to every camera image's stamp (ms; [`crate::log::DriveOptions::camera_time_offset_nanos`]).
     pub camera_time_offset_ms: f64,
+    /// unical with cameras: `FIRST..LAST`, the milliseconds after each image's stamp its first
+    /// and last rows were exposed ([`crate::log::DriveOptions::camera_readout`]); `None`: a
+    /// global shutter.
+    pub camera_readout_ms: Option<String>,
     /// Degrees and centimetres every sensor of the initial guess is moved by (random axis and
     /// direction drawn from `seed`; (0, 0) leaves it), to measure recovery from a known start.
     pub perturb: (f64, f64),
@@ -219,6 +223,7 @@ impl CalibrateArgs {
             ("--pose-average", number(self.pose_average)),
             ("--cubic-scene-box", flag(self.cubic_scene_box)),
             ("--drop-moving", flag(self.drop_moving)),
+            ("--camera-readout-ms", text(&self.camera_readout_ms)),
         ];
         options
             .into_iter()
@@ -503,6 +508,25 @@ fn parse_coarse_to_fine(s: &str) -> Result<Option<CoarseToFine>, String> {
     CoarseToFine::parse_setting(s).map_err(|e| format!("--coarse-to-fine: {e}"))
 }
 
+/// Parse `--camera-readout-ms FIRST..LAST`: when a rolling shutter exposed the first and the
+/// last image rows, in milliseconds after the stamp (each within ±1000; LAST below FIRST is a
+/// readout from the bottom up).
+fn parse_readout(text: &str) -> Result<crate::geometry::RowTimes, String> {
+    let (a, b) = text.split_once("..").ok_or_else(|| {
+        format!("--camera-readout-ms '{text}': expected FIRST..LAST in milliseconds, e.g. -30..10")
+    })?;
+    let parse = |s: &str| {
+        s.trim()
+            .parse::<f64>()
+            .ok()
+            .filter(|v| v.is_finite() && v.abs() <= 1000.0)
+            .ok_or_else(|| {
+                format!("--camera-readout-ms '{text}': '{s}' is not a number of milliseconds within ±1000")
+            })
+    };
+    Ok(crate::geometry::RowTimes::from_millis(parse(a)?, parse(b)?))
+}
+
 /// Parse `START..END` (seconds from `t0`) into nanoseconds.
 pub fn parse_segment(text: &str, t0_nanos: i64) -> Result<(i64, i64), String> {
     let (a, b) = text
@@ -617,8 +641,13 @@ pub fn calibrate(
             args.camera_time_offset_ms
         ));
     }
+    let camera_readout = match args.camera_readout_ms.as_deref() {
+        Some(s) => parse_readout(s)?,
+        None => crate::geometry::RowTimes::GLOBAL,
+    };
     let options = crate::log::DriveOptions {
         camera_time_offset_nanos: (args.camera_time_offset_ms * 1e6).round() as i64,
+        camera_readout,
         ..crate::log::DriveOptions::default()
     };
     let drive = Drive::open_with(&args.log, &options).map_err(|e| e.to_string())?;
@@ -1200,6 +1229,32 @@ mod tests {
         );
         let inside = parse_segment("7..20", 1_000).unwrap();
         assert!(check_segment_in_log("7..20", inside, range, log).is_ok());
+    }
+
+    #[test]
+    fn a_readout_parses_the_first_and_last_rows_milliseconds() {
+        use crate::geometry::RowTimes;
+        assert_eq!(
+            parse_readout("-30..10"),
+            Ok(RowTimes {
+                first_row_nanos: -30_000_000,
+                last_row_nanos: 10_000_000
+            })
+        );
+        // Bottom up, and fractions of a millisecond.
+        assert_eq!(
+            parse_readout(" 12.5 .. -2.25 "),
+            Ok(RowTimes::from_millis(12.5, -2.25))
+        );
+        for (bad, says) in [
+            ("30", "FIRST..LAST"),
+            ("a..10", "'a'"),
+            ("-30..2000", "'2000'"),
+            ("nan..0", "'nan'"),
+        ] {
+            let err = parse_readout(bad).unwrap_err();
+            assert!(err.contains(says) && err.contains(bad), "{err}");
+        }
     }
 
     #[test]

@@ -9,10 +9,12 @@ pub mod motion;
 pub mod pnp;
 pub mod projection;
 pub mod rigid;
+pub mod rolling_shutter;
 pub mod rot6d;
 pub mod so3;
 pub mod spd;
 pub mod trajectory;
 
 pub use rigid::{RigError, Rigid, rig_errors};
+pub use rolling_shutter::RowTimes;
 pub use trajectory::{StampConflict, Trajectory, TrajectoryError, conflicting_stamps};

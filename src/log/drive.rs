@@ -21,7 +21,7 @@ use super::types::{CameraInfoMsg, Decoded, PoseMsg, TransformMsg};
 use crate::calib::file::exportable_name;
 use crate::calib::{Rig, Sensor, SensorKind};
 use crate::geometry::camera::CameraIntrinsics;
-use crate::geometry::{Rigid, StampConflict, Trajectory, conflicting_stamps};
+use crate::geometry::{Rigid, RowTimes, StampConflict, Trajectory, conflicting_stamps};
 
 /// Faster than any vehicle: a trajectory pose that implies it towards most of its nearest poses
 /// is dropped ([`Trajectory::remove_jumps`]).
@@ -62,6 +62,9 @@ pub struct DriveOptions {
     /// Added to every camera image's stamp: a known delay between the cameras' clock (or
     /// trigger) and the trajectory's (negative: the images were taken before their stamps).
     pub camera_time_offset_nanos: i64,
+    /// When the cameras' first and last image rows were exposed relative to each image's
+    /// (offset) stamp: a rolling shutter's readout ([`Drive::camera_readout`]).
+    pub camera_readout: RowTimes,
 }
 
 impl Default for DriveOptions {
@@ -72,6 +75,7 @@ impl Default for DriveOptions {
             max_extrapolation_secs: 0.1,
             image_cache_len: 24,
             camera_time_offset_nanos: 0,
+            camera_readout: RowTimes::GLOBAL,
         }
     }
 }
@@ -162,6 +166,9 @@ pub struct Drive {
     pub problems: Vec<Problem>,
     image_cache: Mutex<VecDeque<((usize, usize), Arc<RgbImage>)>>,
     image_cache_len: usize,
+    /// When each image row of the cameras was exposed relative to the image's stamp (a
+    /// rolling shutter; [`RowTimes::GLOBAL`] unless the user gave a readout).
+    pub camera_readout: RowTimes,
 }
 
 impl std::fmt::Debug for Drive {
@@ -485,6 +492,7 @@ impl Drive {
             problems,
             image_cache: Mutex::new(VecDeque::new()),
             image_cache_len: options.image_cache_len.max(1),
+            camera_readout: options.camera_readout,
         })
     }
 

@@ -241,11 +241,12 @@ impl UnicalLidarStage {
                     self.calib.config.camera_target_blur_px,
                 );
                 let stamp_nanos = stream.frames[i].stamp_nanos;
+                // Masks are grown around what they cover: the middle row's time will do.
                 let masked = self.transient_mask(
                     drive,
                     &small,
                     cam.vehicle_from_sensor,
-                    stamp_nanos,
+                    stamp_nanos + drive.camera_readout.middle_nanos(),
                     &mut transient_sweeps,
                 )?;
                 let keypoints = if with_keypoints {
@@ -286,6 +287,7 @@ impl UnicalLidarStage {
                     initial: cam.vehicle_from_sensor,
                     intrinsics: small,
                     frames,
+                    readout: drive.camera_readout,
                 });
             }
         }

@@ -42,7 +42,7 @@ use super::transient::TransientSettings;
 use crate::features::orb::Keypoint;
 use crate::geometry::camera::CameraIntrinsics;
 use crate::geometry::projection::world_points;
-use crate::geometry::{Rigid, Trajectory};
+use crate::geometry::{Rigid, RowTimes, Trajectory};
 use crate::log::LidarSweep;
 
 /// The camera ray budget [`DepthCalibConfig::lr_camera_pose`] is meant for.
@@ -556,6 +556,46 @@ pub struct CameraData {
     pub initial: Rigid,
     pub intrinsics: CameraIntrinsics,
     pub frames: Vec<CameraFrame>,
+    /// When each image row was exposed relative to its frame's stamp (rolling shutter).
+    pub readout: RowTimes,
+}
+
+impl CameraData {
+    /// When the row at training pixel `y` of a frame stamped `stamp_nanos` was exposed.
+    pub fn row_stamp_nanos(&self, stamp_nanos: i64, y: f64) -> i64 {
+        stamp_nanos + self.readout.offset_nanos(y, self.intrinsics.height)
+    }
+
+    /// The training pixel where world point `p_world` appears in the frame stamped
+    /// `stamp_nanos`, seen in front of the camera within ~78° of its axis (no folded-over
+    /// pixels). With a rolling shutter the point is projected at the middle row's time, then
+    /// twice again at the time of the row it fell on: each pass shrinks the row's error by
+    /// the pixels the point moves in one row's readout, a small fraction.
+    pub fn project_world(
+        &self,
+        trajectory: &Trajectory,
+        vehicle_from_camera: Rigid,
+        stamp_nanos: i64,
+        p_world: DVec3,
+    ) -> Option<DVec2> {
+        let at = |stamp: i64| {
+            let wv = trajectory.world_from_vehicle(stamp).ok()?;
+            let in_camera = (wv * vehicle_from_camera)
+                .inverse()
+                .transform_point(p_world);
+            if in_camera.z < 0.2 * in_camera.length() {
+                return None;
+            }
+            self.intrinsics.project(in_camera)
+        };
+        let mut px = at(stamp_nanos + self.readout.middle_nanos())?;
+        if self.readout.first_row_nanos != self.readout.last_row_nanos {
+            for _ in 0..2 {
+                px = at(self.row_stamp_nanos(stamp_nanos, px.y))?;
+            }
+        }
+        self.intrinsics.in_image(px).then_some(px)
+    }
 }
 
 /// Everything the colour term adds: camera poses, exposure maps, decoders and their optimisers.
@@ -1273,7 +1313,12 @@ impl DepthCalibration {
         let stage = self.camera.as_ref()?;
         let k = stage.cameras.iter().position(|c| c.name == name)?;
         let (cam, pose, exposure) = (&stage.cameras[k], stage.poses[k], stage.exposure[k]);
-        let wv = self.trajectory.world_from_vehicle(stamp_nanos).ok()?;
+        // Fails for a time outside the trajectory (checked at the middle row).
+        self.trajectory
+            .world_from_vehicle(
+                cam.row_stamp_nanos(stamp_nanos, (cam.intrinsics.height / 2) as f64),
+            )
+            .ok()?;
         let model = CameraModel {
             field: &self.field,
             background: stage.background.as_ref().map(|b| &b.field),
@@ -1286,6 +1331,10 @@ impl DepthCalibration {
             .into_par_iter()
             .map(|y| {
                 let mut row = Vec::with_capacity(3 * w as usize);
+                let wv = self
+                    .trajectory
+                    .world_from_vehicle(cam.row_stamp_nanos(stamp_nanos, y as f64))
+                    .unwrap_or(Rigid::IDENTITY);
                 for x in 0..w {
                     let rgb = match cam.intrinsics.unproject(DVec2::new(x as f64, y as f64)) {
                         Some(u) => {
@@ -1340,7 +1389,7 @@ impl DepthCalibration {
     fn align_ray(&mut self, (camera, frame): (usize, usize), pixel: DVec2) -> Option<AlignRay> {
         let stage = self.camera.as_ref()?;
         let cam = stage.cameras.get(camera)?;
-        let stamp = cam.frames.get(frame)?.stamp_nanos;
+        let stamp = cam.row_stamp_nanos(cam.frames.get(frame)?.stamp_nanos, pixel.y);
         let u = cam.intrinsics.unproject(pixel)?;
         let wv = self.trajectory.world_from_vehicle(stamp).ok()?;
         let (o, d) = stage.poses[camera].ray(wv, u);
@@ -1521,10 +1570,6 @@ impl DepthCalibration {
                 cam.frames
                     .par_iter()
                     .map(|f| {
-                        let Ok(wv) = trajectory.world_from_vehicle(f.stamp_nanos) else {
-                            return Vec::new();
-                        };
-                        let camera_from_world = (wv * vehicle_from_camera).inverse();
                         let mut out = Vec::new();
                         for ((lidar, vehicle_from_lidar), indices) in
                             lidars.iter().zip(&lidar_poses).zip(points)
@@ -1549,18 +1594,14 @@ impl DepthCalibration {
                                     continue;
                                 };
                                 let p = DVec3::new(x as f64, y as f64, z as f64);
-                                let in_camera =
-                                    camera_from_world
-                                        .transform_point(wv_point.transform_point(
-                                            vehicle_from_lidar.transform_point(p),
-                                        ));
-                                // In front and within ~78° of the axis (no folded-over pixels).
-                                if in_camera.z < 0.2 * in_camera.length() {
-                                    continue;
-                                }
-                                if let Some(px) = cam.intrinsics.project(in_camera)
-                                    && cam.intrinsics.in_image(px)
-                                {
+                                let p_world =
+                                    wv_point.transform_point(vehicle_from_lidar.transform_point(p));
+                                if let Some(px) = cam.project_world(
+                                    trajectory,
+                                    vehicle_from_camera,
+                                    f.stamp_nanos,
+                                    p_world,
+                                ) {
                                     out.push((px.x as f32, px.y as f32));
                                 }
                             }
@@ -1638,7 +1679,8 @@ impl DepthCalibration {
             let Some(u) = cam.intrinsics.unproject(DVec2::new(x as f64, y as f64)) else {
                 continue;
             };
-            let Ok(wv) = self.trajectory.world_from_vehicle(f.stamp_nanos) else {
+            let stamp = cam.row_stamp_nanos(f.stamp_nanos, y as f64);
+            let Ok(wv) = self.trajectory.world_from_vehicle(stamp) else {
                 continue;
             };
             let (o, d) = pose.ray(wv, u);
@@ -2608,6 +2650,7 @@ mod tests {
             initial: vehicle_from_camera,
             intrinsics,
             frames,
+            readout: RowTimes::GLOBAL,
         }
     }
 
@@ -2768,6 +2811,83 @@ mod tests {
                     .any(|q| (px.x - q.0 as f64).abs() < 1.2 && (px.y - q.1 as f64).abs() < 1.2),
                 "{px:?}"
             );
+        }
+    }
+
+    /// A rolling shutter: every colour ray and every matched pixel's ray leaves from where the
+    /// vehicle was when its row was exposed (the test drive moves 8 m/s along x, so a ray's
+    /// origin tells its time), and a world point seen on a row projects back to that pixel.
+    #[test]
+    fn rolling_shutter_rays_leave_from_their_rows_time() {
+        let (trajectory, mount, sweeps) = flat_drive();
+        let readout = RowTimes::from_millis(-30.0, 10.0);
+        let camera = CameraData {
+            readout,
+            ..ground_camera(&trajectory)
+        };
+        let (h, frame_stamps) = (
+            camera.intrinsics.height,
+            camera
+                .frames
+                .iter()
+                .map(|f| f.stamp_nanos)
+                .collect::<Vec<_>>(),
+        );
+        let mut c = one_lidar(small_config(), &trajectory, mount, sweeps)
+            .with_cameras(vec![camera.clone()]);
+        // The ray's time from the vehicle's position, and the frame stamp it implies.
+        let check = |wv: Rigid, y: f64| {
+            let t_nanos = (wv.translation.x / 8.0 * 1e9).round() as i64;
+            let stamp = t_nanos - readout.offset_nanos(y, h);
+            assert!(
+                frame_stamps.iter().any(|s| (s - stamp).abs() < 1_000),
+                "row {y}: ray at {t_nanos} ns, stamp {stamp} not a frame's"
+            );
+        };
+        let rays = c.draw_camera_rays(0);
+        assert!(rays.len() > 50, "{}", rays.len());
+        let mut rows = std::collections::BTreeSet::new();
+        for r in &rays {
+            let y = camera.intrinsics.project(r.dir_in_sensor).unwrap().y;
+            check(r.world_from_vehicle, y);
+            rows.insert(y.round() as i64);
+        }
+        // Rays from rows far apart leave from places far apart: 40 ms is 32 cm here.
+        assert!(rows.len() > 20, "{rows:?}");
+        for (frame, y) in [(0, 0.0), (3, 23.5), (6, 47.0)] {
+            let ray = c.align_ray((0, frame), DVec2::new(30.0, y)).unwrap();
+            check(ray.world_from_vehicle, y);
+            assert!(
+                ray.world_from_vehicle.translation.distance(
+                    trajectory
+                        .world_from_vehicle(frame_stamps[frame] + readout.offset_nanos(y, h))
+                        .unwrap()
+                        .translation
+                ) < 1e-9
+            );
+        }
+        // A point 6 m out along pixel (x, y)'s ray at its row's time projects back onto it.
+        for (x, y) in [(5.0, 2.0), (31.5, 23.5), (60.0, 45.0)] {
+            let stamp = frame_stamps[2];
+            let wv = trajectory
+                .world_from_vehicle(camera.row_stamp_nanos(stamp, y))
+                .unwrap();
+            let u = camera.intrinsics.unproject(DVec2::new(x, y)).unwrap();
+            let world_from_camera = wv * camera.initial;
+            let p = world_from_camera.transform_point(u * 6.0 / u.z);
+            let px = camera
+                .project_world(&trajectory, camera.initial, stamp, p)
+                .unwrap();
+            assert!(px.distance(DVec2::new(x, y)) < 0.01, "({x}, {y}) -> {px:?}");
+            // Projected as if the whole image were exposed at the stamp, it lands elsewhere.
+            let global = CameraData {
+                readout: RowTimes::GLOBAL,
+                ..camera.clone()
+            };
+            let px_global = global
+                .project_world(&trajectory, camera.initial, stamp, p)
+                .unwrap();
+            assert!(px_global.distance(DVec2::new(x, y)) > 0.05, "{px_global:?}");
         }
     }
 

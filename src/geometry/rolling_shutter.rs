@@ -1,0 +1,93 @@
+//! When each row of a rolling-shutter image was exposed.
+//!
+//! A rolling shutter reads an image out row by row, top to bottom, so on a moving vehicle each
+//! row sees the scene from a slightly different place: at 5 m/s a 40 ms readout spreads one
+//! image over 20 cm of the drive. [`RowTimes`] holds when the first and the last row were
+//! exposed relative to the image's stamp; rows in between are spaced evenly. The pose of a
+//! pixel's ray is the vehicle's pose at its row's time composed with the camera's extrinsic.
+//! The zero value is a global shutter exposed at the stamp.
+
+/// The exposure times of an image's first and last rows, relative to its stamp.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct RowTimes {
+    /// When the top row (y = 0) was exposed, relative to the stamp (ns; negative: before it).
+    pub first_row_nanos: i64,
+    /// When the bottom row was exposed, relative to the stamp (ns).
+    pub last_row_nanos: i64,
+}
+
+impl RowTimes {
+    /// A global shutter exposed at the stamp.
+    pub const GLOBAL: Self = Self {
+        first_row_nanos: 0,
+        last_row_nanos: 0,
+    };
+
+    /// From milliseconds (first row, last row).
+    pub fn from_millis(first_ms: f64, last_ms: f64) -> Self {
+        Self {
+            first_row_nanos: (first_ms * 1e6).round() as i64,
+            last_row_nanos: (last_ms * 1e6).round() as i64,
+        }
+    }
+
+    /// Whether every row is exposed at the stamp.
+    pub fn is_global(&self) -> bool {
+        *self == Self::GLOBAL
+    }
+
+    /// When the row at pixel coordinate `y` (pixel centres at integers, as in
+    /// [`super::camera::CameraIntrinsics`]) of an image `height` rows tall was exposed,
+    /// relative to the stamp. The row's fraction of the image is the same at any scale, so
+    /// downscaled images use their own `y` and `height`.
+    pub fn offset_nanos(&self, y: f64, height: u32) -> i64 {
+        if self.first_row_nanos == self.last_row_nanos || height == 0 {
+            return self.first_row_nanos;
+        }
+        let fraction = ((y + 0.5) / height as f64).clamp(0.0, 1.0);
+        let span = (self.last_row_nanos - self.first_row_nanos) as f64;
+        self.first_row_nanos + (span * fraction).round() as i64
+    }
+
+    /// When the middle of the image was exposed, relative to the stamp.
+    pub fn middle_nanos(&self) -> i64 {
+        self.first_row_nanos + (self.last_row_nanos - self.first_row_nanos) / 2
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn rows_are_spaced_evenly_from_the_first_to_the_last() {
+        let t = RowTimes::from_millis(-30.0, 10.0);
+        let h = 1080;
+        // The top edge of the image is the first row's time, the bottom edge the last's.
+        assert_eq!(t.offset_nanos(-0.5, h), -30_000_000);
+        assert_eq!(t.offset_nanos(h as f64 - 0.5, h), 10_000_000);
+        assert_eq!(t.offset_nanos(539.5, h), -10_000_000);
+        assert_eq!(t.middle_nanos(), -10_000_000);
+        // The same row at a quarter of the size is exposed at the same time.
+        assert_eq!(t.offset_nanos(134.5, h / 4), t.offset_nanos(539.5, h));
+        // Rows outside the image are clamped to the readout.
+        assert_eq!(t.offset_nanos(5000.0, h), 10_000_000);
+        assert_eq!(t.offset_nanos(-40.0, h), -30_000_000);
+        let mut previous = i64::MIN;
+        for y in 0..h {
+            let o = t.offset_nanos(y as f64, h);
+            assert!(o > previous, "row {y}");
+            previous = o;
+        }
+    }
+
+    #[test]
+    fn a_global_shutter_exposes_every_row_at_one_time() {
+        assert!(RowTimes::default().is_global());
+        assert_eq!(RowTimes::GLOBAL.offset_nanos(700.0, 1080), 0);
+        let late = RowTimes::from_millis(5.0, 5.0);
+        assert!(!late.is_global());
+        assert_eq!(late.offset_nanos(0.0, 1080), 5_000_000);
+        assert_eq!(late.offset_nanos(1079.0, 0), 5_000_000);
+    }
+}
