@@ -408,8 +408,29 @@ fn one_line(error: &anyhow::Error) -> String {
     line
 }
 
+/// A usage error from the command line's parser on one line: its message, with any tip, and
+/// where to look (clap spreads it over several, with the usage, which `--help` gives).
+fn one_line_usage(rendered: &str) -> String {
+    let message = rendered.split("\n\nUsage:").next().unwrap_or(rendered);
+    let words: Vec<&str> = message.split_whitespace().collect();
+    let text = words.join(" ");
+    let text = text.strip_prefix("error: ").unwrap_or(&text);
+    format!("rigcal: {text} (see --help)")
+}
+
 fn run() -> Result<()> {
-    let cli = Cli::parse();
+    let cli = match Cli::try_parse() {
+        Ok(cli) => cli,
+        Err(e)
+            if e.use_stderr()
+                && e.kind() != clap::error::ErrorKind::DisplayHelpOnMissingArgumentOrSubcommand =>
+        {
+            eprintln!("{}", one_line_usage(&e.render().to_string()));
+            std::process::exit(2);
+        }
+        // Help and the version go to standard output, as clap prints them.
+        Err(e) => e.exit(),
+    };
     match cli.command {
         None => studio(None, None, None),
         Some(Command::Studio {
@@ -733,7 +754,45 @@ fn studio(
 
 #[cfg(test)]
 mod tests {
-    use super::one_line;
+    use super::{Cli, one_line, one_line_usage};
+    use clap::Parser;
+
+    #[test]
+    fn usage_errors_are_one_line() {
+        let cases: [&[&str]; 3] = [
+            &["rigcal", "calibrate", "drive.mcap", "--out", "c.yaml"],
+            &[
+                "rigcal",
+                "calibrate",
+                "drive.mcap",
+                "--method",
+                "unical",
+                "--out",
+                "c.yaml",
+                "--frobnicate",
+            ],
+            &["rigcal", "eval", "--calibration"],
+        ];
+        for args in cases {
+            let Err(e) = Cli::try_parse_from(args) else {
+                panic!("{args:?} parsed");
+            };
+            let line = one_line_usage(&e.render().to_string());
+            assert!(!line.contains('\n'), "{line}");
+            assert!(
+                line.starts_with("rigcal: ") && line.ends_with("(see --help)"),
+                "{line}"
+            );
+        }
+        let Err(e) = Cli::try_parse_from(["rigcal", "calibrate", "d.mcap", "--out", "c.yaml"])
+        else {
+            panic!("parsed");
+        };
+        assert_eq!(
+            one_line_usage(&e.render().to_string()),
+            "rigcal: the following required arguments were not provided: --method <METHOD> (see --help)"
+        );
+    }
 
     #[test]
     fn a_cause_already_in_the_message_is_not_repeated() {

@@ -454,6 +454,23 @@ fn selected_cameras(args: &CalibrateArgs, rig: &Rig) -> Vec<String> {
         .collect()
 }
 
+/// A note when a camera has fewer usable images (inside the trajectory and the segments;
+/// `held`: name and count) than `--camera-frames` asks for: it trains on every one it has.
+fn fewer_images_note(asked: usize, held: &[(String, usize)], segmented: bool) -> Option<String> {
+    let short: Vec<String> = held
+        .iter()
+        .filter(|(_, n)| *n < asked)
+        .map(|(name, n)| format!("{name} {n}"))
+        .collect();
+    (!short.is_empty()).then(|| {
+        format!(
+            "camera images: --camera-frames {asked}, but the log holds fewer inside the trajectory{}: {}; each of these trains on all it has",
+            if segmented { " and the segments" } else { "" },
+            short.join(", ")
+        )
+    })
+}
+
 /// An optional numeric option, checked: finite and `ok`, else an error naming the option and
 /// what it expects.
 fn checked<T: Copy + std::fmt::Display + Into<f64>>(
@@ -866,6 +883,23 @@ pub fn calibrate(
                     &|phase, done, total| bars.report(phase, done, total),
                 )?;
             bars.finish();
+            if args.camera_frames > 0 {
+                let held: Vec<(String, usize)> = rig
+                    .cameras()
+                    .filter(|c| c.camera.is_some() && drive.stream(&c.name).is_some())
+                    .map(|c| {
+                        (
+                            c.name.clone(),
+                            drive.frames_within(&c.name, &segments).len(),
+                        )
+                    })
+                    .collect();
+                if let Some(note) =
+                    fewer_images_note(args.camera_frames, &held, !segments.is_empty())
+                {
+                    eprintln!("{note}");
+                }
+            }
             if args.camera_rays_below_lidar_top {
                 match stage.calibration().camera_ray_top_elevation_rad() {
                     Some(top) => eprintln!(
@@ -1229,6 +1263,23 @@ mod tests {
         );
         let inside = parse_segment("7..20", 1_000).unwrap();
         assert!(check_segment_in_log("7..20", inside, range, log).is_ok());
+    }
+
+    #[test]
+    fn cameras_with_fewer_images_than_asked_for_are_named() {
+        let held = [("front".to_string(), 16), ("back".to_string(), 9)];
+        assert_eq!(
+            fewer_images_note(16, &held, false).as_deref(),
+            Some(
+                "camera images: --camera-frames 16, but the log holds fewer inside the trajectory: back 9; each of these trains on all it has"
+            )
+        );
+        let note = fewer_images_note(32, &held, true).unwrap();
+        assert!(
+            note.contains("trajectory and the segments: front 16, back 9"),
+            "{note}"
+        );
+        assert_eq!(fewer_images_note(9, &held, true), None);
     }
 
     #[test]
