@@ -30,8 +30,9 @@ fn main() {
         std::env::var("RIGCAL_PHOTO_READOUT_MS")
             .ok()
             .map_or(RowTimes::GLOBAL, |v| {
-                let (a, b) = v.split_once("..").unwrap();
-                RowTimes::from_millis(a.parse().unwrap(), b.parse().unwrap())
+                let bad = "RIGCAL_PHOTO_READOUT_MS: FIRST..LAST in ms, e.g. -30..10";
+                let (a, b) = v.split_once("..").expect(bad);
+                RowTimes::from_millis(a.parse().expect(bad), b.parse().expect(bad))
             });
     let options = DriveOptions {
         camera_readout,

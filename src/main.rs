@@ -411,16 +411,48 @@ fn one_line(error: &anyhow::Error) -> String {
 /// A usage error from the command line's parser on one line: its message, with any tip, and
 /// where to look (clap spreads it over several, with the usage, which `--help` gives).
 fn one_line_usage(rendered: &str) -> String {
-    let message = rendered.split("\n\nUsage:").next().unwrap_or(rendered);
+    // Some errors (a bad value) carry no usage, only the closing hint.
+    let message = rendered
+        .split("\n\nUsage:")
+        .next()
+        .and_then(|m| m.split("\n\nFor more information").next())
+        .unwrap_or(rendered);
     let words: Vec<&str> = message.split_whitespace().collect();
     let text = words.join(" ");
     let text = text.strip_prefix("error: ").unwrap_or(&text);
     format!("rigcal: {text} (see --help)")
 }
 
+/// `calibrate`'s options with a default value (UniCal's), by their flags.
+const CALIBRATE_DEFAULTED: [&str; 6] = [
+    "camera_frames",
+    "lidar_sweeps",
+    "alignment",
+    "camera_scale",
+    "camera_rays",
+    "rounds",
+];
+
+/// Which of [`CALIBRATE_DEFAULTED`] were typed on the command line, as `--flag`s (whatever
+/// their value: at the default they are still given, and refused with another method).
+fn calibrate_given(matches: &clap::ArgMatches) -> Vec<String> {
+    let Some(m) = matches.subcommand_matches("calibrate") else {
+        return Vec::new();
+    };
+    CALIBRATE_DEFAULTED
+        .iter()
+        .filter(|id| m.value_source(id) == Some(clap::parser::ValueSource::CommandLine))
+        .map(|id| format!("--{}", id.replace('_', "-")))
+        .collect()
+}
+
 fn run() -> Result<()> {
-    let cli = match Cli::try_parse() {
-        Ok(cli) => cli,
+    use clap::{CommandFactory, FromArgMatches};
+    let parsed = Cli::command()
+        .try_get_matches()
+        .and_then(|m| Ok((Cli::from_arg_matches(&m)?, calibrate_given(&m))));
+    let (cli, given_at_default) = match parsed {
+        Ok(parsed) => parsed,
         Err(e)
             if e.use_stderr()
                 && e.kind() != clap::error::ErrorKind::DisplayHelpOnMissingArgumentOrSubcommand =>
@@ -531,6 +563,7 @@ fn run() -> Result<()> {
                 drop_moving,
                 camera_time_offset_ms,
                 camera_readout_ms,
+                given_at_default: given_at_default.clone(),
                 perturb: (perturb_deg, perturb_cm),
                 out: out.clone(),
             };
@@ -791,6 +824,14 @@ mod tests {
         assert_eq!(
             one_line_usage(&e.render().to_string()),
             "rigcal: the following required arguments were not provided: --method <METHOD> (see --help)"
+        );
+        // A bad value has no usage block, only the closing hint, which is not repeated.
+        let Err(e) = Cli::try_parse_from(["rigcal", "eval", "--calibration"]) else {
+            panic!("parsed");
+        };
+        assert_eq!(
+            one_line_usage(&e.render().to_string()),
+            "rigcal: a value is required for '--calibration <CALIBRATION>' but none was supplied (see --help)"
         );
     }
 

@@ -127,6 +127,19 @@ fn bad_arguments_fail_with_one_line() {
         !ok && err.contains("--camera-frames, --lidar-icp apply to --method unical only"),
         "{err}"
     );
+    // Typed at its default value, an option is still given.
+    let (ok, err) = run(&[
+        "--method",
+        "icp",
+        "--lidar-sweeps",
+        "4",
+        "--alignment",
+        "surface",
+    ]);
+    assert!(
+        !ok && err.contains("--lidar-sweeps, --alignment apply to --method unical only"),
+        "{err}"
+    );
     let (ok, err) = run(&["--method", "mi", "--camera-readout-ms", "-30..10"]);
     assert!(
         !ok && err.contains("--camera-readout-ms applies to --method unical only"),

@@ -156,3 +156,28 @@ fn a_camera_time_offset_moves_the_image_stamps_only() {
         shifted.trajectory.world_from_vehicle(t).unwrap()
     );
 }
+
+/// With a rolling shutter a camera frame is usable only when every row's time is inside the
+/// trajectory: the back camera's first image, stamped 50 ms before the first pose (within the
+/// 100 ms the trajectory may extrapolate), is left out when its first row was exposed 60 ms
+/// earlier still; LiDAR sweeps and the other frames are not affected.
+#[test]
+fn a_rolling_shutter_keeps_only_frames_whose_rows_are_inside_the_trajectory() {
+    let plain = open();
+    let options = rigcal::log::DriveOptions {
+        camera_readout: rigcal::geometry::RowTimes::from_millis(-60.0, 10.0),
+        ..rigcal::log::DriveOptions::default()
+    };
+    let rolling = Drive::open_with(&data_dir().join("pandaset-002.mcap"), &options).unwrap();
+    let start = plain.trajectory.time_range_nanos().unwrap().0;
+    let back = plain.frames_within("back_camera", &[]);
+    assert!(back.contains(&0));
+    assert!(plain.stream("back_camera").unwrap().frames[0].stamp_nanos < start - 40_000_000);
+    let back_rolling = rolling.frames_within("back_camera", &[]);
+    assert_eq!(back_rolling, back[1..].to_vec());
+    assert_eq!(
+        rolling.frames_within("pandar64", &[]),
+        plain.frames_within("pandar64", &[])
+    );
+    assert_eq!(rolling.camera_readout.last_row_nanos, 10_000_000);
+}

@@ -138,6 +138,9 @@ pub struct CalibrateArgs {
     /// and last rows were exposed ([`crate::log::DriveOptions::camera_readout`]); `None`: a
     /// global shutter.
     pub camera_readout_ms: Option<String>,
+    /// UniCal's options with a default that were typed at it (`--lidar-sweeps` for
+    /// `--lidar-sweeps 4`), which the values alone cannot tell from options not given.
+    pub given_at_default: Vec<String>,
     /// Degrees and centimetres every sensor of the initial guess is moved by (random axis and
     /// direction drawn from `seed`; (0, 0) leaves it), to measure recovery from a known start.
     pub perturb: (f64, f64),
@@ -147,7 +150,7 @@ pub struct CalibrateArgs {
 impl CalibrateArgs {
     /// The UniCal options given, each by its flag and its value: with another method they
     /// would be ignored (so they are refused), and the provenance records them. An option at
-    /// its default is not given.
+    /// its default is given only when it is in `given_at_default`.
     fn unical_options(&self) -> Vec<(&'static str, serde_yaml::Value)> {
         use serde_yaml::Value;
         let flag = |on: bool| on.then_some(Value::Bool(true));
@@ -157,31 +160,44 @@ impl CalibrateArgs {
             |v: Option<f32>| v.map(|v| Value::from(v.to_string().parse().unwrap_or(f64::from(v))));
         let text = |v: &Option<String>| v.clone().map(Value::String);
         let alignment = match self.alignment {
-            AlignmentLoss::None => Some("none"),
-            AlignmentLoss::ProjectedRayDistance => Some("ray-distance"),
-            AlignmentLoss::SurfaceAlignment => None,
+            AlignmentLoss::None => "none",
+            AlignmentLoss::ProjectedRayDistance => "ray-distance",
+            AlignmentLoss::SurfaceAlignment => "surface",
+        };
+        // Whether an option with a default was given: off its default, or typed at it.
+        let given = |name: &str, off_default: bool| {
+            off_default || self.given_at_default.iter().any(|g| g == name)
         };
         let options = [
             (
                 "--camera-frames",
-                (self.camera_frames != 0).then(|| Value::from(self.camera_frames as u64)),
+                given("--camera-frames", self.camera_frames != 0)
+                    .then(|| Value::from(self.camera_frames as u64)),
             ),
             (
                 "--lidar-sweeps",
-                (self.lidar_sweeps != DEFAULT_LIDAR_SWEEPS)
+                given("--lidar-sweeps", self.lidar_sweeps != DEFAULT_LIDAR_SWEEPS)
                     .then(|| Value::from(self.lidar_sweeps as u64)),
             ),
             ("--scene-radius", number(self.scene_radius_m)),
-            ("--alignment", alignment.map(|a| Value::String(a.into()))),
+            (
+                "--alignment",
+                given(
+                    "--alignment",
+                    self.alignment != AlignmentLoss::SurfaceAlignment,
+                )
+                .then(|| Value::String(alignment.into())),
+            ),
             ("--lidar-icp", flag(self.lidar_icp)),
             ("--camera-hand-eye", flag(self.camera_hand_eye)),
             (
                 "--camera-scale",
-                (self.camera_scale != DEFAULT_CAMERA_SCALE).then(|| Value::from(self.camera_scale)),
+                given("--camera-scale", self.camera_scale != DEFAULT_CAMERA_SCALE)
+                    .then(|| Value::from(self.camera_scale)),
             ),
             (
                 "--camera-rays",
-                (self.camera_rays != DEFAULT_CAMERA_RAYS)
+                given("--camera-rays", self.camera_rays != DEFAULT_CAMERA_RAYS)
                     .then(|| Value::from(self.camera_rays as u64)),
             ),
             ("--camera-lr", short(self.camera_lr)),
@@ -196,7 +212,7 @@ impl CalibrateArgs {
             ("--camera-early-release", text(&self.camera_early_release)),
             (
                 "--rounds",
-                (self.rounds != 1).then(|| Value::from(self.rounds as u64)),
+                given("--rounds", self.rounds != 1).then(|| Value::from(self.rounds as u64)),
             ),
             ("--coarse-to-fine", text(&self.coarse_to_fine)),
             (

@@ -10,9 +10,10 @@
 /// The exposure times of an image's first and last rows, relative to its stamp.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct RowTimes {
-    /// When the top row (y = 0) was exposed, relative to the stamp (ns; negative: before it).
+    /// When the readout began, at the image's top edge (y = −0.5), relative to the stamp (ns;
+    /// negative: before it). Row 0's centre is half a row later; as NeuRAD counts it.
     pub first_row_nanos: i64,
-    /// When the bottom row was exposed, relative to the stamp (ns).
+    /// When the readout ended, at the bottom edge (ns).
     pub last_row_nanos: i64,
 }
 

@@ -508,16 +508,25 @@ impl Drive {
         self.streams.iter().find(|s| s.sensor == sensor)
     }
 
-    /// Frame indices of `sensor` stamped inside the trajectory and, unless `segments_nanos` is
-    /// empty, inside one of the segments.
+    /// Frame indices of `sensor` stamped inside the trajectory (a camera with a rolling shutter:
+    /// every row's time inside it) and, unless `segments_nanos` is empty, inside one of the
+    /// segments.
     pub fn frames_within(&self, sensor: &str, segments_nanos: &[(i64, i64)]) -> Vec<usize> {
         let Some(stream) = self.stream(sensor) else {
             return Vec::new();
         };
+        let inside = |t: i64| self.trajectory.world_from_vehicle(t).is_ok();
+        // A rolling shutter's every row, from the first's time to the last's, must be inside.
+        let readout = (stream.kind == SensorKind::Camera && !self.camera_readout.is_global())
+            .then_some(self.camera_readout);
         (0..stream.frames.len())
             .filter(|&i| {
                 let t = stream.frames[i].stamp_nanos;
-                in_segments(segments_nanos, t) && self.trajectory.world_from_vehicle(t).is_ok()
+                in_segments(segments_nanos, t)
+                    && inside(t)
+                    && readout.is_none_or(|r| {
+                        inside(t + r.first_row_nanos) && inside(t + r.last_row_nanos)
+                    })
             })
             .collect()
     }

@@ -578,20 +578,53 @@ impl CameraData {
         stamp_nanos: i64,
         p_world: DVec3,
     ) -> Option<DVec2> {
-        let at = |stamp: i64| {
-            let wv = trajectory.world_from_vehicle(stamp).ok()?;
-            let in_camera = (wv * vehicle_from_camera)
-                .inverse()
-                .transform_point(p_world);
+        let middle = self.camera_from_world_at(
+            trajectory,
+            vehicle_from_camera,
+            stamp_nanos + self.readout.middle_nanos(),
+        )?;
+        self.project_world_from(
+            trajectory,
+            vehicle_from_camera,
+            stamp_nanos,
+            middle,
+            p_world,
+        )
+    }
+
+    /// `camera_from_world` at `stamp_nanos` (`None` outside the trajectory).
+    pub fn camera_from_world_at(
+        &self,
+        trajectory: &Trajectory,
+        vehicle_from_camera: Rigid,
+        stamp_nanos: i64,
+    ) -> Option<Rigid> {
+        let wv = trajectory.world_from_vehicle(stamp_nanos).ok()?;
+        Some((wv * vehicle_from_camera).inverse())
+    }
+
+    /// [`Self::project_world`] given `camera_from_world` at the middle row's time (the same for
+    /// every point of a frame, so callers projecting many look it up once).
+    pub fn project_world_from(
+        &self,
+        trajectory: &Trajectory,
+        vehicle_from_camera: Rigid,
+        stamp_nanos: i64,
+        middle_camera_from_world: Rigid,
+        p_world: DVec3,
+    ) -> Option<DVec2> {
+        let project = |camera_from_world: Rigid| {
+            let in_camera = camera_from_world.transform_point(p_world);
             if in_camera.z < 0.2 * in_camera.length() {
                 return None;
             }
             self.intrinsics.project(in_camera)
         };
-        let mut px = at(stamp_nanos + self.readout.middle_nanos())?;
+        let mut px = project(middle_camera_from_world)?;
         if self.readout.first_row_nanos != self.readout.last_row_nanos {
             for _ in 0..2 {
-                px = at(self.row_stamp_nanos(stamp_nanos, px.y))?;
+                let stamp = self.row_stamp_nanos(stamp_nanos, px.y);
+                px = project(self.camera_from_world_at(trajectory, vehicle_from_camera, stamp)?)?;
             }
         }
         self.intrinsics.in_image(px).then_some(px)
@@ -1313,12 +1346,13 @@ impl DepthCalibration {
         let stage = self.camera.as_ref()?;
         let k = stage.cameras.iter().position(|c| c.name == name)?;
         let (cam, pose, exposure) = (&stage.cameras[k], stage.poses[k], stage.exposure[k]);
-        // Fails for a time outside the trajectory (checked at the middle row).
-        self.trajectory
-            .world_from_vehicle(
-                cam.row_stamp_nanos(stamp_nanos, (cam.intrinsics.height / 2) as f64),
-            )
-            .ok()?;
+        // Fails when a row's time is outside the trajectory (its ends suffice: it is one
+        // interval, and the rows' times lie between the first's and the last's).
+        for y in [0.0, cam.intrinsics.height.saturating_sub(1) as f64] {
+            self.trajectory
+                .world_from_vehicle(cam.row_stamp_nanos(stamp_nanos, y))
+                .ok()?;
+        }
         let model = CameraModel {
             field: &self.field,
             background: stage.background.as_ref().map(|b| &b.field),
@@ -1570,6 +1604,13 @@ impl DepthCalibration {
                 cam.frames
                     .par_iter()
                     .map(|f| {
+                        let Some(middle) = cam.camera_from_world_at(
+                            trajectory,
+                            vehicle_from_camera,
+                            f.stamp_nanos + cam.readout.middle_nanos(),
+                        ) else {
+                            return Vec::new();
+                        };
                         let mut out = Vec::new();
                         for ((lidar, vehicle_from_lidar), indices) in
                             lidars.iter().zip(&lidar_poses).zip(points)
@@ -1596,10 +1637,11 @@ impl DepthCalibration {
                                 let p = DVec3::new(x as f64, y as f64, z as f64);
                                 let p_world =
                                     wv_point.transform_point(vehicle_from_lidar.transform_point(p));
-                                if let Some(px) = cam.project_world(
+                                if let Some(px) = cam.project_world_from(
                                     trajectory,
                                     vehicle_from_camera,
                                     f.stamp_nanos,
+                                    middle,
                                     p_world,
                                 ) {
                                     out.push((px.x as f32, px.y as f32));

@@ -4,7 +4,8 @@
 //!
 //! For a match (u_a in camera a, u_b in camera b), each pixel's ray is rendered to its surface
 //! point `p = o + D̄ d` (`D̄ = D/A`, the depth normalised by the accumulated opacity), which is
-//! projected into the other camera at its frame's time: `e_ab = ‖π_b(p_a) − u_b‖`,
+//! projected into the other camera at the time of the partner pixel's row (its frame's, for a
+//! global shutter): `e_ab = ‖π_b(p_a) − u_b‖`,
 //! `e_ba = ‖π_a(p_b) − u_a‖` (pixels, scaled to a 1920-pixel-wide image as the paper measures
 //! them). Matches with either error above the threshold or either accumulation below 0.5 are
 //! left out, and `L = (1/|M|) Σ ½ (e_ab + e_ba)`.
@@ -38,7 +39,7 @@ pub enum AlignmentLoss {
     SurfaceAlignment,
 }
 
-/// One pixel's ray at its frame's time.
+/// One pixel's ray at its row's time (its frame's, for a global shutter).
 #[derive(Clone, Debug)]
 pub struct AlignRay {
     pub world_from_vehicle: Rigid,
