@@ -236,10 +236,11 @@ enum Command {
         /// cameras and the trajectory (negative: the images were taken before their stamps)
         #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
         camera_time_offset_ms: f64,
-        /// With --camera-frames: the cameras have a rolling shutter whose first and last image
-        /// rows were exposed FIRST and LAST milliseconds after each image's stamp (negative:
-        /// before it), rows in between evenly; each ray is cast from where the vehicle was
-        /// when its row was exposed (e.g. -30..10; default: a global shutter at the stamp)
+        /// With --camera-frames: the cameras have a rolling shutter whose readout began FIRST
+        /// and ended LAST milliseconds after each image's stamp (at the image's top and bottom
+        /// edges; negative: before it), rows in between evenly; each ray is cast from where the
+        /// vehicle was when its row was exposed (e.g. -30..10; default: a global shutter at the
+        /// stamp)
         #[arg(
             help_heading = HEADING_UNICAL,
             long,
@@ -423,7 +424,7 @@ fn one_line_usage(rendered: &str) -> String {
     format!("rigcal: {text} (see --help)")
 }
 
-/// `calibrate`'s options with a default value (UniCal's), by their flags.
+/// `calibrate`'s options with a default value (UniCal's), by their argument ids.
 const CALIBRATE_DEFAULTED: [&str; 6] = [
     "camera_frames",
     "lidar_sweeps",
@@ -789,6 +790,34 @@ fn studio(
 mod tests {
     use super::{Cli, one_line, one_line_usage};
     use clap::Parser;
+
+    /// Every id looked up for `calibrate`'s value sources is one of its arguments (a release
+    /// build would not say so at run time).
+    #[test]
+    fn the_defaulted_calibrate_options_are_its_arguments() {
+        use clap::CommandFactory;
+        let command = Cli::command();
+        let calibrate = command.find_subcommand("calibrate").unwrap();
+        for id in super::CALIBRATE_DEFAULTED {
+            assert!(calibrate.get_arguments().any(|a| a.get_id() == id), "{id}");
+        }
+        let m = command
+            .try_get_matches_from([
+                "rigcal",
+                "calibrate",
+                "d.mcap",
+                "--method",
+                "icp",
+                "--out",
+                "c.yaml",
+                "--rounds",
+                "1",
+                "--camera-scale",
+                "0.125",
+            ])
+            .unwrap();
+        assert_eq!(super::calibrate_given(&m), ["--camera-scale", "--rounds"]);
+    }
 
     #[test]
     fn usage_errors_are_one_line() {

@@ -1,7 +1,8 @@
 //! The camera colour term (main Eq. 3, method.md §4 and §8) for a batch of rays, with gradients
 //! for the scene, the appearance decoders, the camera's exposure mapping and its pose.
 //!
-//! A ray leaves camera k through a pixel at its row's time (the frame's, for a global shutter): `o = P(t)·t_k`, `d = R_P R_k u`
+//! A ray leaves camera k through a pixel at its row's time (the frame's, for a global
+//! shutter): `o = P(t)·t_k`, `d = R_P R_k u`
 //! with `u` the camera model's unit ray. Samples every 10 cm in occupied space are composited
 //! front to back into a feature `F = Σ w_i f_i` (feature rendering, §4(a)), stopping once the
 //! transmittance is negligible; what is left (`T = 1 − A`) sees the sky, a feature from a small
