@@ -26,14 +26,11 @@ fn env<T: std::str::FromStr>(name: &str, default: T) -> T {
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
     // A rolling shutter's readout, `FIRST..LAST` ms after the stamp.
-    let camera_readout =
-        std::env::var("RIGCAL_PHOTO_READOUT_MS")
-            .ok()
-            .map_or(RowTimes::GLOBAL, |v| {
-                let bad = "RIGCAL_PHOTO_READOUT_MS: FIRST..LAST in ms, e.g. -30..10";
-                let (a, b) = v.split_once("..").expect(bad);
-                RowTimes::from_millis(a.parse().expect(bad), b.parse().expect(bad))
-            });
+    let camera_readout = std::env::var("RIGCAL_PHOTO_READOUT_MS")
+        .ok()
+        .map_or(RowTimes::GLOBAL, |v| {
+            RowTimes::parse_millis(&v).unwrap_or_else(|e| panic!("RIGCAL_PHOTO_READOUT_MS {e}"))
+        });
     let options = DriveOptions {
         camera_readout,
         ..DriveOptions::default()

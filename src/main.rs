@@ -564,7 +564,7 @@ fn run() -> Result<()> {
                 drop_moving,
                 camera_time_offset_ms,
                 camera_readout_ms,
-                given_at_default: given_at_default.clone(),
+                given_at_default,
                 perturb: (perturb_deg, perturb_cm),
                 out: out.clone(),
             };

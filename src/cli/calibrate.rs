@@ -545,19 +545,7 @@ fn parse_coarse_to_fine(s: &str) -> Result<Option<CoarseToFine>, String> {
 /// last image rows, in milliseconds after the stamp (each within ±1000; LAST below FIRST is a
 /// readout from the bottom up).
 fn parse_readout(text: &str) -> Result<crate::geometry::RowTimes, String> {
-    let (a, b) = text.split_once("..").ok_or_else(|| {
-        format!("--camera-readout-ms '{text}': expected FIRST..LAST in milliseconds, e.g. -30..10")
-    })?;
-    let parse = |s: &str| {
-        s.trim()
-            .parse::<f64>()
-            .ok()
-            .filter(|v| v.is_finite() && v.abs() <= 1000.0)
-            .ok_or_else(|| {
-                format!("--camera-readout-ms '{text}': '{s}' is not a number of milliseconds within ±1000")
-            })
-    };
-    Ok(crate::geometry::RowTimes::from_millis(parse(a)?, parse(b)?))
+    crate::geometry::RowTimes::parse_millis(text).map_err(|e| format!("--camera-readout-ms {e}"))
 }
 
 /// Parse `START..END` (seconds from `t0`) into nanoseconds.

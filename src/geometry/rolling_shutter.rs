@@ -32,6 +32,24 @@ impl RowTimes {
         }
     }
 
+    /// Parse `FIRST..LAST` in milliseconds, each within ±1000 (LAST below FIRST is a readout
+    /// from the bottom up); the error says what is wrong with `text`.
+    pub fn parse_millis(text: &str) -> Result<Self, String> {
+        let (a, b) = text.split_once("..").ok_or_else(|| {
+            format!("'{text}': expected FIRST..LAST in milliseconds, e.g. -30..10")
+        })?;
+        let parse = |s: &str| {
+            s.trim()
+                .parse::<f64>()
+                .ok()
+                .filter(|v| v.is_finite() && v.abs() <= 1000.0)
+                .ok_or_else(|| {
+                    format!("'{text}': '{s}' is not a number of milliseconds within ±1000")
+                })
+        };
+        Ok(Self::from_millis(parse(a)?, parse(b)?))
+    }
+
     /// Whether every row is exposed at the stamp.
     pub fn is_global(&self) -> bool {
         *self == Self::GLOBAL

@@ -1346,13 +1346,14 @@ impl DepthCalibration {
         let stage = self.camera.as_ref()?;
         let k = stage.cameras.iter().position(|c| c.name == name)?;
         let (cam, pose, exposure) = (&stage.cameras[k], stage.poses[k], stage.exposure[k]);
-        // Fails when a row's time is outside the trajectory (its ends suffice: it is one
-        // interval, and the rows' times lie between the first's and the last's).
-        for y in [0.0, cam.intrinsics.height.saturating_sub(1) as f64] {
-            self.trajectory
-                .world_from_vehicle(cam.row_stamp_nanos(stamp_nanos, y))
-                .ok()?;
-        }
+        // Each row's vehicle pose; `None` when a row's time is outside the trajectory.
+        let row_poses: Vec<Rigid> = (0..cam.intrinsics.height)
+            .map(|y| {
+                self.trajectory
+                    .world_from_vehicle(cam.row_stamp_nanos(stamp_nanos, y as f64))
+                    .ok()
+            })
+            .collect::<Option<_>>()?;
         let model = CameraModel {
             field: &self.field,
             background: stage.background.as_ref().map(|b| &b.field),
@@ -1365,10 +1366,7 @@ impl DepthCalibration {
             .into_par_iter()
             .map(|y| {
                 let mut row = Vec::with_capacity(3 * w as usize);
-                let wv = self
-                    .trajectory
-                    .world_from_vehicle(cam.row_stamp_nanos(stamp_nanos, y as f64))
-                    .unwrap_or(Rigid::IDENTITY);
+                let wv = row_poses[y as usize];
                 for x in 0..w {
                     let rgb = match cam.intrinsics.unproject(DVec2::new(x as f64, y as f64)) {
                         Some(u) => {
