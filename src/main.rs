@@ -285,6 +285,10 @@ enum Command {
         /// and the image delay at which it is best
         #[arg(long)]
         photometric: bool,
+        /// With --photometric: the cameras have a rolling shutter whose readout began FIRST and
+        /// ended LAST milliseconds after each image's stamp (as calibrate's option of that name)
+        #[arg(long, value_name = "FIRST..LAST", allow_hyphen_values = true)]
+        camera_readout_ms: Option<String>,
         /// Also write the report as JSON.
         #[arg(long)]
         json: Option<PathBuf>,
@@ -593,6 +597,7 @@ fn run() -> Result<()> {
             frames,
             checkerboard,
             photometric,
+            camera_readout_ms,
             json,
         }) => {
             let args = rigcal::cli::eval::EvalArgs {
@@ -603,6 +608,7 @@ fn run() -> Result<()> {
                 frames,
                 checkerboard,
                 photometric,
+                camera_readout_ms,
             };
             let mut bar = rigcal::cli::progress::Progress::new("eval", 1);
             let report =

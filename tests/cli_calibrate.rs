@@ -150,6 +150,21 @@ fn bad_arguments_fail_with_one_line() {
         !ok && err.contains("--camera-readout-ms '-30': expected FIRST..LAST"),
         "{err}"
     );
+    // Options on camera images, with no images in the run (no --camera-frames).
+    let (ok, err) = run(&[
+        "--method",
+        "unical",
+        "--camera-readout-ms=-30..10",
+        "--camera-scale",
+        "0.5",
+        "--camera-hand-eye",
+    ]);
+    assert!(
+        !ok && err.contains(
+            "--camera-scale, --camera-readout-ms act on camera images, which join UniCal only with --camera-frames N"
+        ),
+        "{err}"
+    );
     let (ok, err) = run(&["--method", "UniCal", "--camera-frames", "8"]);
     assert!(!ok && err.contains("unknown --method 'UniCal'"), "{err}");
     let (ok, err) = run(&["--method", "pose-graph", "--iterations", "5"]);

@@ -284,3 +284,47 @@ fn the_command_prints_tables_and_fails_with_the_file_named() {
         "{err}"
     );
 }
+
+/// `--camera-readout-ms` reaches the photometric metrics: with a rolling shutter the images'
+/// rows are placed at their own times, so the inconsistency changes; without `--photometric`
+/// (or with a malformed readout) it is refused by name.
+#[test]
+fn a_rolling_shutter_readout_reaches_the_photometric_metrics() {
+    let json = pandaset_dir().join("ground_truth.json");
+    let mut rig = load_reference(&json).unwrap();
+    // One camera and one LiDAR: one map and one camera to measure per readout.
+    rig.sensors
+        .retain(|s| s.name == "front_camera" || s.name == "pandar64");
+    let tmp = temp_dir("readout");
+    let path = tmp.path().join("front.yaml");
+    save(&rig, &path);
+    let args = |readout: Option<&str>, photometric: bool| EvalArgs {
+        ground_truth: json.clone(),
+        calibration: path.clone(),
+        log: Some(pandaset_dir().join("pandaset-002.mcap")),
+        frames: 1,
+        photometric,
+        camera_readout_ms: readout.map(String::from),
+        ..Default::default()
+    };
+    let inconsistency = |readout| {
+        let report = evaluate(&args(readout, true), &mut |_, _| {}).unwrap();
+        assert_eq!(report.photo_inconsistency.len(), 1);
+        report.photo_inconsistency[0].calibration.unwrap()
+    };
+    let (global, rolling) = (inconsistency(None), inconsistency(Some("-30..10")));
+    assert!(
+        (global - rolling).abs() > 1e-6 * global,
+        "{global} {rolling}"
+    );
+    let e = evaluate(&args(Some("-30..10"), false), &mut |_, _| {}).unwrap_err();
+    assert!(
+        e.contains("--camera-readout-ms applies to --photometric only"),
+        "{e}"
+    );
+    let e = evaluate(&args(Some("-30"), true), &mut |_, _| {}).unwrap_err();
+    assert!(
+        e.contains("--camera-readout-ms '-30': expected FIRST..LAST"),
+        "{e}"
+    );
+}

@@ -160,7 +160,8 @@ fn a_camera_time_offset_moves_the_image_stamps_only() {
 /// With a rolling shutter a camera frame is usable only when every row's time is inside the
 /// trajectory: the back camera's first image, stamped 50 ms before the first pose (within the
 /// 100 ms the trajectory may extrapolate), is left out when its first row was exposed 60 ms
-/// earlier still; LiDAR sweeps and the other frames are not affected.
+/// earlier still; LiDAR sweeps and the other frames are not affected. The hand-eye then places
+/// each image it reads at its middle row's pose.
 #[test]
 fn a_rolling_shutter_keeps_only_frames_whose_rows_are_inside_the_trajectory() {
     let plain = open();
@@ -180,4 +181,25 @@ fn a_rolling_shutter_keeps_only_frames_whose_rows_are_inside_the_trajectory() {
         plain.frames_within("pandar64", &[])
     );
     assert_eq!(rolling.camera_readout.last_row_nanos, 10_000_000);
+    // The hand-eye places each image at its middle row's time (25 ms before its stamp here).
+    let rolled = rigcal::classical::camera_motion::camera_pairs(
+        &rolling,
+        &rolling.rig,
+        "back_camera",
+        2,
+        &[],
+        false,
+        &|_, _, _| {},
+    )
+    .unwrap();
+    let stream = rolling.stream("back_camera").unwrap();
+    let picked = rigcal::log::spread_evenly(&back_rolling, 2);
+    for (k, &i) in picked.iter().enumerate() {
+        let stamp = stream.frames[i].stamp_nanos;
+        let at = |t: i64| plain.trajectory.world_from_vehicle(t).unwrap().translation;
+        let rolled_at = rolled.world_from_vehicle[k].unwrap().translation;
+        assert!(rolled_at.distance(at(stamp - 25_000_000)) < 1e-9);
+        // Not the stamp's pose: the vehicle creeps at the log's start (0.19 m/s), so a few mm.
+        assert!(rolled_at.distance(at(stamp)) > 1e-3);
+    }
 }

@@ -361,6 +361,7 @@ fn a_session_restores_edits_segments_and_locks_and_export_round_trips() {
         .insert(camera.clone(), [true, false, false, false, false, false]);
     use rigcal::app::optimiser::Method;
     h.state_mut().optimiser.method = Method::Unical;
+    h.state_mut().optimiser.readout_ms = Some((-30.0, 10.0));
     let edited = h.state().current.clone();
     let dir = std::env::temp_dir().join(format!("rigcal-session-test-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
@@ -371,6 +372,7 @@ fn a_session_restores_edits_segments_and_locks_and_export_round_trips() {
     h.state_mut().open_log(&log);
     assert_ne!(h.state().current, edited);
     h.state_mut().optimiser.method = Method::EdgeAlign;
+    h.state_mut().optimiser.readout_ms = None;
     h.state_mut().restore_session(&path);
     h.run_steps(2);
     assert_eq!(h.state().current, edited, "{:?}", h.state().status);
@@ -381,6 +383,7 @@ fn a_session_restores_edits_segments_and_locks_and_export_round_trips() {
         Method::Unical,
         "the panel's method"
     );
+    assert_eq!(h.state().optimiser.readout_ms, Some((-30.0, 10.0)));
     // A broken session file is an error in the UI; nothing is lost.
     std::fs::write(dir.join("bad.json"), "{").unwrap();
     h.state_mut().restore_session(&dir.join("bad.json"));
@@ -533,8 +536,14 @@ fn the_hand_eye_runs_from_the_optimiser_panel_and_reports_each_camera() {
     h.run_steps(2);
     h.get_by_label_contains("fit each camera to its own motion first")
         .click();
+    // A rolling shutter too: the run reads the log again with the readout and says so.
+    h.get_by_label("rolling-shutter cameras").click();
     h.run_steps(2);
     assert!(h.state().optimiser.hand_eye);
+    assert_eq!(
+        h.state().optimiser.readout_ms,
+        Some(rigcal::app::optimiser::DEFAULT_READOUT_MS)
+    );
     let before = h.state().current.clone();
     h.get_by_label("Start").click();
     h.run_steps(1);
@@ -542,6 +551,13 @@ fn the_hand_eye_runs_from_the_optimiser_panel_and_reports_each_camera() {
     let note = "camera hand-eye: front_camera kept: the vehicle turns at most";
     assert!(
         run_until(&mut h, 300.0, |s| s.status.iter().any(|m| m.contains(note))),
+        "{:?}",
+        s_status(&h)
+    );
+    assert!(
+        s_status(&h)
+            .iter()
+            .any(|m| m.starts_with("rolling shutter: image rows exposed from -15.0 to +15.0 ms")),
         "{:?}",
         s_status(&h)
     );

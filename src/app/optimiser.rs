@@ -8,7 +8,7 @@
 use egui_plot::{Legend, Line, Plot, PlotPoints};
 
 use crate::calib::{Rig, SensorKind};
-use crate::geometry::rig_errors;
+use crate::geometry::{RowTimes, rig_errors};
 use crate::optim::edge_refine::EdgeRefiner;
 use crate::optim::runner::{Calibrator, Run};
 
@@ -90,6 +90,10 @@ pub struct OptimiserPanel {
     /// What the hand-eye did to each camera, written by the run's preparation and moved to
     /// the status bar by [`poll`].
     pub hand_eye_notes: std::sync::Arc<std::sync::Mutex<Vec<String>>>,
+    /// UniCal with cameras: a rolling shutter whose rows were exposed from the first to the
+    /// last of these milliseconds after each image's stamp (`rigcal calibrate
+    /// --camera-readout-ms`); `None`: a global shutter.
+    pub readout_ms: Option<(f64, f64)>,
     pub frames: usize,
     pub run: Option<Run>,
     /// The rig when the run started (restored by undo).
@@ -186,6 +190,41 @@ pub fn poll(studio: &mut Studio, ctx: &egui::Context) {
     }
 }
 
+/// What the run says of a rolling-shutter readout: the rows' times, and the cameras that lose
+/// images to it (rows before the trajectory's start or after its end).
+fn readout_note(
+    global: &crate::log::Drive,
+    rolling: &crate::log::Drive,
+    cameras: &[String],
+    segments: &[(i64, i64)],
+    readout: RowTimes,
+) -> String {
+    let lost: Vec<String> = cameras
+        .iter()
+        .filter_map(|c| {
+            let (kept, all) = (
+                rolling.frames_within(c, segments).len(),
+                global.frames_within(c, segments).len(),
+            );
+            (kept < all).then(|| format!("{c} {kept} of {all}"))
+        })
+        .collect();
+    format!(
+        "rolling shutter: image rows exposed from {:+.1} to {:+.1} ms after each stamp; \
+         UniCal places each row at its own time (the overlay draws each image at its stamp){}",
+        readout.first_row_nanos as f64 * 1e-6,
+        readout.last_row_nanos as f64 * 1e-6,
+        if lost.is_empty() {
+            String::new()
+        } else {
+            format!(
+                "; images with rows outside the trajectory left out: {}",
+                lost.join(", ")
+            )
+        }
+    )
+}
+
 /// Start a run with the panel's settings.
 pub fn start(studio: &mut Studio) {
     let Some(drive) = studio.drive.clone() else {
@@ -251,8 +290,30 @@ pub fn start(studio: &mut Studio) {
             ..Default::default()
         };
         let hand_eye = method == Method::Unical && studio.optimiser.hand_eye;
+        let readout = studio
+            .optimiser
+            .readout_ms
+            .filter(|_| method == Method::Unical)
+            .map(|(first, last)| RowTimes::from_millis(first, last));
         let notes = studio.optimiser.hand_eye_notes.clone();
         studio.optimiser.run = Some(Run::spawn_preparing(move |preparing| {
+            // The studio's drive has a global shutter: the run reads the log again with the
+            // readout (the index only, about a second), for its images and the hand-eye.
+            let drive = match readout {
+                Some(readout) => {
+                    let options = crate::log::DriveOptions {
+                        camera_readout: readout,
+                        ..crate::log::DriveOptions::default()
+                    };
+                    let reread = crate::log::Drive::open_with(drive.path(), &options)
+                        .map_err(|e| format!("cannot read the log with the readout: {e}"))?;
+                    if let Ok(mut notes) = notes.lock() {
+                        notes.push(readout_note(&drive, &reread, &cameras, &segments, readout));
+                    }
+                    std::sync::Arc::new(reread)
+                }
+                None => drive,
+            };
             let prepare_rig = if hand_eye {
                 use crate::classical::camera_motion;
                 let map = camera_motion::lidar_map(&drive, &prepare_rig);
@@ -453,6 +514,7 @@ pub fn optimiser_ui(studio: &mut Studio, ui: &mut egui::Ui) {
                  translation the turns observe) to the vehicle's motion before the scene is \
                  learned. Takes about 5 s per camera; a straight drive keeps the cameras.",
             );
+            readout_ui(&mut studio.optimiser.readout_ms, ui);
         }
     });
     ui.horizontal(|ui| {
@@ -516,6 +578,40 @@ pub fn optimiser_ui(studio: &mut Studio, ui: &mut egui::Ui) {
     alignment_table_ui(studio, ui);
     ground_truth_errors_ui(studio, ui);
 }
+
+/// The rolling-shutter setting: a tick, then when the first and the last row were exposed.
+fn readout_ui(readout_ms: &mut Option<(f64, f64)>, ui: &mut egui::Ui) {
+    let mut rolling = readout_ms.is_some();
+    let help = "Each image row was exposed at its own time, evenly from the first (top edge) \
+                to the last (bottom edge), in milliseconds after the image's stamp (negative: \
+                before it). UniCal then casts every ray from where the vehicle was when its \
+                row was exposed. As `rigcal calibrate --camera-readout-ms FIRST..LAST`.";
+    if ui
+        .checkbox(&mut rolling, "rolling-shutter cameras")
+        .on_hover_text(help)
+        .changed()
+    {
+        *readout_ms = rolling.then_some(DEFAULT_READOUT_MS);
+    }
+    if let Some((first, last)) = readout_ms {
+        let ms = |v| {
+            egui::DragValue::new(v)
+                .range(-1000.0..=1000.0)
+                .speed(0.5)
+                .suffix(" ms")
+        };
+        ui.horizontal(|ui| {
+            ui.label("rows exposed from");
+            ui.add(ms(first));
+            ui.label("to");
+            ui.add(ms(last));
+            ui.label("after each stamp");
+        });
+    }
+}
+
+/// The readout the rolling-shutter tick starts from: 30 ms, centred on the stamp.
+pub const DEFAULT_READOUT_MS: (f64, f64) = (-15.0, 15.0);
 
 /// Loss curves (log10 scale) and per-sensor rotation change against the step.
 fn losses_ui(studio: &Studio, ui: &mut egui::Ui) {

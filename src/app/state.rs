@@ -573,6 +573,7 @@ impl Studio {
                 .map(|f| f.name().to_string())
                 .unwrap_or_default(),
             optimiser_method: self.optimiser.method.key().into(),
+            camera_readout_ms: self.optimiser.readout_ms.map(|(a, b)| [a, b]),
         });
         s
     }
@@ -700,6 +701,11 @@ impl Studio {
             if let Some(m) = super::optimiser::Method::from_key(&v.optimiser_method) {
                 self.optimiser.method = m;
             }
+            // Only what the panel could have set: finite, within ±1000 ms.
+            self.optimiser.readout_ms = v
+                .camera_readout_ms
+                .filter(|r| r.iter().all(|v| v.is_finite() && v.abs() <= 1000.0))
+                .map(|[a, b]| (a, b));
         }
         self.overlays.clear();
         self.status

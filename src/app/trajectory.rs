@@ -343,9 +343,7 @@ fn segments_ui(
             .map(|(i, &(a, b))| (Some(i), a, b))
             .collect()
     };
-    // Seconds from the start of the log, as `rigcal calibrate --segment` counts them (the
-    // trajectory may start later than the first sensor frame).
-    let log_t0 = drive.time_range_nanos().map_or(t0, |r| r.0);
+    let log_range = drive.time_range_nanos().unwrap_or((t0, t1));
     let mut remove = None;
     egui::Grid::new("segments").striped(true).show(ui, |ui| {
         for h in ["segment", "s", "km/h", "max °/s", "turn °", "turns", "", ""] {
@@ -356,11 +354,7 @@ fn segments_ui(
             let Some(m) = MotionSummary::of(&drive.trajectory, a, b) else {
                 continue;
             };
-            ui.label(format!(
-                "{:.1}–{:.1} s",
-                (a - log_t0) as f64 * 1e-9,
-                (b - log_t0) as f64 * 1e-9
-            ));
+            ui.label(segment_label((a, b), log_range));
             ui.label(format!("{:.1}", m.duration_s));
             ui.label(format!("{:.0}", m.mean_speed_mps * 3.6));
             ui.label(format!("{:.1}", m.max_abs_yaw_rate_deg_s));
@@ -392,6 +386,14 @@ fn segments_ui(
     }
 }
 
+/// A segment as seconds from the start of the log, as `rigcal calibrate --segment` counts
+/// them, shown within the sensor data (`log_range`): the trajectory may start before the first
+/// sensor frame or end after the last, where there is nothing to calibrate on.
+fn segment_label((a, b): (i64, i64), (log_t0, log_t1): (i64, i64)) -> String {
+    let seconds = |t: i64| (t.clamp(log_t0, log_t1) - log_t0) as f64 * 1e-9;
+    format!("{:.1}–{:.1} s", seconds(a), seconds(b))
+}
+
 /// Add a segment, merging overlapping ones and keeping them sorted.
 pub fn add_segment(segments: &mut Vec<(i64, i64)>, new: (i64, i64)) {
     segments.push(new);
@@ -409,6 +411,24 @@ pub fn add_segment(segments: &mut Vec<(i64, i64)>, new: (i64, i64)) {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn segments_are_labelled_within_the_sensor_data() {
+        // The demo drive's trajectory starts 0.2 s before its first sensor frame.
+        let log = (1_000_000_000, 9_000_000_000);
+        assert_eq!(
+            segment_label((800_000_000, 9_000_000_000), log),
+            "0.0–8.0 s"
+        );
+        assert_eq!(
+            segment_label((3_000_000_000, 5_500_000_000), log),
+            "2.0–4.5 s"
+        );
+        assert_eq!(
+            segment_label((3_000_000_000, 9_500_000_000), log),
+            "2.0–8.0 s"
+        );
+    }
 
     #[test]
     fn overlapping_segments_merge() {

@@ -63,9 +63,10 @@ pub fn camera_pairs(
         .stream(name)
         .ok_or_else(|| format!("the log has no images of '{name}'"))?;
     let picked = spread_evenly(&drive.frames_within(name, segments_nanos), frames);
+    // A rolling-shutter image stands at its middle row's time.
     let stamps: Vec<i64> = picked
         .iter()
-        .map(|&i| stream.frames[i].stamp_nanos)
+        .map(|&i| stream.frames[i].stamp_nanos + drive.camera_readout.middle_nanos())
         .collect();
     let candidates = candidate_pairs(&drive.trajectory, &stamps);
     if require_turns {

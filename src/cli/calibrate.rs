@@ -147,6 +147,26 @@ pub struct CalibrateArgs {
     pub out: PathBuf,
 }
 
+/// UniCal's options that act on the camera images it trains on (`--camera-frames`).
+const IMAGE_OPTIONS: &[&str] = &[
+    "--alignment",
+    "--camera-scale",
+    "--camera-rays",
+    "--camera-lr",
+    "--camera-translation-rate",
+    "--camera-translation-final",
+    "--camera-early-release",
+    "--shared-camera-translation",
+    "--grouped-camera-translation",
+    "--camera-rays-below-lidar-top",
+    "--camera-hold-unobserved",
+    "--camera-hold-axial",
+    "--silhouette-share",
+    "--camera-blur",
+    "--colour-pose-levels",
+    "--camera-readout-ms",
+];
+
 impl CalibrateArgs {
     /// The UniCal options given, each by its flag and its value: with another method they
     /// would be ignored (so they are refused), and the provenance records them. An option at
@@ -244,6 +264,21 @@ impl CalibrateArgs {
         options
             .into_iter()
             .filter_map(|(name, value)| Some((name, value?)))
+            .collect()
+    }
+
+    /// The UniCal options given that act on camera images only (`--camera-scale`,
+    /// `--camera-readout-ms`, …): without `--camera-frames` no image joins the run, so they
+    /// would be ignored. The hand-eye is not among them: it fits the cameras from their own
+    /// images before UniCal, with or without images in UniCal.
+    fn image_options_without_images(&self) -> Vec<&'static str> {
+        if self.camera_frames > 0 {
+            return Vec::new();
+        }
+        self.unical_options()
+            .into_iter()
+            .map(|(flag, _)| flag)
+            .filter(|flag| IMAGE_OPTIONS.contains(flag))
             .collect()
     }
 
@@ -807,6 +842,14 @@ pub fn calibrate(
                 .as_deref()
                 .map(parse_early_release)
                 .transpose()?;
+            let idle = args.image_options_without_images();
+            if !idle.is_empty() {
+                return Err(format!(
+                    "{} act{} on camera images, which join UniCal only with --camera-frames N",
+                    idle.join(", "),
+                    if idle.len() == 1 { "s" } else { "" }
+                ));
+            }
             if args.lidar_icp {
                 rig = register_lidars(&drive, &rig, args, &segments)?;
             }

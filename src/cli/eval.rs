@@ -15,7 +15,9 @@
 //! late or early, or (the same thing while the vehicle drives at one speed) that the camera
 //! sits off along the drive; and the focal-length scale (0.98 to 1.02) at which it is best: a
 //! scale away from 1 says the intrinsics' focal length is off, or (the same thing to one
-//! camera's images) that the camera sits off along its optical axis.
+//! camera's images) that the camera sits off along its optical axis. With
+//! `--camera-readout-ms` the photometric metrics place each image row at its own time (a rolling
+//! shutter).
 
 use std::path::PathBuf;
 
@@ -25,7 +27,7 @@ use crate::calib::dataset_json::load_reference;
 use crate::calib::{CalibrationFile, Rig, SensorKind};
 use crate::eval::checkerboard::{BoardSpec, pair_corner_error};
 use crate::eval::registration::{RegistrationError, pair_registration_errors};
-use crate::geometry::{RigError, rig_errors};
+use crate::geometry::{RigError, RowTimes, rig_errors};
 use crate::log::Drive;
 use crate::optim::edge_align::EdgeAlignment;
 use crate::optim::photo_consistency::{PhotoConfig, PhotoProblem, lidar_map};
@@ -47,6 +49,10 @@ pub struct EvalArgs {
     pub checkerboard: bool,
     /// Also the photometric consistency of every camera over the LiDAR map, and its best delay.
     pub photometric: bool,
+    /// With `photometric`: the cameras' rolling-shutter readout as `FIRST..LAST` milliseconds
+    /// from each image's stamp ([`crate::geometry::RowTimes::parse_millis`]); `None`: a global
+    /// shutter.
+    pub camera_readout_ms: Option<String>,
 }
 
 impl Default for EvalArgs {
@@ -60,6 +66,7 @@ impl Default for EvalArgs {
             frames: 3,
             checkerboard: false,
             photometric: false,
+            camera_readout_ms: None,
         }
     }
 }
@@ -156,8 +163,25 @@ pub fn evaluate(
         photo_delay_ms: Vec::new(),
         photo_focal_scale: Vec::new(),
     };
+    let camera_readout = match &args.camera_readout_ms {
+        None => RowTimes::GLOBAL,
+        Some(_) if !args.photometric || args.log.is_none() => {
+            return Err(
+                "--camera-readout-ms applies to --photometric only (a log and its images)".into(),
+            );
+        }
+        Some(text) => {
+            RowTimes::parse_millis(text).map_err(|e| format!("--camera-readout-ms {e}"))?
+        }
+    };
     if let Some(log) = &args.log {
-        let drive = Drive::open(log).map_err(|e| e.to_string())?;
+        // The readout places each image row of the photometric metrics at its own time; it
+        // also leaves out frames with rows outside the trajectory from every metric.
+        let options = crate::log::DriveOptions {
+            camera_readout,
+            ..crate::log::DriveOptions::default()
+        };
+        let drive = Drive::open_with(log, &options).map_err(|e| e.to_string())?;
         if !calibration
             .sensors
             .iter()

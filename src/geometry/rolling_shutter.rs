@@ -63,9 +63,14 @@ impl RowTimes {
         if self.first_row_nanos == self.last_row_nanos || height == 0 {
             return self.first_row_nanos;
         }
-        let fraction = ((y + 0.5) / height as f64).clamp(0.0, 1.0);
         let span = (self.last_row_nanos - self.first_row_nanos) as f64;
-        self.first_row_nanos + (span * fraction).round() as i64
+        self.first_row_nanos + (span * Self::row_fraction(y, height)).round() as i64
+    }
+
+    /// How far down the image pixel coordinate `y` lies: 0 at the top edge (y = −0.5), 1 at
+    /// the bottom edge (y = height − 0.5), clamped to those.
+    pub fn row_fraction(y: f64, height: u32) -> f64 {
+        ((y + 0.5) / f64::from(height.max(1))).clamp(0.0, 1.0)
     }
 
     /// When the middle of the image was exposed, relative to the stamp.

@@ -147,7 +147,7 @@ impl PhotoImage {
         if self.row_poses.is_empty() {
             return Some((q, px));
         }
-        let fraction = ((px.y + 0.5) / self.height as f64).clamp(0.0, 1.0);
+        let fraction = RowTimes::row_fraction(px.y, self.height as u32);
         let k = (fraction * (ROW_POSES - 1) as f64).round() as usize;
         let q = (camera_from_vehicle * self.row_poses[k]).transform_point(p);
         Some((q, intrinsics.project(q)?))

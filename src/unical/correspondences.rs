@@ -138,9 +138,12 @@ pub fn cache_key(
                 h.write_u64(v.to_bits());
             }
             write_rigid(&mut h, extrinsic);
+            h.write_u64(c.readout.first_row_nanos as u64);
+            h.write_u64(c.readout.last_row_nanos as u64);
             for f in &c.frames {
                 h.write_u64(f.stamp_nanos as u64);
-                if let Ok(wv) = trajectory.world_from_vehicle(f.stamp_nanos) {
+                // The pose the overlap check places the frame at.
+                if let Ok(wv) = trajectory.world_from_vehicle(c.middle_stamp_nanos(f.stamp_nanos)) {
                     write_rigid(&mut h, &wv);
                 }
                 h.write_u64(f.keypoints.len() as u64);
@@ -295,7 +298,8 @@ pub fn build(
     Correspondences::new(pairs, cameras.len(), overlapping.len())
 }
 
-/// Fraction of a grid of frame a's pixels, at 8 and 20 m, that frame b sees.
+/// Fraction of a grid of frame a's pixels, at 8 and 20 m, that frame b sees (each frame at
+/// its middle row's pose).
 fn overlap(
     cameras: &[CameraData],
     vehicle_from_camera: &[Rigid],
@@ -305,11 +309,11 @@ fn overlap(
 ) -> Option<f64> {
     let (cam_a, cam_b) = (&cameras[ca], &cameras[cb]);
     let world_from_a = trajectory
-        .world_from_vehicle(cam_a.frames[fa].stamp_nanos)
+        .world_from_vehicle(cam_a.middle_stamp_nanos(cam_a.frames[fa].stamp_nanos))
         .ok()?
         * vehicle_from_camera[ca];
     let b_from_world = (trajectory
-        .world_from_vehicle(cam_b.frames[fb].stamp_nanos)
+        .world_from_vehicle(cam_b.middle_stamp_nanos(cam_b.frames[fb].stamp_nanos))
         .ok()?
         * vehicle_from_camera[cb])
         .inverse();

@@ -566,6 +566,12 @@ impl CameraData {
         stamp_nanos + self.readout.offset_nanos(y, self.intrinsics.height)
     }
 
+    /// When the middle row of a frame stamped `stamp_nanos` was exposed: the one time that
+    /// stands for the whole image where a single pose is needed.
+    pub fn middle_stamp_nanos(&self, stamp_nanos: i64) -> i64 {
+        stamp_nanos + self.readout.middle_nanos()
+    }
+
     /// The training pixel where world point `p_world` appears in the frame stamped
     /// `stamp_nanos`, seen in front of the camera within ~78° of its axis (no folded-over
     /// pixels). With a rolling shutter the point is projected at the middle row's time, then
@@ -581,7 +587,7 @@ impl CameraData {
         let middle = self.camera_from_world_at(
             trajectory,
             vehicle_from_camera,
-            stamp_nanos + self.readout.middle_nanos(),
+            self.middle_stamp_nanos(stamp_nanos),
         )?;
         self.project_world_from(
             trajectory,
@@ -1605,7 +1611,7 @@ impl DepthCalibration {
                         let Some(middle) = cam.camera_from_world_at(
                             trajectory,
                             vehicle_from_camera,
-                            f.stamp_nanos + cam.readout.middle_nanos(),
+                            cam.middle_stamp_nanos(f.stamp_nanos),
                         ) else {
                             return Vec::new();
                         };
@@ -2929,6 +2935,24 @@ mod tests {
                 .unwrap();
             assert!(px_global.distance(DVec2::new(x, y)) > 0.05, "{px_global:?}");
         }
+        // Matches found with one readout are not read back from the cache for another: the
+        // overlap check places each frame at its middle row's pose.
+        let global = CameraData {
+            readout: RowTimes::GLOBAL,
+            ..camera.clone()
+        };
+        let key = |c: &CameraData| {
+            crate::unical::correspondences::cache_key(
+                std::slice::from_ref(c),
+                &[c.initial],
+                &trajectory,
+            )
+        };
+        assert_ne!(key(&camera), key(&global));
+        assert_eq!(
+            camera.middle_stamp_nanos(frame_stamps[0]),
+            frame_stamps[0] - 10_000_000
+        );
     }
 
     /// Cameras join: the colour loss falls, the camera's pose is
