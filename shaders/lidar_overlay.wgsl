@@ -3,9 +3,11 @@
 //
 // `points` holds five 32-bit words per LiDAR point: x, y, z (sensor frame, f32 bits), intensity
 // and a packed index (bits 0..24 the firing-time bucket, bits 24..32 the LiDAR).
-// `camera_from_lidar[bucket]` (computed on the CPU from the trajectory at the bucket's time, the
-// LiDAR and camera extrinsics and the image stamp) moves a point into the camera's optical
-// frame; the camera model (pinhole, plumb_bob / rational_polynomial radial-tangential, or
+// `camera_from_lidar[bucket * rows + row]` (computed on the CPU from the trajectory at the
+// bucket's time, the LiDAR and camera extrinsics and the image stamp) moves a point into the
+// camera's optical frame; a rolling-shutter camera has `rows` poses per bucket, from the image's
+// top edge to its bottom edge, and a point is moved by the middle one first, then by the one of
+// the row it fell on (a global shutter has one); the camera model (pinhole, plumb_bob / rational_polynomial radial-tangential, or
 // equidistant fisheye, as in src/geometry/camera.rs) gives the pixel, and the view (zoom and
 // pan: image pixels `view_min .. view_min + view_size`) the pixel of the viewport target.
 //
@@ -49,6 +51,11 @@ struct Uniforms {
     count: u32,
     // Per LiDAR: the z row of vehicle_from_lidar (r20, r21, r22, t_z).
     height_rows: array<vec4<f32>, 8>,
+    // Camera poses per bucket: 1, or the rows of a rolling shutter.
+    rows: u32,
+    pad0: u32,
+    pad1: u32,
+    pad2: u32,
 };
 
 @group(0) @binding(0) var<uniform> u: Uniforms;
@@ -111,11 +118,18 @@ fn project(index: u32) -> Projected {
     );
     let intensity = bitcast<f32>(points[base + 3u]);
     let packed = points[base + 4u];
-    let bucket = packed & 0xFFFFFFu;
-    if (bucket >= arrayLength(&camera_from_lidar)) {
+    let rows = max(u.rows, 1u);
+    let first = (packed & 0xFFFFFFu) * rows;
+    if (first + rows > arrayLength(&camera_from_lidar)) {
         return out;
     }
-    let p = (camera_from_lidar[bucket] * vec4<f32>(p_lidar, 1.0)).xyz;
+    var p = (camera_from_lidar[first + rows / 2u] * vec4<f32>(p_lidar, 1.0)).xyz;
+    if (rows > 1u && p.z > 0.05) {
+        let y = u.focal.y * distort(p).y + u.principal.y;
+        let fraction = clamp((y + 0.5) / u.image_size.y, 0.0, 1.0);
+        let row = u32(round(fraction * f32(rows - 1u)));
+        p = (camera_from_lidar[first + row] * vec4<f32>(p_lidar, 1.0)).xyz;
+    }
     let range = length(p);
     if (p.z <= 0.05 || range < u.range_min_m || range > u.range_max_m) {
         return out;

@@ -236,10 +236,11 @@ enum Command {
         /// cameras and the trajectory (negative: the images were taken before their stamps)
         #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
         camera_time_offset_ms: f64,
-        /// With --camera-frames: the cameras have a rolling shutter whose readout began FIRST
-        /// and ended LAST milliseconds after each image's stamp (at the image's top and bottom
-        /// edges; negative: before it), rows in between evenly; each ray is cast from where the
-        /// vehicle was when its row was exposed (e.g. -30..10; default: a global shutter at the
+        /// With --camera-frames or --camera-hand-eye: the cameras have a rolling shutter whose
+        /// readout began FIRST and ended LAST milliseconds after each image's stamp (at the
+        /// image's top and bottom edges; negative: before it), rows in between evenly; each ray
+        /// is cast from where the vehicle was when its row was exposed, and the hand-eye places
+        /// each image at its middle row's time (e.g. -30..10; default: a global shutter at the
         /// stamp)
         #[arg(
             help_heading = HEADING_UNICAL,

@@ -157,12 +157,25 @@ fn bad_arguments_fail_with_one_line() {
         "--camera-readout-ms=-30..10",
         "--camera-scale",
         "0.5",
-        "--camera-hand-eye",
     ]);
     assert!(
         !ok && err.contains(
             "--camera-scale, --camera-readout-ms act on camera images, which join UniCal only with --camera-frames N"
         ),
+        "{err}"
+    );
+    // The hand-eye reads images of its own: the readout is taken with it (the run goes on, to
+    // the hand-eye, which keeps the cameras on this straight drive, and a later bad option).
+    let (ok, err) = run(&[
+        "--method",
+        "unical",
+        "--camera-readout-ms=-30..10",
+        "--camera-hand-eye",
+        "--coarse-to-fine",
+        "nope",
+    ]);
+    assert!(
+        !ok && err.contains("--coarse-to-fine:") && err.contains("camera hand-eye:"),
         "{err}"
     );
     let (ok, err) = run(&["--method", "UniCal", "--camera-frames", "8"]);

@@ -250,6 +250,19 @@ fn occlusion_colour_modes_and_accumulation_change_what_is_drawn() {
     let after = h.state().overlay_transforms(0).len();
     assert!(after > before, "accumulating sweeps added no transforms");
     assert!(d > 5_000, "accumulating sweeps changed only {d} pixels");
+    // A rolling shutter, halfway through the drive (5 m/s): 33 camera poses per firing-time
+    // bucket, and the points move.
+    let frame = rendered_difference(&mut h, |s| s.frame = 40);
+    assert!(frame > 5_000, "frame 40 changed only {frame} pixels");
+    let global = h.state().overlay_transforms(0).len();
+    let d = rendered_difference(&mut h, |s| s.camera_readout_ms = Some((-30.0, 10.0)));
+    assert_eq!(h.state().overlay_transforms(0).len(), global * 33);
+    assert!(d > 2_000, "a rolling shutter changed only {d} pixels");
+    assert!(
+        s_status(&h).iter().all(|m| !m.starts_with("error")),
+        "{:?}",
+        s_status(&h)
+    );
 }
 
 #[test]
@@ -361,7 +374,7 @@ fn a_session_restores_edits_segments_and_locks_and_export_round_trips() {
         .insert(camera.clone(), [true, false, false, false, false, false]);
     use rigcal::app::optimiser::Method;
     h.state_mut().optimiser.method = Method::Unical;
-    h.state_mut().optimiser.readout_ms = Some((-30.0, 10.0));
+    h.state_mut().camera_readout_ms = Some((-30.0, 10.0));
     let edited = h.state().current.clone();
     let dir = std::env::temp_dir().join(format!("rigcal-session-test-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
@@ -372,7 +385,7 @@ fn a_session_restores_edits_segments_and_locks_and_export_round_trips() {
     h.state_mut().open_log(&log);
     assert_ne!(h.state().current, edited);
     h.state_mut().optimiser.method = Method::EdgeAlign;
-    h.state_mut().optimiser.readout_ms = None;
+    h.state_mut().camera_readout_ms = None;
     h.state_mut().restore_session(&path);
     h.run_steps(2);
     assert_eq!(h.state().current, edited, "{:?}", h.state().status);
@@ -383,7 +396,7 @@ fn a_session_restores_edits_segments_and_locks_and_export_round_trips() {
         Method::Unical,
         "the panel's method"
     );
-    assert_eq!(h.state().optimiser.readout_ms, Some((-30.0, 10.0)));
+    assert_eq!(h.state().camera_readout_ms, Some((-30.0, 10.0)));
     // A broken session file is an error in the UI; nothing is lost.
     std::fs::write(dir.join("bad.json"), "{").unwrap();
     h.state_mut().restore_session(&dir.join("bad.json"));
@@ -541,7 +554,7 @@ fn the_hand_eye_runs_from_the_optimiser_panel_and_reports_each_camera() {
     h.run_steps(2);
     assert!(h.state().optimiser.hand_eye);
     assert_eq!(
-        h.state().optimiser.readout_ms,
+        h.state().camera_readout_ms,
         Some(rigcal::app::optimiser::DEFAULT_READOUT_MS)
     );
     let before = h.state().current.clone();

@@ -42,7 +42,7 @@ pub fn pack_bucket(bucket: u32, lidar: u32) -> u32 {
     (bucket & 0x00FF_FFFF) | (lidar.min(255) << 24)
 }
 
-/// Must match `Uniforms` in the shader (256 bytes).
+/// Must match `Uniforms` in the shader (272 bytes).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, bytemuck::Pod, bytemuck::Zeroable)]
 pub struct Uniforms {
@@ -73,6 +73,10 @@ pub struct Uniforms {
     pub count: u32,
     /// Per LiDAR: the z row of `vehicle_from_lidar`.
     pub height_rows: [[f32; 4]; 8],
+    /// Camera poses per firing-time bucket in the transform table: 1, or a rolling shutter's
+    /// [`crate::geometry::projection::SHUTTER_ROWS`] (0 counts as 1).
+    pub rows: u32,
+    pub _pad: [u32; 3],
 }
 
 /// Must match `Resolve` in `overlay_blit.wgsl`.
@@ -513,9 +517,9 @@ mod tests {
 
     #[test]
     fn rust_layouts_match_the_shader() {
-        // WGSL: Uniforms is 256 bytes (checked against naga in tests/shaders.rs); a point is a
+        // WGSL: Uniforms is 272 bytes (checked against naga in tests/shaders.rs); a point is a
         // vec4<f32> and a u32.
-        assert_eq!(std::mem::size_of::<Uniforms>(), 256);
+        assert_eq!(std::mem::size_of::<Uniforms>(), 272);
         assert_eq!(std::mem::size_of::<GpuPoint>(), 20);
     }
 

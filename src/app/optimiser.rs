@@ -90,10 +90,6 @@ pub struct OptimiserPanel {
     /// What the hand-eye did to each camera, written by the run's preparation and moved to
     /// the status bar by [`poll`].
     pub hand_eye_notes: std::sync::Arc<std::sync::Mutex<Vec<String>>>,
-    /// UniCal with cameras: a rolling shutter whose rows were exposed from the first to the
-    /// last of these milliseconds after each image's stamp (`rigcal calibrate
-    /// --camera-readout-ms`); `None`: a global shutter.
-    pub readout_ms: Option<(f64, f64)>,
     pub frames: usize,
     pub run: Option<Run>,
     /// The rig when the run started (restored by undo).
@@ -211,7 +207,7 @@ fn readout_note(
         .collect();
     format!(
         "rolling shutter: image rows exposed from {:+.1} to {:+.1} ms after each stamp; \
-         UniCal places each row at its own time (the overlay draws each image at its stamp){}",
+         UniCal places each row at its own time{}",
         readout.first_row_nanos as f64 * 1e-6,
         readout.last_row_nanos as f64 * 1e-6,
         if lost.is_empty() {
@@ -291,8 +287,7 @@ pub fn start(studio: &mut Studio) {
         };
         let hand_eye = method == Method::Unical && studio.optimiser.hand_eye;
         let readout = studio
-            .optimiser
-            .readout_ms
+            .camera_readout_ms
             .filter(|_| method == Method::Unical)
             .map(|(first, last)| RowTimes::from_millis(first, last));
         let notes = studio.optimiser.hand_eye_notes.clone();
@@ -514,7 +509,12 @@ pub fn optimiser_ui(studio: &mut Studio, ui: &mut egui::Ui) {
                  translation the turns observe) to the vehicle's motion before the scene is \
                  learned. Takes about 5 s per camera; a straight drive keeps the cameras.",
             );
-            readout_ui(&mut studio.optimiser.readout_ms, ui);
+            if let Some((first, last)) = studio.camera_readout_ms {
+                ui.weak(format!(
+                    "rolling shutter: rows from {first:+.1} to {last:+.1} ms after each stamp \
+                     (set under the image)"
+                ));
+            }
         }
     });
     ui.horizontal(|ui| {
@@ -580,12 +580,13 @@ pub fn optimiser_ui(studio: &mut Studio, ui: &mut egui::Ui) {
 }
 
 /// The rolling-shutter setting: a tick, then when the first and the last row were exposed.
-fn readout_ui(readout_ms: &mut Option<(f64, f64)>, ui: &mut egui::Ui) {
+pub(crate) fn readout_ui(readout_ms: &mut Option<(f64, f64)>, ui: &mut egui::Ui) {
     let mut rolling = readout_ms.is_some();
     let help = "Each image row was exposed at its own time, evenly from the first (top edge) \
                 to the last (bottom edge), in milliseconds after the image's stamp (negative: \
-                before it). UniCal then casts every ray from where the vehicle was when its \
-                row was exposed. As `rigcal calibrate --camera-readout-ms FIRST..LAST`.";
+                before it). The overlay then projects every point from where the vehicle was \
+                when the row it falls on was exposed, and UniCal casts every ray so. As \
+                `rigcal calibrate --camera-readout-ms FIRST..LAST`.";
     if ui
         .checkbox(&mut rolling, "rolling-shutter cameras")
         .on_hover_text(help)

@@ -18,7 +18,8 @@ use super::state::{ColorBy, ExtrinsicsView, HoverReadout, Studio};
 use crate::calib::{Rig, SensorKind};
 use crate::geometry::Rigid;
 use crate::geometry::projection::{
-    ProjectedPoint, camera_from_lidar_buckets, point_buckets, project_sweep, visible_points,
+    ProjectedPoint, camera_from_lidar_rows, point_buckets, project_sweep_rolling, shutter_rows,
+    visible_points,
 };
 use crate::log::{Drive, LidarSweep};
 
@@ -66,7 +67,10 @@ pub(crate) struct OverlayCache {
     /// The camera this slot holds: the camera list shifts when a loaded calibration gives a
     /// camera intrinsics (or an undo takes them away), and a slot must not keep another's.
     camera: String,
-    key: Option<(usize, usize, usize)>,
+    /// Frame, stride, accumulated sweeps and the readout (ms bits) the points were made for.
+    key: Option<(usize, usize, usize, Option<[u64; 2]>)>,
+    /// Camera poses per firing-time bucket in `gpu_transforms` (1, or a rolling shutter's).
+    gpu_rows: u32,
     rig: Option<Rig>,
     texture: Option<(usize, egui::TextureHandle)>,
     sweeps: Vec<(usize, Arc<LidarSweep>)>,
@@ -306,6 +310,7 @@ fn toolbar_ui(
                     .suffix(" px"),
             );
         }
+        super::optimiser::readout_ui(&mut studio.camera_readout_ms, ui);
     });
 }
 
@@ -560,6 +565,7 @@ fn draw_camera(
         for (i, l) in rig.lidars().enumerate() {
             u.set_height_row(i, l.vehicle_from_sensor);
         }
+        u.rows = cache.gpu_rows.max(1);
         if cache.texture.is_some() && !cache.gpu_points.is_empty() {
             studio.pictures.0 += 1;
             studio.pictures.1 += cache.gpu_points.len();
@@ -635,7 +641,15 @@ fn refresh(
             ..Default::default()
         };
     }
-    let key = (frame, studio.overlay.stride, studio.overlay.accumulate);
+    let key = (
+        frame,
+        studio.overlay.stride,
+        studio.overlay.accumulate,
+        studio
+            .camera_readout_ms
+            .map(|(a, b)| [a.to_bits(), b.to_bits()]),
+    );
+    let readout = studio.readout();
     // Every frame: compare without cloning the rig.
     let unchanged = studio
         .overlays
@@ -692,21 +706,23 @@ fn refresh(
         return Ok(());
     };
     let lidars: Vec<_> = rig.lidars().collect();
+    let intrinsics = cam.camera.as_ref().ok_or("camera has no intrinsics")?;
     let mut transforms = Vec::with_capacity(sweeps.len());
     for (li, s) in &sweeps {
         let view = LidarSweep::view(s);
-        let t = camera_from_lidar_buckets(
+        let t = camera_from_lidar_rows(
             &view,
             &drive.trajectory,
             lidars[*li].vehicle_from_sensor,
             cam.vehicle_from_sensor,
-            image_stamp,
+            (image_stamp, readout, intrinsics.height),
         )
         .map_err(|e| format!("{camera} frame {frame}: {e}"))?;
         transforms.push(t);
     }
     cache.sweeps = sweeps;
-    let cone_cos = view_cone_cos(cam.camera.as_ref().ok_or("camera has no intrinsics")?);
+    let cone_cos = view_cone_cos(intrinsics);
+    cache.gpu_rows = shutter_rows(readout) as u32;
     upload_gpu_points(cache, &transforms, studio.overlay.stride, cone_cos);
     cache.cpu.clear();
     cache.cpu_key = None;
@@ -809,7 +825,8 @@ fn upload_gpu_points(
                     },
                 ));
             }
-            base += t.len() as u32;
+            // Buckets, not transforms: the shader finds a bucket's rows at `bucket * rows`.
+            base += (t.len() / cache.gpu_rows.max(1) as usize) as u32;
         }
         // Far to near: nearer splats are drawn over farther ones.
         pts.sort_by(|a, b| b.0.total_cmp(&a.0));
@@ -880,13 +897,14 @@ fn ensure_cpu(
     );
     let rig = studio.shown_rig().clone();
     let stride = studio.overlay.stride;
+    let readout = studio.readout();
     let Some(cache) = studio.overlays.get_mut(index) else {
         return Ok(());
     };
     if cache.cpu_key == Some(occlusion) {
         return Ok(());
     }
-    let Some((frame, _, _)) = cache.key else {
+    let Some((frame, _, _, _)) = cache.key else {
         return Ok(());
     };
     let cam = rig.sensor(camera).ok_or("no such camera")?;
@@ -900,13 +918,13 @@ fn ensure_cpu(
     let mut cpu = Vec::new();
     for (li, s) in &cache.sweeps {
         let lidar = lidars[*li];
-        let projected = project_sweep(
+        let projected = project_sweep_rolling(
             &LidarSweep::view(s),
             &drive.trajectory,
             lidar.vehicle_from_sensor,
             cam.vehicle_from_sensor,
             &intr,
-            image_stamp,
+            (image_stamp, readout),
             stride,
         )
         .map_err(|e| format!("{camera} frame {frame}: {e}"))?;

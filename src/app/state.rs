@@ -131,6 +131,10 @@ pub struct Studio {
     pub blink_with: ExtrinsicsView,
     pub(crate) blink_phase: bool,
     pub overlay: OverlaySettings,
+    /// The cameras' rolling shutter: their first and last image rows were exposed this many
+    /// milliseconds after each image's stamp (`rigcal calibrate --camera-readout-ms`); the
+    /// overlay and UniCal's runs place each row at its own time. `None`: a global shutter.
+    pub camera_readout_ms: Option<(f64, f64)>,
     /// Show every camera at once (each at its frame nearest in time).
     pub grid: bool,
     pub zoom: ViewZoom,
@@ -195,6 +199,7 @@ impl Default for Studio {
             blink_with: ExtrinsicsView::Initial,
             blink_phase: false,
             overlay: OverlaySettings::default(),
+            camera_readout_ms: None,
             grid: false,
             zoom: ViewZoom::default(),
             hover: None,
@@ -573,7 +578,7 @@ impl Studio {
                 .map(|f| f.name().to_string())
                 .unwrap_or_default(),
             optimiser_method: self.optimiser.method.key().into(),
-            camera_readout_ms: self.optimiser.readout_ms.map(|(a, b)| [a, b]),
+            camera_readout_ms: self.camera_readout_ms.map(|(a, b)| [a, b]),
         });
         s
     }
@@ -702,7 +707,7 @@ impl Studio {
                 self.optimiser.method = m;
             }
             // Only what the panel could have set: finite, within ±1000 ms.
-            self.optimiser.readout_ms = v
+            self.camera_readout_ms = v
                 .camera_readout_ms
                 .filter(|r| r.iter().all(|v| v.is_finite() && v.abs() <= 1000.0))
                 .map(|[a, b]| (a, b));
@@ -710,6 +715,14 @@ impl Studio {
         self.overlays.clear();
         self.status
             .push(format!("restored session {}", path.display()));
+    }
+
+    /// The cameras' readout ([`Self::camera_readout_ms`]) as row times.
+    pub fn readout(&self) -> crate::geometry::RowTimes {
+        self.camera_readout_ms
+            .map_or(crate::geometry::RowTimes::GLOBAL, |(first, last)| {
+                crate::geometry::RowTimes::from_millis(first, last)
+            })
     }
 
     /// This drive's rig with the extrinsics/intrinsics of `other`'s matching sensors.

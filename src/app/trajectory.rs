@@ -351,7 +351,13 @@ fn segments_ui(
         }
         ui.end_row();
         for (i, a, b) in rows {
-            let Some(m) = MotionSummary::of(&drive.trajectory, a, b) else {
+            // Summarised where there is sensor data, as labelled.
+            let (ca, cb) = (
+                a.clamp(log_range.0, log_range.1),
+                b.clamp(log_range.0, log_range.1),
+            );
+            let (sa, sb) = if cb > ca { (ca, cb) } else { (a, b) };
+            let Some(m) = MotionSummary::of(&drive.trajectory, sa, sb) else {
                 continue;
             };
             ui.label(segment_label((a, b), log_range));

@@ -1,5 +1,6 @@
 //! A camera's motion pairs read from a drive, and the hand-eye fit of its extrinsic
-//! ([`super::hand_eye`]): the images, their keypoints and the trajectory at their stamps.
+//! ([`super::hand_eye`]): the images, their keypoints and the trajectory at their stamps (at
+//! their middle row's time with a rolling shutter, [`Drive::camera_readout`]).
 //!
 //! How it works. `frames` images of the camera spread over the selected segments are decoded
 //! and their keypoints found at up to 960 px wide (oriented FAST + steered BRIEF, as the

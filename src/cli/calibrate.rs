@@ -270,7 +270,8 @@ impl CalibrateArgs {
     /// The UniCal options given that act on camera images only (`--camera-scale`,
     /// `--camera-readout-ms`, …): without `--camera-frames` no image joins the run, so they
     /// would be ignored. The hand-eye is not among them: it fits the cameras from their own
-    /// images before UniCal, with or without images in UniCal.
+    /// images before UniCal, with or without images in UniCal, and places each image at its
+    /// middle row's time, so the readout acts on it too.
     fn image_options_without_images(&self) -> Vec<&'static str> {
         if self.camera_frames > 0 {
             return Vec::new();
@@ -279,6 +280,7 @@ impl CalibrateArgs {
             .into_iter()
             .map(|(flag, _)| flag)
             .filter(|flag| IMAGE_OPTIONS.contains(flag))
+            .filter(|&flag| !(self.camera_hand_eye && flag == "--camera-readout-ms"))
             .collect()
     }
 

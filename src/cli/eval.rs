@@ -165,18 +165,19 @@ pub fn evaluate(
     };
     let camera_readout = match &args.camera_readout_ms {
         None => RowTimes::GLOBAL,
-        Some(_) if !args.photometric || args.log.is_none() => {
-            return Err(
-                "--camera-readout-ms applies to --photometric only (a log and its images)".into(),
-            );
+        Some(_) if !args.photometric => {
+            return Err("--camera-readout-ms applies to --photometric only".into());
+        }
+        Some(_) if args.log.is_none() => {
+            return Err("--camera-readout-ms and --photometric measure on a log: give one".into());
         }
         Some(text) => {
             RowTimes::parse_millis(text).map_err(|e| format!("--camera-readout-ms {e}"))?
         }
     };
     if let Some(log) = &args.log {
-        // The readout places each image row of the photometric metrics at its own time; it
-        // also leaves out frames with rows outside the trajectory from every metric.
+        // The readout places each image row of the photometric metrics at its own time, and
+        // leaves out of them the images with rows outside the trajectory.
         let options = crate::log::DriveOptions {
             camera_readout,
             ..crate::log::DriveOptions::default()

@@ -4,12 +4,17 @@
 //! p_cam = (world_from_vehicle(t_img) · vehicle_from_camera)⁻¹ · world_from_vehicle(t_pt) ·
 //! vehicle_from_lidar · p_lidar  (method.md §1 and §5). Points of a deskewed sweep share the
 //! sweep stamp. Poses are interpolated once per time bucket (1 ms), not once per point.
+//!
+//! A rolling-shutter camera ([`RowTimes`]) was at its own pose for every image row: the camera
+//! side is then taken at [`SHUTTER_ROWS`] rows spread from the top edge to the bottom edge,
+//! a point is projected from the middle row's pose first and then again from the pose of the
+//! row it fell on (`t_img` above becomes that row's time).
 
 use glam::DVec3;
 use rayon::prelude::*;
 
 use super::camera::CameraIntrinsics;
-use super::{Rigid, Trajectory, TrajectoryError};
+use super::{Rigid, RowTimes, Trajectory, TrajectoryError};
 
 /// One LiDAR point seen in an image.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -108,6 +113,20 @@ pub fn point_buckets(sweep: &SweepView<'_>) -> Vec<u32> {
     }
 }
 
+/// Image rows a rolling-shutter camera's pose is taken at (top edge to bottom edge): with a
+/// 40 ms readout a row's pose is then at most 0.6 ms off its own time.
+pub const SHUTTER_ROWS: usize = 33;
+
+/// How many camera poses an image has: one for a shutter that exposes every row at once (at
+/// the stamp plus its one offset), else [`SHUTTER_ROWS`].
+pub fn shutter_rows(readout: RowTimes) -> usize {
+    if readout.first_row_nanos == readout.last_row_nanos {
+        1
+    } else {
+        SHUTTER_ROWS
+    }
+}
+
 /// `camera_from_lidar` at each firing-time bucket of a sweep, for an image taken at
 /// `image_stamp_nanos`: `(world_from_vehicle(t_img) · vehicle_from_camera)⁻¹ ·
 /// world_from_vehicle(t_bucket) · vehicle_from_lidar`. Small numbers even far from the world
@@ -119,10 +138,46 @@ pub fn camera_from_lidar_buckets(
     vehicle_from_camera: Rigid,
     image_stamp_nanos: i64,
 ) -> Result<Vec<Rigid>, TrajectoryError> {
-    let camera_from_world =
-        (trajectory.world_from_vehicle(image_stamp_nanos)? * vehicle_from_camera).inverse();
+    camera_from_lidar_rows(
+        sweep,
+        trajectory,
+        vehicle_from_lidar,
+        vehicle_from_camera,
+        (image_stamp_nanos, RowTimes::GLOBAL, 1),
+    )
+}
+
+/// As [`camera_from_lidar_buckets`] for an image exposed row by row: `image` is its stamp,
+/// its readout and its height (rows). [`shutter_rows`] transforms per bucket, bucket-major
+/// (`[bucket * rows + row]`), row `k` at the time of image row `k / (rows − 1)` of the way
+/// from the top edge to the bottom edge.
+pub fn camera_from_lidar_rows(
+    sweep: &SweepView<'_>,
+    trajectory: &Trajectory,
+    vehicle_from_lidar: Rigid,
+    vehicle_from_camera: Rigid,
+    (image_stamp_nanos, readout, height): (i64, RowTimes, u32),
+) -> Result<Vec<Rigid>, TrajectoryError> {
+    let rows = shutter_rows(readout);
+    let cameras_from_world = (0..rows)
+        .map(|k| {
+            let offset = if rows == 1 {
+                readout.first_row_nanos
+            } else {
+                let y = k as f64 / (rows - 1) as f64 * f64::from(height) - 0.5;
+                readout.offset_nanos(y, height)
+            };
+            Ok(
+                (trajectory.world_from_vehicle(image_stamp_nanos + offset)? * vehicle_from_camera)
+                    .inverse(),
+            )
+        })
+        .collect::<Result<Vec<_>, TrajectoryError>>()?;
     let (_, buckets) = world_from_lidar_buckets(sweep, trajectory, vehicle_from_lidar)?;
-    Ok(buckets.iter().map(|w| camera_from_world * *w).collect())
+    Ok(buckets
+        .iter()
+        .flat_map(|w| cameras_from_world.iter().map(move |c| *c * *w))
+        .collect())
 }
 
 /// Project a sweep into an image taken at `image_stamp_nanos`. Points behind the camera or
@@ -136,10 +191,38 @@ pub fn project_sweep(
     image_stamp_nanos: i64,
     stride: usize,
 ) -> Result<Vec<ProjectedPoint>, TrajectoryError> {
-    let camera_from_world =
-        (trajectory.world_from_vehicle(image_stamp_nanos)? * vehicle_from_camera).inverse();
-    let (first_bucket, buckets) = world_from_lidar_buckets(sweep, trajectory, vehicle_from_lidar)?;
-    let camera_from_lidar: Vec<Rigid> = buckets.iter().map(|w| camera_from_world * *w).collect();
+    project_sweep_rolling(
+        sweep,
+        trajectory,
+        vehicle_from_lidar,
+        vehicle_from_camera,
+        intrinsics,
+        (image_stamp_nanos, RowTimes::GLOBAL),
+        stride,
+    )
+}
+
+/// [`project_sweep`] into an image exposed row by row (`image`: its stamp and readout): each
+/// point from the middle row's pose, then from the pose of the row it fell on.
+pub fn project_sweep_rolling(
+    sweep: &SweepView<'_>,
+    trajectory: &Trajectory,
+    vehicle_from_lidar: Rigid,
+    vehicle_from_camera: Rigid,
+    intrinsics: &CameraIntrinsics,
+    (image_stamp_nanos, readout): (i64, RowTimes),
+    stride: usize,
+) -> Result<Vec<ProjectedPoint>, TrajectoryError> {
+    let (first_bucket, _) = bucket_range(sweep).unwrap_or((0, 0));
+    let camera_from_lidar = camera_from_lidar_rows(
+        sweep,
+        trajectory,
+        vehicle_from_lidar,
+        vehicle_from_camera,
+        (image_stamp_nanos, readout, intrinsics.height),
+    )?;
+    let rows = shutter_rows(readout);
+    let bucket_count = camera_from_lidar.len() / rows;
     let stride = stride.max(1);
     let n = sweep.points_in_lidar.len();
     Ok((0..n.div_ceil(stride))
@@ -148,18 +231,21 @@ pub fn project_sweep(
         .filter_map(|k| {
             let i = k * stride;
             let b = match sweep.time_offset_secs {
-                Some(t) => (bucket_of(t[i]) - first_bucket)
-                    .clamp(0, camera_from_lidar.len() as i64 - 1)
-                    as usize,
+                Some(t) => {
+                    (bucket_of(t[i]) - first_bucket).clamp(0, bucket_count as i64 - 1) as usize
+                }
                 None => 0,
             };
             let p = sweep.points_in_lidar[i];
-            let p_cam = camera_from_lidar[b].transform_point(DVec3::new(
-                p[0] as f64,
-                p[1] as f64,
-                p[2] as f64,
-            ));
-            let pixel = intrinsics.project(p_cam)?;
+            let p = DVec3::new(p[0] as f64, p[1] as f64, p[2] as f64);
+            let mut p_cam = camera_from_lidar[b * rows + rows / 2].transform_point(p);
+            let mut pixel = intrinsics.project(p_cam)?;
+            if rows > 1 {
+                let fraction = RowTimes::row_fraction(pixel.y, intrinsics.height);
+                let row = (fraction * (rows - 1) as f64).round() as usize;
+                p_cam = camera_from_lidar[b * rows + row].transform_point(p);
+                pixel = intrinsics.project(p_cam)?;
+            }
             if !intrinsics.in_image(pixel) {
                 return None;
             }
@@ -271,6 +357,90 @@ mod tests {
         )
         .unwrap();
         assert!((out[0].depth_m - 19.0).abs() < 1e-3, "{}", out[0].depth_m);
+    }
+
+    /// A rolling shutter: a point placed along pixel (x, y)'s ray from where the camera was
+    /// when row y was exposed projects back onto (x, y), within the rows' pose spacing; the
+    /// global projection misses it. The bucket-major table reproduces the projection.
+    #[test]
+    fn a_rolling_shutter_projects_each_point_from_its_rows_pose() {
+        // 8 m/s along x, a camera looking sideways (−y), a deskewed sweep.
+        let traj = Trajectory::new(vec![
+            (0, Rigid::IDENTITY),
+            (
+                1_000_000_000,
+                Rigid::new(DQuat::IDENTITY, DVec3::new(8.0, 0.0, 0.0)),
+            ),
+        ]);
+        let vehicle_from_camera = Rigid::new(
+            DQuat::from_mat3(&glam::DMat3::from_cols(DVec3::X, DVec3::Z, -DVec3::Y)),
+            DVec3::new(0.0, -0.5, 1.5),
+        );
+        let vehicle_from_lidar = Rigid::new(DQuat::IDENTITY, DVec3::new(0.0, 0.0, 1.8));
+        let k = CameraIntrinsics::pinhole(640, 480, 500.0, 500.0, 320.0, 240.0);
+        let readout = RowTimes::from_millis(-30.0, 10.0);
+        let (image_stamp, sweep_stamp) = (500_000_000, 480_000_000);
+        let lidar_from_world =
+            (traj.world_from_vehicle(sweep_stamp).unwrap() * vehicle_from_lidar).inverse();
+        let pixels = [(20.0, 3.0), (320.0, 240.0), (600.0, 470.0), (100.0, 400.0)];
+        let pts: Vec<[f32; 3]> = pixels
+            .iter()
+            .map(|&(x, y)| {
+                let t = image_stamp + readout.offset_nanos(y, k.height);
+                let world_from_camera = traj.world_from_vehicle(t).unwrap() * vehicle_from_camera;
+                let ray = k.unproject(glam::DVec2::new(x, y)).unwrap();
+                let p = lidar_from_world
+                    .transform_point(world_from_camera.transform_point(ray * 10.0 / ray.z));
+                [p.x as f32, p.y as f32, p.z as f32]
+            })
+            .collect();
+        let sweep = SweepView {
+            points_in_lidar: &pts,
+            intensity: &[0.0; 4],
+            time_offset_secs: None,
+            stamp_nanos: sweep_stamp,
+        };
+        let project = |readout| {
+            project_sweep_rolling(
+                &sweep,
+                &traj,
+                vehicle_from_lidar,
+                vehicle_from_camera,
+                &k,
+                (image_stamp, readout),
+                1,
+            )
+            .unwrap()
+        };
+        let rolling = project(readout);
+        let global = project(RowTimes::GLOBAL);
+        assert_eq!(rolling.len(), 4);
+        for (r, &(x, y)) in rolling.iter().zip(&pixels) {
+            let miss = ((r.pixel[0] - x as f32).powi(2) + (r.pixel[1] - y as f32).powi(2)).sqrt();
+            assert!(miss < 0.5, "({x}, {y}) -> {:?}", r.pixel);
+        }
+        // At the stamp the camera is 8–24 cm further along: the image's points shift by px.
+        let g = global.iter().find(|g| g.index == 0).unwrap();
+        assert!((g.pixel[0] - 20.0).abs() > 2.0, "{:?}", g.pixel);
+        // The table the overlay uploads: 33 poses for the one bucket, the middle at −10 ms.
+        let table = camera_from_lidar_rows(
+            &sweep,
+            &traj,
+            vehicle_from_lidar,
+            vehicle_from_camera,
+            (image_stamp, readout, k.height),
+        )
+        .unwrap();
+        assert_eq!(table.len(), SHUTTER_ROWS);
+        let middle = (traj.world_from_vehicle(image_stamp - 10_000_000).unwrap()
+            * vehicle_from_camera)
+            .inverse()
+            * traj.world_from_vehicle(sweep_stamp).unwrap()
+            * vehicle_from_lidar;
+        let (dr, dt) = table[SHUTTER_ROWS / 2].difference(middle);
+        assert!(dr < 1e-12 && dt < 1e-9, "{dr} {dt}");
+        assert_eq!(shutter_rows(RowTimes::GLOBAL), 1);
+        assert_eq!(shutter_rows(RowTimes::from_millis(5.0, 5.0)), 1);
     }
 
     #[test]
