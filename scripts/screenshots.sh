@@ -40,10 +40,12 @@ if want pandaset; then
   start --session "$tmp/one.json"; shot pandaset 6; stop
 fi
 if want pandaset-unical; then
-  # The optimiser panel on UniCal (its options, the hand-eye among them), chosen by the session.
+  # The optimiser panel on UniCal (its options, the hand-eye among them), chosen by the session,
+  # with rolling-shutter cameras (NeuRAD's PandaSet readout) under the image.
   cat > "$tmp/unical.json" <<JSON
-{"rigcal_session": 1, "log": "$log", "initial": null, "current": null, "camera": 3,
- "view": {"color_by": "range", "tab": "optimise", "optimiser_method": "unical"}}
+{"rigcal_session": 1, "log": "$log", "initial": null, "current": null, "camera": 3, "frame": 15,
+ "view": {"color_by": "range", "tab": "optimise", "optimiser_method": "unical",
+          "camera_readout_ms": [-30.0, 10.0]}}
 JSON
   start --session "$tmp/unical.json"; shot pandaset-unical 6; stop
 fi
