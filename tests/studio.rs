@@ -255,8 +255,14 @@ fn occlusion_colour_modes_and_accumulation_change_what_is_drawn() {
     let frame = rendered_difference(&mut h, |s| s.frame = 8);
     assert!(frame > 5_000, "frame 8 changed only {frame} pixels");
     let global = h.state().overlay_transforms(0).len();
+    // A readout of no length first (one pose per bucket): the setting's fields appear, so the
+    // next picture differs from this one by the points alone.
+    let d = rendered_difference(&mut h, |s| s.camera_readout_ms = Some((0.0, 0.0)));
+    assert_eq!(h.state().overlay_transforms(0).len(), global);
+    assert!(d > 500, "the readout's fields changed only {d} pixels");
     let d = rendered_difference(&mut h, |s| s.camera_readout_ms = Some((-30.0, 10.0)));
     assert_eq!(h.state().overlay_transforms(0).len(), global * 33);
+    eprintln!("a rolling shutter changed {d} pixels");
     assert!(d > 2_000, "a rolling shutter changed only {d} pixels");
     assert!(
         s_status(&h).iter().all(|m| !m.starts_with("error")),

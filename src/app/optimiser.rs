@@ -586,7 +586,9 @@ pub(crate) fn readout_ui(readout_ms: &mut Option<(f64, f64)>, ui: &mut egui::Ui)
                 to the last (bottom edge), in milliseconds after the image's stamp (negative: \
                 before it). The overlay then projects every point from where the vehicle was \
                 when the row it falls on was exposed, and UniCal casts every ray so. As \
-                `rigcal calibrate --camera-readout-ms FIRST..LAST`.";
+                `rigcal calibrate --camera-readout-ms FIRST..LAST`. The alignment scores \
+                (Reprojection checks, the optimiser's table) and the other methods still \
+                project each image at its stamp.";
     if ui
         .checkbox(&mut rolling, "rolling-shutter cameras")
         .on_hover_text(help)

@@ -710,14 +710,23 @@ fn refresh(
     let mut transforms = Vec::with_capacity(sweeps.len());
     for (li, s) in &sweeps {
         let view = LidarSweep::view(s);
-        let t = camera_from_lidar_rows(
+        let t = match camera_from_lidar_rows(
             &view,
             &drive.trajectory,
             lidars[*li].vehicle_from_sensor,
             cam.vehicle_from_sensor,
             (image_stamp, readout, intrinsics.height),
-        )
-        .map_err(|e| format!("{camera} frame {frame}: {e}"))?;
+        ) {
+            Ok(t) => t,
+            Err(e) => {
+                // The image is new: draw no points rather than the last frame's over it.
+                cache.gpu_points = Arc::new(Vec::new());
+                cache.gpu_transforms.clear();
+                cache.cpu.clear();
+                cache.cpu_key = None;
+                return Err(format!("{camera} frame {frame}: {e}"));
+            }
+        };
         transforms.push(t);
     }
     cache.sweeps = sweeps;
@@ -779,11 +788,13 @@ fn upload_gpu_points(
     }
     stride.hash(&mut h);
     let key = h.finish();
-    // The camera (origin, optical axis) in each sweep's LiDAR frame at its first bucket.
+    // The camera (origin, optical axis) in each sweep's LiDAR frame at its first bucket (the
+    // middle row's pose of a rolling shutter).
+    let middle = cache.gpu_rows.max(1) as usize / 2;
     let cameras_in_lidar: Vec<(glam::DVec3, glam::DVec3)> = transforms
         .iter()
         .map(|t| {
-            let lidar_from_camera = t.first().copied().unwrap_or_default().inverse();
+            let lidar_from_camera = t.get(middle).copied().unwrap_or_default().inverse();
             (
                 lidar_from_camera.translation,
                 lidar_from_camera.rotation * glam::DVec3::Z,

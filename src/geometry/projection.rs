@@ -441,6 +441,34 @@ mod tests {
         assert!(dr < 1e-12 && dt < 1e-9, "{dr} {dt}");
         assert_eq!(shutter_rows(RowTimes::GLOBAL), 1);
         assert_eq!(shutter_rows(RowTimes::from_millis(5.0, 5.0)), 1);
+        // A sweep fired over 3 ms: the table is bucket-major, entry `b * rows + r` the camera at
+        // row r's time (r / 32 of the way from −30 to +10 ms) and the LiDAR at bucket b's.
+        let times = [0.0f32, 0.001, 0.002, 0.003];
+        let timed = SweepView {
+            time_offset_secs: Some(&times),
+            ..sweep
+        };
+        let table = camera_from_lidar_rows(
+            &timed,
+            &traj,
+            vehicle_from_lidar,
+            vehicle_from_camera,
+            (image_stamp, readout, k.height),
+        )
+        .unwrap();
+        assert_eq!(table.len(), 4 * SHUTTER_ROWS);
+        for (b, r) in [(0, 0), (1, 5), (2, 32), (3, 16)] {
+            let row_nanos = -30_000_000 + 40_000_000 * r as i64 / 32;
+            let expected = (traj.world_from_vehicle(image_stamp + row_nanos).unwrap()
+                * vehicle_from_camera)
+                .inverse()
+                * traj
+                    .world_from_vehicle(sweep_stamp + b as i64 * 1_000_000)
+                    .unwrap()
+                * vehicle_from_lidar;
+            let (dr, dt) = table[b * SHUTTER_ROWS + r].difference(expected);
+            assert!(dr < 1e-12 && dt < 1e-9, "bucket {b} row {r}: {dr} {dt}");
+        }
     }
 
     #[test]
