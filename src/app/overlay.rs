@@ -18,8 +18,8 @@ use super::state::{ColorBy, ExtrinsicsView, HoverReadout, Studio};
 use crate::calib::{Rig, SensorKind};
 use crate::geometry::Rigid;
 use crate::geometry::projection::{
-    ProjectedPoint, camera_from_lidar_rows, point_buckets, project_sweep_rolling, shutter_rows,
-    visible_points,
+    ProjectedPoint, bucket_count, camera_from_lidar_rows, point_buckets, project_sweep_rolling,
+    shutter_rows, visible_points,
 };
 use crate::log::{Drive, LidarSweep};
 
@@ -707,6 +707,11 @@ fn refresh(
     };
     let lidars: Vec<_> = rig.lidars().collect();
     let intrinsics = cam.camera.as_ref().ok_or("camera has no intrinsics")?;
+    let buckets: usize = sweeps
+        .iter()
+        .map(|(_, s)| bucket_count(&LidarSweep::view(s)))
+        .sum();
+    let rows = overlay_rows(readout, buckets);
     let mut transforms = Vec::with_capacity(sweeps.len());
     for (li, s) in &sweeps {
         let view = LidarSweep::view(s);
@@ -716,6 +721,7 @@ fn refresh(
             lidars[*li].vehicle_from_sensor,
             cam.vehicle_from_sensor,
             (image_stamp, readout, intrinsics.height),
+            rows,
         ) {
             Ok(t) => t,
             Err(e) => {
@@ -731,13 +737,30 @@ fn refresh(
     }
     cache.sweeps = sweeps;
     let cone_cos = view_cone_cos(intrinsics);
-    cache.gpu_rows = shutter_rows(readout) as u32;
+    cache.gpu_rows = rows as u32;
     upload_gpu_points(cache, &transforms, studio.overlay.stride, cone_cos);
     cache.cpu.clear();
     cache.cpu_key = None;
     cache.key = Some(key);
     cache.rig = Some(rig);
     Ok(())
+}
+
+/// Transforms one camera's overlay table may hold (4 MiB as f32): the rows of a rolling
+/// shutter thin out when many sweeps are accumulated (30 each side of two LiDARs), instead of
+/// 26 MB per camera on every refresh.
+const MAX_OVERLAY_TRANSFORMS: usize = 1 << 16;
+
+/// Camera poses per firing-time bucket for `buckets` buckets: one for a shutter without
+/// readout, else [`SHUTTER_ROWS`](crate::geometry::projection::SHUTTER_ROWS) or fewer to
+/// stay within [`MAX_OVERLAY_TRANSFORMS`], at least 3, always odd (one at the middle row).
+fn overlay_rows(readout: crate::geometry::RowTimes, buckets: usize) -> usize {
+    let rows = shutter_rows(readout);
+    if rows == 1 {
+        return 1;
+    }
+    let fit = (MAX_OVERLAY_TRANSFORMS / buckets.max(1)).clamp(3, rows);
+    fit - (1 - fit % 2)
 }
 
 /// Rebuild the GPU point list when the set of sweeps changed; always refresh the transforms.
@@ -969,6 +992,23 @@ fn ensure_cpu(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_rolling_shutters_rows_thin_out_to_bound_the_table() {
+        use crate::geometry::RowTimes;
+        let rolling = RowTimes::from_millis(-30.0, 10.0);
+        assert_eq!(overlay_rows(RowTimes::GLOBAL, 12_200), 1);
+        // One sweep of each of two LiDARs (100 buckets each): every row.
+        assert_eq!(overlay_rows(rolling, 200), 33);
+        // ± 10 sweeps: 4200 buckets, 15 rows; ± 30: 12 200 buckets, 5 rows; odd, at least 3.
+        assert_eq!(overlay_rows(rolling, 4_200), 15);
+        assert_eq!(overlay_rows(rolling, 12_200), 5);
+        assert_eq!(overlay_rows(rolling, 1_000_000), 3);
+        for buckets in 1..20_000 {
+            let rows = overlay_rows(rolling, buckets);
+            assert!(rows % 2 == 1 && (rows * buckets <= MAX_OVERLAY_TRANSFORMS || rows == 3));
+        }
+    }
 
     #[test]
     fn an_image_larger_than_the_gpu_allows_is_shrunk_keeping_its_aspect() {

@@ -144,21 +144,30 @@ pub fn camera_from_lidar_buckets(
         vehicle_from_lidar,
         vehicle_from_camera,
         (image_stamp_nanos, RowTimes::GLOBAL, 1),
+        1,
     )
 }
 
+/// The firing-time buckets of a sweep: one per millisecond its points span (one for a
+/// deskewed sweep); [`camera_from_lidar_buckets`] gives a transform for each.
+pub fn bucket_count(sweep: &SweepView<'_>) -> usize {
+    bucket_range(sweep).map_or(1, |(first, last)| (last - first + 1) as usize)
+}
+
 /// As [`camera_from_lidar_buckets`] for an image exposed row by row: `image` is its stamp,
-/// its readout and its height (rows). [`shutter_rows`] transforms per bucket, bucket-major
+/// its readout and its height (rows). `rows` transforms per bucket ([`shutter_rows`], or
+/// fewer to bound the table; odd keeps one at the middle row), bucket-major
 /// (`[bucket * rows + row]`), row `k` at the time of image row `k / (rows − 1)` of the way
-/// from the top edge to the bottom edge.
+/// from the top edge to the bottom edge; one row is at the stamp plus the readout's start.
 pub fn camera_from_lidar_rows(
     sweep: &SweepView<'_>,
     trajectory: &Trajectory,
     vehicle_from_lidar: Rigid,
     vehicle_from_camera: Rigid,
     (image_stamp_nanos, readout, height): (i64, RowTimes, u32),
+    rows: usize,
 ) -> Result<Vec<Rigid>, TrajectoryError> {
-    let rows = shutter_rows(readout);
+    let rows = rows.max(1);
     let cameras_from_world = (0..rows)
         .map(|k| {
             let offset = if rows == 1 {
@@ -214,14 +223,15 @@ pub fn project_sweep_rolling(
     stride: usize,
 ) -> Result<Vec<ProjectedPoint>, TrajectoryError> {
     let (first_bucket, _) = bucket_range(sweep).unwrap_or((0, 0));
+    let rows = shutter_rows(readout);
     let camera_from_lidar = camera_from_lidar_rows(
         sweep,
         trajectory,
         vehicle_from_lidar,
         vehicle_from_camera,
         (image_stamp_nanos, readout, intrinsics.height),
+        rows,
     )?;
-    let rows = shutter_rows(readout);
     let bucket_count = camera_from_lidar.len() / rows;
     let stride = stride.max(1);
     let n = sweep.points_in_lidar.len();
@@ -438,9 +448,12 @@ mod tests {
             vehicle_from_lidar,
             vehicle_from_camera,
             (image_stamp, readout, k.height),
+            SHUTTER_ROWS,
         )
         .unwrap();
         assert_eq!(table.len(), 4 * SHUTTER_ROWS);
+        assert_eq!(bucket_count(&timed), 4);
+        assert_eq!(bucket_count(&sweep), 1);
         for (b, r) in [(0, 0), (1, 5), (2, 32), (3, 16)] {
             let row_nanos = -30_000_000 + 40_000_000 * r as i64 / 32;
             let expected = (traj.world_from_vehicle(image_stamp + row_nanos).unwrap()
