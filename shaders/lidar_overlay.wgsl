@@ -7,9 +7,10 @@
 // bucket's time, the LiDAR and camera extrinsics and the image stamp) moves a point into the
 // camera's optical frame; a rolling-shutter camera has `rows` poses per bucket, from the image's
 // top edge to its bottom edge, and a point is moved by the middle one first, then by the one of
-// the row it fell on (a global shutter has one); the camera model (pinhole, plumb_bob / rational_polynomial radial-tangential, or
-// equidistant fisheye, as in src/geometry/camera.rs) gives the pixel, and the view (zoom and
-// pan: image pixels `view_min .. view_min + view_size`) the pixel of the viewport target.
+// the row it fell on (a global shutter has one). The camera model (pinhole, plumb_bob /
+// rational_polynomial radial-tangential, or equidistant fisheye, as in src/geometry/camera.rs)
+// gives the pixel, and the view (zoom and pan: image pixels `view_min .. view_min + view_size`)
+// the pixel of the viewport target.
 //
 // Points are splatted with atomics instead of rasterised triangles: on software Vulkan
 // (lavapipe, what CPU-only laptops run) this is several times faster than one small triangle

@@ -97,8 +97,8 @@ pub struct SessionView {
     /// `unical-lidar`, `unical`; empty: the default).
     #[serde(default, skip_serializing_if = "String::is_empty")]
     pub optimiser_method: String,
-    /// The optimiser panel's rolling-shutter readout (first and last row, ms after each
-    /// image's stamp); absent: a global shutter.
+    /// The cameras' rolling-shutter readout set under the image (first and last row, ms after
+    /// each image's stamp; the overlay and UniCal's runs use it); absent: a global shutter.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub camera_readout_ms: Option<[f64; 2]>,
 }

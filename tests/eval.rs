@@ -287,7 +287,7 @@ fn the_command_prints_tables_and_fails_with_the_file_named() {
 
 /// `--camera-readout-ms` reaches the photometric metrics: with a rolling shutter the images'
 /// rows are placed at their own times, so the inconsistency changes; without `--photometric`
-/// (or with a malformed readout) it is refused by name.
+/// or a log, or malformed, it is refused by name.
 #[test]
 fn a_rolling_shutter_readout_reaches_the_photometric_metrics() {
     let json = pandaset_dir().join("ground_truth.json");
@@ -322,6 +322,12 @@ fn a_rolling_shutter_readout_reaches_the_photometric_metrics() {
         e.contains("--camera-readout-ms applies to --photometric only"),
         "{e}"
     );
+    let no_log = EvalArgs {
+        log: None,
+        ..args(Some("-30..10"), true)
+    };
+    let e = evaluate(&no_log, &mut |_, _| {}).unwrap_err();
+    assert!(e.contains("measure on a log: give one"), "{e}");
     let e = evaluate(&args(Some("-30"), true), &mut |_, _| {}).unwrap_err();
     assert!(
         e.contains("--camera-readout-ms '-30': expected FIRST..LAST"),

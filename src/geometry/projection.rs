@@ -158,7 +158,7 @@ pub fn bucket_count(sweep: &SweepView<'_>) -> usize {
 /// its readout and its height (rows). `rows` transforms per bucket ([`shutter_rows`], or
 /// fewer to bound the table; odd keeps one at the middle row), bucket-major
 /// (`[bucket * rows + row]`), row `k` at the time of image row `k / (rows − 1)` of the way
-/// from the top edge to the bottom edge; one row is at the stamp plus the readout's start.
+/// from the top edge to the bottom edge; a single row is the middle row's.
 pub fn camera_from_lidar_rows(
     sweep: &SweepView<'_>,
     trajectory: &Trajectory,
@@ -171,7 +171,7 @@ pub fn camera_from_lidar_rows(
     let cameras_from_world = (0..rows)
         .map(|k| {
             let offset = if rows == 1 {
-                readout.first_row_nanos
+                readout.middle_nanos()
             } else {
                 let y = k as f64 / (rows - 1) as f64 * f64::from(height) - 0.5;
                 readout.offset_nanos(y, height)
@@ -232,7 +232,7 @@ pub fn project_sweep_rolling(
         (image_stamp_nanos, readout, intrinsics.height),
         rows,
     )?;
-    let bucket_count = camera_from_lidar.len() / rows;
+    let buckets = camera_from_lidar.len() / rows;
     let stride = stride.max(1);
     let n = sweep.points_in_lidar.len();
     Ok((0..n.div_ceil(stride))
@@ -241,9 +241,7 @@ pub fn project_sweep_rolling(
         .filter_map(|k| {
             let i = k * stride;
             let b = match sweep.time_offset_secs {
-                Some(t) => {
-                    (bucket_of(t[i]) - first_bucket).clamp(0, bucket_count as i64 - 1) as usize
-                }
+                Some(t) => (bucket_of(t[i]) - first_bucket).clamp(0, buckets as i64 - 1) as usize,
                 None => 0,
             };
             let p = sweep.points_in_lidar[i];
