@@ -277,7 +277,7 @@ fn name_problem(name: &str) -> Option<&'static str> {
     }
 }
 
-/// `name` as the calibration file accepts it ([`name_problem`]): trimmed, each control
+/// `name` as the calibration file accepts it (`name_problem`): trimmed, each control
 /// character replaced by `_`. Empty stays empty.
 pub fn exportable_name(name: &str) -> String {
     name.trim()

@@ -18,7 +18,7 @@
 //! Davenport's q-method; directions of pairs that turn count less, as they depend on `p_X`).
 //! `p_X` is then linear: with `u = R_X t̂_C` and `P = I − u uᵀ`, `P (R_V − I) p_X = −P t_V`
 //! for every pair, by least squares with a weak pull to the start. Pairs whose residual is far
-//! above the median are dropped. Then [`refine`] fits all six parameters to every pair's
+//! above the median are dropped. Then `refine` fits all six parameters to every pair's
 //! matches directly: each pair's predicted motion `X⁻¹ V X` gives an essential matrix, and the
 //! matches' Sampson distances to it are minimised (Levenberg–Marquardt, Cauchy weights). A
 //! scene that is mostly one façade leaves a free essential matrix ill-posed, not this one;
@@ -112,7 +112,7 @@ const MIN_TURN_DEG: f64 = 3.0;
 /// The camera's motion from matched rays (unit, in each camera's frame) of two images:
 /// `camera_a_from_camera_b`'s rotation and the unit direction of camera `b` seen from `a`,
 /// with the verified matches (`rays_a`, `rays_b`). `None` when RANSAC finds fewer than
-/// [`MIN_INLIERS`] agreeing matches, or fewer lie in front of both cameras.
+/// `MIN_INLIERS` agreeing matches, or fewer lie in front of both cameras.
 pub fn relative_motion(
     rays_a: &[DVec3],
     rays_b: &[DVec3],

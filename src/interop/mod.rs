@@ -3,7 +3,7 @@
 //! How it works: [`export`] turns a native calibration document into the files of one
 //! [`ExportFormat`] in memory (text, or an MCAP written to memory), each file
 //! naming the direction of every transform it holds in a key or a comment (`p_parent =
-//! parent_from_child · p_child`). [`write`] puts them on disk atomically: one file, or one file
+//! parent_from_child · p_child`). [`write`](fn@write) puts them on disk atomically: one file, or one file
 //! per camera in a directory for the per-camera formats. [`import::load_initial_guess`] reads
 //! the native file, URDF, ROS camera_info YAML or the `/tf_static` of any MCAP *onto* a base
 //! rig (the log's sensors), matching sensors by frame id or name, so another tool's file becomes
@@ -422,7 +422,7 @@ pub(crate) fn pick<'a>(
     }
 }
 
-/// Where [`write`] puts `export`'s files for `--out` `out`: the file itself, or one file per
+/// Where [`write`](fn@write) puts `export`'s files for `--out` `out`: the file itself, or one file per
 /// camera inside the directory.
 pub fn paths(export: &Export, out: &Path) -> Vec<PathBuf> {
     if export.format.is_directory() {

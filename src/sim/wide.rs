@@ -4,7 +4,7 @@
 //! 64-bit vector multiply, so the floors and SplitMix64 hashes behind every procedural texture
 //! and every pixel's sensor noise run one at a time. The texture, sky and tone code is therefore
 //! compiled three times: for the baseline, for AVX2 (with SSE4.1's rounding) and for AVX-512
-//! (F, DQ, VL, BW: eight 64-bit hashes in one `vpmullq`), and [`dispatch_wide!`] runs the best
+//! (F, DQ, VL, BW: eight 64-bit hashes in one `vpmullq`), and `dispatch_wide!` runs the best
 //! copy the CPU has. The wide copies take `WIDE = true`, which switches to forms written for
 //! vectors (fBm octaves side by side, batched noise lanes, `floor` by rounding); all copies do
 //! the same IEEE operations in the same order (Rust never contracts a multiply and an add into

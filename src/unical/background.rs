@@ -3,7 +3,7 @@
 //! inverted-sphere coordinates, sampled 16 times per ray.
 //!
 //! Around the box's centre `c` with the sphere of radius `R` that encloses the box, a point `x`
-//! at `p = x − c`, `r = |p|` maps to `(atan2(p_y, p_x)/2π + ½, asin(p_z/r)/π + ½, R/r)` ∈ [0,1]³
+//! at `p = x − c`, `r = |p|` maps to `(atan2(p_y, p_x)/2π + ½, asin(p_z/r)/π + ½, R/r)` ∈ \[0,1\]³
 //! (the neurad-unisim form of NeRF++'s inverted sphere): direction and disparity, so the
 //! infinite outside becomes a bounded cube. A hash grid and an MLP on it give `[s, f]` like the
 //! scene field, turned into opacity by the same `α = sigmoid(−β s)`. Samples are uniform in

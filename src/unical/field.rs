@@ -1,7 +1,7 @@
 //! The scene field (main Eq. 1): `[s, f] = MLP_geo(h(x))` — signed distance and appearance
 //! feature at a world point, from the hash encoding of the point's position in the scene box.
 //!
-//! World points map to [0,1]³ by the scene's axis-aligned box (from the aggregated LiDAR plus a
+//! World points map to \[0,1\]³ by the scene's axis-aligned box (from the aggregated LiDAR plus a
 //! margin, method.md §2), each axis by its own extent; with [`FieldConfig::cubic_box`] all by the
 //! largest, so a street scene tens of metres high and hundreds long gets cells as tall as wide. The geometry MLP is the paper's two layers of 64 (`L·F → 64 → 1 + d_f`);
 //! its SDF output starts at +`initial_sdf_m` (free space everywhere) so the first renders see
@@ -19,7 +19,7 @@ pub struct FieldConfig {
     pub hidden: usize,
     pub feature_dim: usize,
     pub initial_sdf_m: f32,
-    /// Map the box to [0,1]³ by its largest extent on every axis (cubic cells) instead of each
+    /// Map the box to \[0,1\]³ by its largest extent on every axis (cubic cells) instead of each
     /// axis by its own (cells as many times finer vertically as the box is flatter).
     pub cubic_box: bool,
 }

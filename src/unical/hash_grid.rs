@@ -2,7 +2,7 @@
 //! pass and its spatial gradient.
 //!
 //! How it works. Level `l` has `scale_l = 2^(l·log2 b)·N_min − 1` and `res_l = ⌈scale_l⌉ + 1`
-//! cells per axis (b spaces the levels geometrically from N_min to N_max). A point x ∈ [0,1]³ sits
+//! cells per axis (b spaces the levels geometrically from N_min to N_max). A point x ∈ \[0,1\]³ sits
 //! at `pos = x·scale_l + 0.5` (the half-cell offset staggers levels); its 8 surrounding lattice
 //! corners are looked up — directly (x fastest) when the level's lattice fits in its table, else by
 //! the spatial hash `(x·1 ⊕ y·2654435761 ⊕ z·805459861) mod T` — and trilinearly blended. Levels
@@ -403,7 +403,7 @@ impl HashGrid {
         }
     }
 
-    /// Encode `x` ∈ [0,1]³ into `out` (length `L·F`). Every level's corners are found before
+    /// Encode `x` ∈ \[0,1\]³ into `out` (length `L·F`). Every level's corners are found before
     /// any is read, so the table reads (random, into tens of megabytes) are independent loads
     /// the processor overlaps instead of each waiting behind the next level's arithmetic.
     pub fn encode(&self, x: [f32; 3], out: &mut [f32]) {

@@ -1,7 +1,7 @@
 //! How crowded the scene's hash tables are: per level of the grid, the lattice points inside the
 //! occupied part of the scene against the table slots they are stored in.
 //!
-//! How it works. The scene box maps to [0,1]³ and level `l`'s lattice point `c` sits at
+//! How it works. The scene box maps to \[0,1\]³ and level `l`'s lattice point `c` sits at
 //! `(c − 0.5)/scale_l` along each axis ([`HashGrid::encode`]'s half-cell offset). For each
 //! occupied voxel (disjoint, half-open boxes) the lattice points inside it are the integers
 //! in `[⌈lo·scale + 0.5⌉, ⌈hi·scale + 0.5⌉)` per axis, so no point is counted twice; each is
@@ -38,7 +38,7 @@ impl LevelLoad {
     }
 }
 
-/// Every level's load over `boxes` (`[lo, hi)` in the grid's [0,1]³, disjoint).
+/// Every level's load over `boxes` (`[lo, hi)` in the grid's \[0,1\]³, disjoint).
 pub fn level_loads(grid: &HashGrid, boxes: &[([f64; 3], [f64; 3])]) -> Vec<LevelLoad> {
     (0..grid.config.levels.max(1))
         .map(|l| {

@@ -27,7 +27,7 @@ pub struct MlpGrad {
 
 /// Activations of one forward pass, all in one buffer (one allocation per sample on the hot
 /// path): the input (`input_len` values), then each layer's output in turn (after ReLU for
-/// hidden layers); the network's widths say where each one starts ([`Mlp::activation`]).
+/// hidden layers); the network's widths say where each one starts (`Mlp::activation`).
 #[derive(Clone, Debug, Default)]
 pub struct Trace {
     data: Vec<f32>,
