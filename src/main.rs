@@ -286,8 +286,9 @@ enum Command {
         /// and the image delay at which it is best
         #[arg(long)]
         photometric: bool,
-        /// With --photometric: the cameras have a rolling shutter whose readout began FIRST and
-        /// ended LAST milliseconds after each image's stamp (as calibrate's option of that name)
+        /// With a log: the cameras have a rolling shutter whose readout began FIRST and ended
+        /// LAST milliseconds after each image's stamp (as calibrate's option of that name), for
+        /// the edge-alignment and photometric metrics
         #[arg(long, value_name = "FIRST..LAST", allow_hyphen_values = true)]
         camera_readout_ms: Option<String>,
         /// Also write the report as JSON.

@@ -285,11 +285,11 @@ fn the_command_prints_tables_and_fails_with_the_file_named() {
     );
 }
 
-/// `--camera-readout-ms` reaches the photometric metrics: with a rolling shutter the images'
-/// rows are placed at their own times, so the inconsistency changes; without `--photometric`
-/// or a log, or malformed, it is refused by name.
+/// `--camera-readout-ms` reaches the photometric and edge-alignment metrics: with a rolling
+/// shutter the images' rows are placed at their own times, so both change; without a log, or
+/// malformed, it is refused by name.
 #[test]
-fn a_rolling_shutter_readout_reaches_the_photometric_metrics() {
+fn a_rolling_shutter_readout_reaches_the_photometric_and_edge_metrics() {
     let json = pandaset_dir().join("ground_truth.json");
     let mut rig = load_reference(&json).unwrap();
     // One camera and one LiDAR: one map and one camera to measure per readout.
@@ -317,17 +317,27 @@ fn a_rolling_shutter_readout_reaches_the_photometric_metrics() {
         (global - rolling).abs() > 1e-6 * global,
         "{global} {rolling}"
     );
-    let e = evaluate(&args(Some("-30..10"), false), &mut |_, _| {}).unwrap_err();
+    // The edge-alignment metric takes it too (without --photometric).
+    let edge = |readout| {
+        let report = evaluate(&args(readout, false), &mut |_, _| {}).unwrap();
+        assert!(report.photo_inconsistency.is_empty());
+        assert_eq!(report.edge_px.len(), 1);
+        report.edge_px[0].calibration.unwrap()
+    };
+    let (global, rolling) = (edge(None), edge(Some("-30..10")));
     assert!(
-        e.contains("--camera-readout-ms applies to --photometric only"),
-        "{e}"
+        (global - rolling).abs() > 1e-6 * global,
+        "{global} {rolling}"
     );
     let no_log = EvalArgs {
         log: None,
         ..args(Some("-30..10"), true)
     };
     let e = evaluate(&no_log, &mut |_, _| {}).unwrap_err();
-    assert!(e.contains("measure on a log: give one"), "{e}");
+    assert!(
+        e.contains("--camera-readout-ms applies to the metrics measured on a log: give one"),
+        "{e}"
+    );
     let e = evaluate(&args(Some("-30"), true), &mut |_, _| {}).unwrap_err();
     assert!(
         e.contains("--camera-readout-ms '-30': expected FIRST..LAST"),

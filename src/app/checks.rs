@@ -84,6 +84,7 @@ pub fn start(studio: &mut Studio) {
     let (initial, current) = (studio.initial.clone(), studio.current.clone());
     studio.checks.scored = Some((initial.clone(), current.clone()));
     let segments = studio.segments.clone();
+    let readout = studio.readout();
     let pairs = camera_lidar_pairs(&current);
     let (tx, rx) = channel();
     let cancel = Arc::new(AtomicBool::new(false));
@@ -95,7 +96,10 @@ pub fn start(studio: &mut Studio) {
                 break;
             }
             let _ = tx.send(Msg::Progress(k, total));
-            let score = |rig| EdgeAlignment::score_rig(&drive, rig, &cam, &lidar, 3, &segments);
+            let score = |rig| {
+                let pair = (cam.as_str(), lidar.as_str());
+                EdgeAlignment::score_rig_with_readout(&drive, rig, pair, 3, &segments, readout)
+            };
             let (before, after) = (score(&initial), score(&current));
             let msg = match (before, after) {
                 (Ok(b), Ok(a)) => Msg::Pair(PairScore {

@@ -438,10 +438,18 @@ pub fn start(studio: &mut Studio) {
         }));
         return;
     }
+    let readout = studio.readout();
     studio.optimiser.run = Some(Run::spawn_with(move || {
-        EdgeRefiner::new(&drive, &prepare_rig, &lidar, &cameras, frames, &segments)
-            .map(|r| Box::new(r) as Box<dyn Calibrator>)
-            .map_err(|e| e.to_string())
+        EdgeRefiner::new_with_readout(
+            &drive,
+            &prepare_rig,
+            (&lidar, &cameras),
+            frames,
+            &segments,
+            readout,
+        )
+        .map(|r| Box::new(r) as Box<dyn Calibrator>)
+        .map_err(|e| e.to_string())
     }));
 }
 
@@ -587,8 +595,9 @@ pub(crate) fn readout_ui(readout_ms: &mut Option<(f64, f64)>, ui: &mut egui::Ui)
                 before it). The overlay then projects every point from where the vehicle was \
                 when the row it falls on was exposed, and UniCal casts every ray so. As \
                 `rigcal calibrate --camera-readout-ms FIRST..LAST`. The alignment scores \
-                (Reprojection checks, the optimiser's table) and the other methods still \
-                project each image at its stamp.";
+                (Reprojection checks, the optimiser's table) and edge alignment do so too; \
+                mutual information and the checkerboards still project each image at its \
+                stamp.";
     if ui
         .checkbox(&mut rolling, "rolling-shutter cameras")
         .on_hover_text(help)

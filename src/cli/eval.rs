@@ -16,8 +16,8 @@
 //! sits off along the drive; and the focal-length scale (0.98 to 1.02) at which it is best: a
 //! scale away from 1 says the intrinsics' focal length is off, or (the same thing to one
 //! camera's images) that the camera sits off along its optical axis. With
-//! `--camera-readout-ms` the photometric metrics place each image row at its own time (a rolling
-//! shutter).
+//! `--camera-readout-ms` the edge-alignment and photometric metrics place each image row at its
+//! own time (a rolling shutter); the checkerboard metric still projects at the stamp.
 
 use std::path::PathBuf;
 
@@ -49,9 +49,9 @@ pub struct EvalArgs {
     pub checkerboard: bool,
     /// Also the photometric consistency of every camera over the LiDAR map, and its best delay.
     pub photometric: bool,
-    /// With `photometric`: the cameras' rolling-shutter readout as `FIRST..LAST` milliseconds
-    /// from each image's stamp ([`crate::geometry::RowTimes::parse_millis`]); `None`: a global
-    /// shutter.
+    /// With a log: the cameras' rolling-shutter readout as `FIRST..LAST` milliseconds from each
+    /// image's stamp ([`crate::geometry::RowTimes::parse_millis`]) for the edge-alignment and
+    /// photometric metrics; `None`: a global shutter.
     pub camera_readout_ms: Option<String>,
 }
 
@@ -165,19 +165,18 @@ pub fn evaluate(
     };
     let camera_readout = match &args.camera_readout_ms {
         None => RowTimes::GLOBAL,
-        Some(_) if !args.photometric => {
-            return Err("--camera-readout-ms applies to --photometric only".into());
-        }
         Some(_) if args.log.is_none() => {
-            return Err("--camera-readout-ms and --photometric measure on a log: give one".into());
+            return Err(
+                "--camera-readout-ms applies to the metrics measured on a log: give one".into(),
+            );
         }
         Some(text) => {
             RowTimes::parse_millis(text).map_err(|e| format!("--camera-readout-ms {e}"))?
         }
     };
     if let Some(log) = &args.log {
-        // The readout places each image row of the photometric metrics at its own time, and
-        // leaves out of them the images with rows outside the trajectory.
+        // The readout places each image row of the edge-alignment and photometric metrics at
+        // its own time, and leaves out of them the images with rows outside the trajectory.
         let options = crate::log::DriveOptions {
             camera_readout,
             ..crate::log::DriveOptions::default()

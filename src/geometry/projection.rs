@@ -308,6 +308,24 @@ pub fn visible_points(
         .collect()
 }
 
+/// For tests of rolling-shutter projections: a drive at 8 m/s along x for a second, and a
+/// camera on it 0.5 m right of the origin, 1.5 m up, looking right (−y), x along the drive.
+#[cfg(test)]
+pub(crate) fn sideways_camera_at_8_mps() -> (Trajectory, Rigid) {
+    let trajectory = Trajectory::new(vec![
+        (0, Rigid::IDENTITY),
+        (
+            1_000_000_000,
+            Rigid::from_translation(DVec3::new(8.0, 0.0, 0.0)),
+        ),
+    ]);
+    let vehicle_from_camera = Rigid::new(
+        glam::DQuat::from_mat3(&glam::DMat3::from_cols(DVec3::X, DVec3::Z, -DVec3::Y)),
+        DVec3::new(0.0, -0.5, 1.5),
+    );
+    (trajectory, vehicle_from_camera)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -373,17 +391,7 @@ mod tests {
     #[test]
     fn a_rolling_shutter_projects_each_point_from_its_rows_pose() {
         // 8 m/s along x, a camera looking sideways (−y), a deskewed sweep.
-        let traj = Trajectory::new(vec![
-            (0, Rigid::IDENTITY),
-            (
-                1_000_000_000,
-                Rigid::new(DQuat::IDENTITY, DVec3::new(8.0, 0.0, 0.0)),
-            ),
-        ]);
-        let vehicle_from_camera = Rigid::new(
-            DQuat::from_mat3(&glam::DMat3::from_cols(DVec3::X, DVec3::Z, -DVec3::Y)),
-            DVec3::new(0.0, -0.5, 1.5),
-        );
+        let (traj, vehicle_from_camera) = sideways_camera_at_8_mps();
         let vehicle_from_lidar = Rigid::new(DQuat::IDENTITY, DVec3::new(0.0, 0.0, 1.8));
         let k = CameraIntrinsics::pinhole(640, 480, 500.0, 500.0, 320.0, 240.0);
         let readout = RowTimes::from_millis(-30.0, 10.0);

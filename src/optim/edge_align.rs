@@ -11,13 +11,20 @@
 //! points leaving the image cost τ). A compass (pattern) search over the six right-perturbation
 //! coordinates of `vehicle_from_camera` minimises it: try ±step on each coordinate, keep the best
 //! improvement, halve the steps when none improves.
+//!
+//! A rolling-shutter camera ([`RowTimes`]): the points are moved into the vehicle frame at the
+//! image's middle row's time, and each frame keeps the vehicle's motion from there to 33 rows
+//! spread from its top edge to its bottom edge; a point is projected through the middle row's
+//! pose, then again through the pose of the row it fell on. Frames with rows outside the
+//! trajectory are left out.
 
 use glam::DVec3;
 
 use crate::calib::Rig;
 use crate::eval::edges;
 use crate::geometry::camera::CameraIntrinsics;
-use crate::geometry::{Rigid, TrajectoryError};
+use crate::geometry::projection::SHUTTER_ROWS;
+use crate::geometry::{Rigid, RowTimes, Trajectory, TrajectoryError};
 use crate::log::{Drive, LidarSweep, LogError};
 
 /// One image with silhouettes ready for scoring.
@@ -27,10 +34,14 @@ pub struct EdgeFrame {
     pub height: usize,
     /// Distance (px) from each pixel to the nearest image edge.
     pub distance_px: Vec<f32>,
-    /// Silhouette points in the vehicle frame at the image's stamp.
+    /// Silhouette points in the vehicle frame at the image's stamp (its middle row's time
+    /// with a rolling shutter).
     pub points_in_vehicle: Vec<DVec3>,
     /// Stamp of the LiDAR sweep the silhouettes come from (0 when unknown).
     pub sweep_stamp_nanos: i64,
+    /// A rolling shutter: the vehicle frame at row k's time from the one at the middle row's,
+    /// for rows spread from the top edge to the bottom edge; empty for a global shutter.
+    pub rows_from_middle: Vec<Rigid>,
 }
 
 /// The edge-alignment problem of one camera against one reference LiDAR.
@@ -187,7 +198,58 @@ impl EdgeFrame {
             distance_px: edges::distance_transform(&edges::image_edges(image), w, h),
             points_in_vehicle,
             sweep_stamp_nanos: 0,
+            rows_from_middle: Vec::new(),
         }
+    }
+
+    /// The frame of an image stamped `image_stamp_nanos` read out row by row (`readout`),
+    /// its points already in the vehicle frame at the middle row's time.
+    pub fn rolling(
+        mut self,
+        trajectory: &Trajectory,
+        image_stamp_nanos: i64,
+        readout: RowTimes,
+    ) -> Result<Self, TrajectoryError> {
+        self.rows_from_middle.clear();
+        if readout.first_row_nanos == readout.last_row_nanos {
+            return Ok(self);
+        }
+        let world_from_middle =
+            trajectory.world_from_vehicle(image_stamp_nanos + readout.middle_nanos())?;
+        let height = self.height as u32;
+        for k in 0..SHUTTER_ROWS {
+            let y = k as f64 / (SHUTTER_ROWS - 1) as f64 * f64::from(height) - 0.5;
+            let t = image_stamp_nanos + readout.offset_nanos(y, height);
+            self.rows_from_middle
+                .push(trajectory.world_from_vehicle(t)?.inverse() * world_from_middle);
+        }
+        Ok(self)
+    }
+
+    /// The pixel of point `q` (vehicle frame, middle row's time), `None` within 10 cm of the
+    /// camera's plane or behind it: through the middle row's pose, then, with a rolling
+    /// shutter, through the pose of the row it fell on.
+    fn pixel(
+        &self,
+        intrinsics: &CameraIntrinsics,
+        camera_from_vehicle: Rigid,
+        q: DVec3,
+    ) -> Option<glam::DVec2> {
+        let through = |q: DVec3| {
+            let p = camera_from_vehicle.transform_point(q);
+            if p.z > 0.1 {
+                intrinsics.project(p)
+            } else {
+                None
+            }
+        };
+        let px = through(q)?;
+        if self.rows_from_middle.is_empty() {
+            return Some(px);
+        }
+        let fraction = RowTimes::row_fraction(px.y, self.height as u32);
+        let row = (fraction * (self.rows_from_middle.len() - 1) as f64).round() as usize;
+        through(self.rows_from_middle[row].transform_point(q))
     }
 
     /// Bilinear distance at a pixel centre coordinate; `None` outside the image.
@@ -210,6 +272,7 @@ impl EdgeFrame {
 impl EdgeAlignment {
     /// Prepare `frames` evenly spaced frames of `camera` against `lidar` from a drive, using the
     /// extrinsics of `rig` for the LiDAR. `segments_nanos` limits the frames to time ranges (empty: all).
+    /// The cameras' readout is the drive's ([`Drive::camera_readout`]).
     pub fn from_drive(
         drive: &Drive,
         rig: &Rig,
@@ -217,6 +280,27 @@ impl EdgeAlignment {
         lidar: &str,
         frames: usize,
         segments_nanos: &[(i64, i64)],
+    ) -> Result<Self, AlignError> {
+        let pair = (camera, lidar);
+        Self::from_drive_with_readout(
+            drive,
+            rig,
+            pair,
+            frames,
+            segments_nanos,
+            drive.camera_readout,
+        )
+    }
+
+    /// [`Self::from_drive`] for `(camera, lidar)` with the cameras read out as `readout` (the
+    /// studio keeps its readout apart from its drive).
+    pub fn from_drive_with_readout(
+        drive: &Drive,
+        rig: &Rig,
+        (camera, lidar): (&str, &str),
+        frames: usize,
+        segments_nanos: &[(i64, i64)],
+        readout: RowTimes,
     ) -> Result<Self, AlignError> {
         let cam = rig
             .sensor(camera)
@@ -232,15 +316,30 @@ impl EdgeAlignment {
         let mut out = Vec::with_capacity(frames);
         for pair in sweep_image_pairs(drive, camera, lidar, frames, segments_nanos)? {
             let image = drive.load_image(camera, pair.image_index)?;
-            let points = silhouettes_in_vehicle(
+            let middle_nanos = pair.image_stamp_nanos + readout.middle_nanos();
+            let Ok(points) = silhouettes_in_vehicle(
                 &pair.sweep,
                 &drive.trajectory,
                 vehicle_from_lidar,
+                middle_nanos,
+            ) else {
+                continue;
+            };
+            // A frame with rows outside the trajectory is left out.
+            let Ok(mut frame) = EdgeFrame::new(&image, points).rolling(
+                &drive.trajectory,
                 pair.image_stamp_nanos,
-            )?;
-            let mut frame = EdgeFrame::new(&image, points);
+                readout,
+            ) else {
+                continue;
+            };
             frame.sweep_stamp_nanos = pair.sweep.stamp_nanos;
             out.push(frame);
+        }
+        if out.is_empty() {
+            return Err(AlignError::Setup(format!(
+                "no image of '{camera}' with every row inside the trajectory near a sweep of '{lidar}'"
+            )));
         }
         let mut problem = Self {
             camera: camera.into(),
@@ -263,7 +362,33 @@ impl EdgeAlignment {
         frames: usize,
         segments_nanos: &[(i64, i64)],
     ) -> Result<(f64, Vec<f32>), AlignError> {
-        let problem = Self::from_drive(drive, rig, camera, lidar, frames, segments_nanos)?;
+        Self::score_rig_with_readout(
+            drive,
+            rig,
+            (camera, lidar),
+            frames,
+            segments_nanos,
+            drive.camera_readout,
+        )
+    }
+
+    /// [`Self::score_rig`] for `(camera, lidar)` with the cameras read out as `readout`.
+    pub fn score_rig_with_readout(
+        drive: &Drive,
+        rig: &Rig,
+        (camera, lidar): (&str, &str),
+        frames: usize,
+        segments_nanos: &[(i64, i64)],
+        readout: RowTimes,
+    ) -> Result<(f64, Vec<f32>), AlignError> {
+        let problem = Self::from_drive_with_readout(
+            drive,
+            rig,
+            (camera, lidar),
+            frames,
+            segments_nanos,
+            readout,
+        )?;
         let t = rig
             .sensor(camera)
             .ok_or_else(|| AlignError::Setup(format!("no sensor '{camera}' in the rig")))?
@@ -322,15 +447,11 @@ impl EdgeAlignment {
         let mut out = Vec::with_capacity(self.point_count());
         for f in &self.frames {
             for q in &f.points_in_vehicle {
-                let p = camera_from_vehicle.transform_point(*q);
-                let d = if p.z <= 0.1 {
-                    tau
-                } else {
-                    self.intrinsics
-                        .project(p)
-                        .and_then(|px| f.distance_at(px.x, px.y))
-                        .map_or(tau, |d| d.min(tau))
-                };
+                // Behind the camera (no pixel) or outside the image: τ.
+                let d = f
+                    .pixel(&self.intrinsics, camera_from_vehicle, *q)
+                    .and_then(|px| f.distance_at(px.x, px.y))
+                    .map_or(tau, |d| d.min(tau));
                 out.push(d as f32);
             }
         }
@@ -425,5 +546,58 @@ impl CompassSearch {
                 false
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::DVec2;
+
+    /// A rolling shutter: a point placed along pixel (x, y)'s ray from where the vehicle was
+    /// when row y was exposed lands on (x, y) within the rows' spacing; without the rows (the
+    /// middle row's pose for the whole image) it misses.
+    #[test]
+    fn a_rolling_frame_projects_each_point_through_its_rows_pose() {
+        // 8 m/s along x, a camera looking sideways (−y).
+        let (trajectory, vehicle_from_camera) =
+            crate::geometry::projection::sideways_camera_at_8_mps();
+        let intrinsics = CameraIntrinsics::pinhole(640, 480, 500.0, 500.0, 320.0, 240.0);
+        let readout = RowTimes::from_millis(-30.0, 10.0);
+        let stamp = 500_000_000;
+        let middle_from_world = trajectory
+            .world_from_vehicle(stamp + readout.middle_nanos())
+            .unwrap()
+            .inverse();
+        let pixels = [(20.0, 3.0), (320.0, 240.0), (600.0, 470.0)];
+        let points: Vec<DVec3> = pixels
+            .iter()
+            .map(|&(x, y)| {
+                let t = stamp + readout.offset_nanos(y, intrinsics.height);
+                let world_from_camera =
+                    trajectory.world_from_vehicle(t).unwrap() * vehicle_from_camera;
+                let ray = intrinsics.unproject(DVec2::new(x, y)).unwrap();
+                middle_from_world
+                    .transform_point(world_from_camera.transform_point(ray * 10.0 / ray.z))
+            })
+            .collect();
+        let image = image::RgbImage::new(640, 480);
+        let global = EdgeFrame::new(&image, points.clone());
+        let rolling = global.clone().rolling(&trajectory, stamp, readout).unwrap();
+        assert_eq!(rolling.rows_from_middle.len(), SHUTTER_ROWS);
+        let camera_from_vehicle = vehicle_from_camera.inverse();
+        for (q, &(x, y)) in points.iter().zip(&pixels) {
+            let px = rolling.pixel(&intrinsics, camera_from_vehicle, *q).unwrap();
+            assert!(px.distance(DVec2::new(x, y)) < 0.5, "({x}, {y}) -> {px:?}");
+            let at_middle = global.pixel(&intrinsics, camera_from_vehicle, *q).unwrap();
+            if (y - 240.0f64).abs() > 100.0 {
+                assert!(at_middle.distance(DVec2::new(x, y)) > 2.0, "{at_middle:?}");
+            }
+        }
+        // A readout of no length keeps the frame global.
+        let none = global
+            .rolling(&trajectory, stamp, RowTimes::from_millis(5.0, 5.0))
+            .unwrap();
+        assert!(none.rows_from_middle.is_empty());
     }
 }

@@ -23,9 +23,36 @@ impl EdgeRefiner {
         frames: usize,
         segments_nanos: &[(i64, i64)],
     ) -> Result<Self, AlignError> {
+        let sensors = (lidar, cameras);
+        Self::new_with_readout(
+            drive,
+            rig,
+            sensors,
+            frames,
+            segments_nanos,
+            drive.camera_readout,
+        )
+    }
+
+    /// [`Self::new`] for `(lidar, cameras)` with the cameras read out as `readout`.
+    pub fn new_with_readout(
+        drive: &Drive,
+        rig: &Rig,
+        (lidar, cameras): (&str, &[String]),
+        frames: usize,
+        segments_nanos: &[(i64, i64)],
+        readout: crate::geometry::RowTimes,
+    ) -> Result<Self, AlignError> {
         let mut problems = Vec::new();
         for cam in cameras {
-            let p = EdgeAlignment::from_drive(drive, rig, cam, lidar, frames, segments_nanos)?;
+            let p = EdgeAlignment::from_drive_with_readout(
+                drive,
+                rig,
+                (cam, lidar),
+                frames,
+                segments_nanos,
+                readout,
+            )?;
             let start = rig
                 .sensor(cam)
                 .map(|s| s.vehicle_from_sensor)
