@@ -517,12 +517,14 @@ pub fn optimiser_ui(studio: &mut Studio, ui: &mut egui::Ui) {
                  translation the turns observe) to the vehicle's motion before the scene is \
                  learned. Takes about 5 s per camera; a straight drive keeps the cameras.",
             );
-            if let Some((first, last)) = studio.camera_readout_ms {
-                ui.weak(format!(
-                    "rolling shutter: rows from {first:+.1} to {last:+.1} ms after each stamp \
-                     (set under the image)"
-                ));
-            }
+        }
+        if matches!(studio.optimiser.method, Method::Unical | Method::EdgeAlign)
+            && let Some((first, last)) = studio.camera_readout_ms
+        {
+            ui.weak(format!(
+                "rolling shutter: rows from {first:+.1} to {last:+.1} ms after each stamp \
+                 (set under the image)"
+            ));
         }
     });
     ui.horizontal(|ui| {

@@ -304,7 +304,6 @@ impl MiProblem {
     pub fn keep_visible(&mut self, vehicle_from_camera: Rigid) {
         let camera_from_vehicle = vehicle_from_camera.inverse();
         let intr = &self.intrinsics;
-        let (mx, my) = (0.05 * intr.width as f64, 0.05 * intr.height as f64);
         for f in &mut self.frames {
             let keep: Vec<bool> = f
                 .points_in_vehicle
@@ -312,12 +311,9 @@ impl MiProblem {
                 .map(|q| {
                     let p = camera_from_vehicle.transform_point(*q);
                     p.z > 0.5
-                        && intr.project(p).is_some_and(|px| {
-                            px.x >= mx
-                                && px.y >= my
-                                && px.x <= intr.width as f64 - mx
-                                && px.y <= intr.height as f64 - my
-                        })
+                        && intr
+                            .project(p)
+                            .is_some_and(|px| crate::optim::edge_align::inside_margin(intr, px))
                 })
                 .collect();
             let mut k = keep.iter();

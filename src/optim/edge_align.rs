@@ -16,7 +16,8 @@
 //! image's middle row's time, and each frame keeps the vehicle's motion from there to 33 rows
 //! spread from its top edge to its bottom edge; a point is projected through the middle row's
 //! pose, then again through the pose of the row it fell on. Frames with rows outside the
-//! trajectory are left out.
+//! trajectory are left out. (Mutual information and the checkerboard method, which share
+//! [`points_in_vehicle_at`], still project each image at its stamp.)
 
 use glam::DVec3;
 
@@ -316,16 +317,14 @@ impl EdgeAlignment {
         let mut out = Vec::with_capacity(frames);
         for pair in sweep_image_pairs(drive, camera, lidar, frames, segments_nanos)? {
             let image = drive.load_image(camera, pair.image_index)?;
-            let middle_nanos = pair.image_stamp_nanos + readout.middle_nanos();
-            let Ok(points) = silhouettes_in_vehicle(
+            let points = silhouettes_in_vehicle(
                 &pair.sweep,
                 &drive.trajectory,
                 vehicle_from_lidar,
-                middle_nanos,
-            ) else {
-                continue;
-            };
-            // A frame with rows outside the trajectory is left out.
+                pair.image_stamp_nanos + readout.middle_nanos(),
+            )?;
+            // A frame with rows outside the trajectory is left out (only a rolling shutter's
+            // can be).
             let Ok(mut frame) = EdgeFrame::new(&image, points).rolling(
                 &drive.trajectory,
                 pair.image_stamp_nanos,
@@ -338,7 +337,9 @@ impl EdgeAlignment {
         }
         if out.is_empty() {
             return Err(AlignError::Setup(format!(
-                "no image of '{camera}' with every row inside the trajectory near a sweep of '{lidar}'"
+                "no image of '{camera}' near a sweep of '{lidar}' has every row (rolling shutter {:+.1}..{:+.1} ms) inside the trajectory",
+                readout.first_row_nanos as f64 * 1e-6,
+                readout.last_row_nanos as f64 * 1e-6
             )));
         }
         let mut problem = Self {
@@ -409,18 +410,19 @@ impl EdgeAlignment {
     pub fn keep_visible(&mut self, vehicle_from_camera: Rigid) {
         let camera_from_vehicle = vehicle_from_camera.inverse();
         let intr = &self.intrinsics;
-        let (mx, my) = (0.05 * intr.width as f64, 0.05 * intr.height as f64);
         for f in &mut self.frames {
-            f.points_in_vehicle.retain(|q| {
-                let p = camera_from_vehicle.transform_point(*q);
-                p.z > 0.5
-                    && intr.project(p).is_some_and(|px| {
-                        px.x >= mx
-                            && px.y >= my
-                            && px.x <= intr.width as f64 - mx
-                            && px.y <= intr.height as f64 - my
-                    })
-            });
+            // Where the cost will look: through the pose of each point's row.
+            let keep: Vec<bool> = f
+                .points_in_vehicle
+                .iter()
+                .map(|q| {
+                    camera_from_vehicle.transform_point(*q).z > 0.5
+                        && f.pixel(intr, camera_from_vehicle, *q)
+                            .is_some_and(|px| inside_margin(intr, px))
+                })
+                .collect();
+            let mut keep = keep.into_iter();
+            f.points_in_vehicle.retain(|_| keep.next().unwrap_or(false));
         }
     }
 
@@ -457,6 +459,13 @@ impl EdgeAlignment {
         }
         out
     }
+}
+
+/// Whether `px` lies inside the image with a 5 % margin on every side.
+pub(crate) fn inside_margin(intr: &CameraIntrinsics, px: glam::DVec2) -> bool {
+    let (w, h) = (intr.width as f64, intr.height as f64);
+    let (mx, my) = (0.05 * w, 0.05 * h);
+    px.x >= mx && px.y >= my && px.x <= w - mx && px.y <= h - my
 }
 
 /// Compass search state for one camera.
