@@ -74,7 +74,7 @@ pub struct Uniforms {
     /// Per LiDAR: the z row of `vehicle_from_lidar`.
     pub height_rows: [[f32; 4]; 8],
     /// Camera poses per firing-time bucket in the transform table: 1, or a rolling shutter's
-    /// rows (odd, at most [`crate::geometry::projection::SHUTTER_ROWS`]; 0 counts as 1).
+    /// rows (odd, at most [`crate::geometry::SAMPLED_ROWS`]; 0 counts as 1).
     pub rows: u32,
     pub _pad: [u32; 3],
 }

@@ -720,7 +720,7 @@ fn refresh(
             &drive.trajectory,
             lidars[*li].vehicle_from_sensor,
             cam.vehicle_from_sensor,
-            (image_stamp, readout, intrinsics.height),
+            (image_stamp, readout),
             rows,
         ) {
             Ok(t) => t,
@@ -752,7 +752,7 @@ fn refresh(
 const MAX_OVERLAY_TRANSFORMS: usize = 1 << 16;
 
 /// Camera poses per firing-time bucket for `buckets` buckets: one for a shutter without
-/// readout, else [`SHUTTER_ROWS`](crate::geometry::projection::SHUTTER_ROWS) or fewer to
+/// readout, else [`SAMPLED_ROWS`](crate::geometry::SAMPLED_ROWS) or fewer to
 /// stay within [`MAX_OVERLAY_TRANSFORMS`], at least 3, always odd (one at the middle row).
 fn overlay_rows(readout: crate::geometry::RowTimes, buckets: usize) -> usize {
     let rows = shutter_rows(readout);

@@ -581,7 +581,7 @@ fn parse_coarse_to_fine(s: &str) -> Result<Option<CoarseToFine>, String> {
 /// Parse `--camera-readout-ms FIRST..LAST`: when a rolling shutter exposed the first and the
 /// last image rows, in milliseconds after the stamp (each within ±1000; LAST below FIRST is a
 /// readout from the bottom up).
-fn parse_readout(text: &str) -> Result<crate::geometry::RowTimes, String> {
+pub(crate) fn parse_readout(text: &str) -> Result<crate::geometry::RowTimes, String> {
     crate::geometry::RowTimes::parse_millis(text).map_err(|e| format!("--camera-readout-ms {e}"))
 }
 

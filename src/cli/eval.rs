@@ -170,9 +170,7 @@ pub fn evaluate(
                 "--camera-readout-ms applies to the metrics measured on a log: give one".into(),
             );
         }
-        Some(text) => {
-            RowTimes::parse_millis(text).map_err(|e| format!("--camera-readout-ms {e}"))?
-        }
+        Some(text) => super::calibrate::parse_readout(text)?,
     };
     if let Some(log) = &args.log {
         // The readout places each image row of the edge-alignment and photometric metrics at

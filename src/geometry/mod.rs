@@ -16,5 +16,5 @@ pub mod spd;
 pub mod trajectory;
 
 pub use rigid::{RigError, Rigid, rig_errors};
-pub use rolling_shutter::RowTimes;
+pub use rolling_shutter::{RowTimes, SAMPLED_ROWS};
 pub use trajectory::{StampConflict, Trajectory, TrajectoryError, conflicting_stamps};

@@ -6,7 +6,7 @@
 //! sweep stamp. Poses are interpolated once per time bucket (1 ms), not once per point.
 //!
 //! A rolling-shutter camera ([`RowTimes`]) was at its own pose for every image row: the camera
-//! side is then taken at [`SHUTTER_ROWS`] rows spread from the top edge to the bottom edge,
+//! side is then taken at [`SAMPLED_ROWS`] rows spread from the top edge to the bottom edge,
 //! a point is projected from the middle row's pose first and then again from the pose of the
 //! row it fell on (`t_img` above becomes that row's time).
 
@@ -14,7 +14,7 @@ use glam::DVec3;
 use rayon::prelude::*;
 
 use super::camera::CameraIntrinsics;
-use super::{Rigid, RowTimes, Trajectory, TrajectoryError};
+use super::{Rigid, RowTimes, SAMPLED_ROWS, Trajectory, TrajectoryError};
 
 /// One LiDAR point seen in an image.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -113,17 +113,13 @@ pub fn point_buckets(sweep: &SweepView<'_>) -> Vec<u32> {
     }
 }
 
-/// Image rows a rolling-shutter camera's pose is taken at (top edge to bottom edge): with a
-/// 40 ms readout a row's pose is then at most 0.6 ms off its own time.
-pub const SHUTTER_ROWS: usize = 33;
-
 /// How many camera poses an image has: one for a shutter that exposes every row at once (at
-/// the stamp plus its one offset), else [`SHUTTER_ROWS`].
+/// the stamp plus its one offset), else [`SAMPLED_ROWS`].
 pub fn shutter_rows(readout: RowTimes) -> usize {
     if readout.first_row_nanos == readout.last_row_nanos {
         1
     } else {
-        SHUTTER_ROWS
+        SAMPLED_ROWS
     }
 }
 
@@ -143,7 +139,7 @@ pub fn camera_from_lidar_buckets(
         trajectory,
         vehicle_from_lidar,
         vehicle_from_camera,
-        (image_stamp_nanos, RowTimes::GLOBAL, 1),
+        (image_stamp_nanos, RowTimes::GLOBAL),
         1,
     )
 }
@@ -154,28 +150,22 @@ pub fn bucket_count(sweep: &SweepView<'_>) -> usize {
     bucket_range(sweep).map_or(1, |(first, last)| (last - first + 1) as usize)
 }
 
-/// As [`camera_from_lidar_buckets`] for an image exposed row by row: `image` is its stamp,
-/// its readout and its height (rows). `rows` transforms per bucket ([`shutter_rows`], or
-/// fewer to bound the table; odd keeps one at the middle row), bucket-major
-/// (`[bucket * rows + row]`), row `k` at the time of image row `k / (rows − 1)` of the way
-/// from the top edge to the bottom edge; a single row is the middle row's.
+/// As [`camera_from_lidar_buckets`] for an image exposed row by row: `image` is its stamp and
+/// its readout. `rows` transforms per bucket ([`shutter_rows`], or fewer to bound the table;
+/// odd keeps one at the middle row), bucket-major (`[bucket * rows + row]`), at the readout's
+/// samples ([`RowTimes::sampled_offsets_nanos`]; a single row is the middle row's).
 pub fn camera_from_lidar_rows(
     sweep: &SweepView<'_>,
     trajectory: &Trajectory,
     vehicle_from_lidar: Rigid,
     vehicle_from_camera: Rigid,
-    (image_stamp_nanos, readout, height): (i64, RowTimes, u32),
+    (image_stamp_nanos, readout): (i64, RowTimes),
     rows: usize,
 ) -> Result<Vec<Rigid>, TrajectoryError> {
-    let rows = rows.max(1);
-    let cameras_from_world = (0..rows)
-        .map(|k| {
-            let offset = if rows == 1 {
-                readout.middle_nanos()
-            } else {
-                let y = k as f64 / (rows - 1) as f64 * f64::from(height) - 0.5;
-                readout.offset_nanos(y, height)
-            };
+    let cameras_from_world = readout
+        .sampled_offsets_nanos(rows)
+        .into_iter()
+        .map(|offset| {
             Ok(
                 (trajectory.world_from_vehicle(image_stamp_nanos + offset)? * vehicle_from_camera)
                     .inverse(),
@@ -229,7 +219,7 @@ pub fn project_sweep_rolling(
         trajectory,
         vehicle_from_lidar,
         vehicle_from_camera,
-        (image_stamp_nanos, readout, intrinsics.height),
+        (image_stamp_nanos, readout),
         rows,
     )?;
     let buckets = camera_from_lidar.len() / rows;
@@ -249,8 +239,7 @@ pub fn project_sweep_rolling(
             let mut p_cam = camera_from_lidar[b * rows + rows / 2].transform_point(p);
             let mut pixel = intrinsics.project(p_cam)?;
             if rows > 1 {
-                let fraction = RowTimes::row_fraction(pixel.y, intrinsics.height);
-                let row = (fraction * (rows - 1) as f64).round() as usize;
+                let row = RowTimes::nearest_sample(pixel.y, intrinsics.height, rows);
                 p_cam = camera_from_lidar[b * rows + row].transform_point(p);
                 pixel = intrinsics.project(p_cam)?;
             }
@@ -453,11 +442,11 @@ mod tests {
             &traj,
             vehicle_from_lidar,
             vehicle_from_camera,
-            (image_stamp, readout, k.height),
-            SHUTTER_ROWS,
+            (image_stamp, readout),
+            SAMPLED_ROWS,
         )
         .unwrap();
-        assert_eq!(table.len(), 4 * SHUTTER_ROWS);
+        assert_eq!(table.len(), 4 * SAMPLED_ROWS);
         assert_eq!(bucket_count(&timed), 4);
         assert_eq!(bucket_count(&sweep), 1);
         for (b, r) in [(0, 0), (1, 5), (2, 32), (3, 16)] {
@@ -469,7 +458,7 @@ mod tests {
                     .world_from_vehicle(sweep_stamp + b as i64 * 1_000_000)
                     .unwrap()
                 * vehicle_from_lidar;
-            let (dr, dt) = table[b * SHUTTER_ROWS + r].difference(expected);
+            let (dr, dt) = table[b * SAMPLED_ROWS + r].difference(expected);
             assert!(dr < 1e-12 && dt < 1e-9, "bucket {b} row {r}: {dr} {dt}");
         }
     }

@@ -24,8 +24,7 @@ use glam::DVec3;
 use crate::calib::Rig;
 use crate::eval::edges;
 use crate::geometry::camera::CameraIntrinsics;
-use crate::geometry::projection::SHUTTER_ROWS;
-use crate::geometry::{Rigid, RowTimes, Trajectory, TrajectoryError};
+use crate::geometry::{Rigid, RowTimes, SAMPLED_ROWS, Trajectory, TrajectoryError};
 use crate::log::{Drive, LidarSweep, LogError};
 
 /// One image with silhouettes ready for scoring.
@@ -217,12 +216,10 @@ impl EdgeFrame {
         }
         let world_from_middle =
             trajectory.world_from_vehicle(image_stamp_nanos + readout.middle_nanos())?;
-        let height = self.height as u32;
-        for k in 0..SHUTTER_ROWS {
-            let y = k as f64 / (SHUTTER_ROWS - 1) as f64 * f64::from(height) - 0.5;
-            let t = image_stamp_nanos + readout.offset_nanos(y, height);
+        for offset in readout.sampled_offsets_nanos(SAMPLED_ROWS) {
+            let world_from_row = trajectory.world_from_vehicle(image_stamp_nanos + offset)?;
             self.rows_from_middle
-                .push(trajectory.world_from_vehicle(t)?.inverse() * world_from_middle);
+                .push(world_from_row.inverse() * world_from_middle);
         }
         Ok(self)
     }
@@ -248,8 +245,8 @@ impl EdgeFrame {
         if self.rows_from_middle.is_empty() {
             return Some(px);
         }
-        let fraction = RowTimes::row_fraction(px.y, self.height as u32);
-        let row = (fraction * (self.rows_from_middle.len() - 1) as f64).round() as usize;
+        let rows = self.rows_from_middle.len();
+        let row = RowTimes::nearest_sample(px.y, self.height as u32, rows);
         through(self.rows_from_middle[row].transform_point(q))
     }
 
@@ -593,7 +590,7 @@ mod tests {
         let image = image::RgbImage::new(640, 480);
         let global = EdgeFrame::new(&image, points.clone());
         let rolling = global.clone().rolling(&trajectory, stamp, readout).unwrap();
-        assert_eq!(rolling.rows_from_middle.len(), SHUTTER_ROWS);
+        assert_eq!(rolling.rows_from_middle.len(), SAMPLED_ROWS);
         let camera_from_vehicle = vehicle_from_camera.inverse();
         for (q, &(x, y)) in points.iter().zip(&pixels) {
             let px = rolling.pixel(&intrinsics, camera_from_vehicle, *q).unwrap();

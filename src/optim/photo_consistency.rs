@@ -22,7 +22,7 @@
 //! [`search`] then keeps the translation where it started unless the cost improves.
 //!
 //! A rolling shutter ([`Drive::camera_readout`]): each image keeps the vehicle's pose at
-//! [`ROW_POSES`] rows spread from the first to the last, and a point is projected at the
+//! [`SAMPLED_ROWS`] rows spread from the first to the last, and a point is projected at the
 //! middle row's pose, then again at the pose of the row it fell on.
 
 use glam::{DVec2, DVec3};
@@ -33,7 +33,7 @@ use crate::classical::icp::voxel_thin;
 use crate::classical::mutual_info::{gaussian_blur, grey};
 use crate::geometry::camera::CameraIntrinsics;
 use crate::geometry::projection::{SweepView, world_points};
-use crate::geometry::{Rigid, RowTimes};
+use crate::geometry::{Rigid, RowTimes, SAMPLED_ROWS};
 use crate::log::Drive;
 use crate::optim::edge_align::{AlignError, CompassSearch};
 
@@ -99,14 +99,10 @@ pub struct PhotoImage {
     pub stamp_nanos: i64,
     /// When each row was exposed relative to `stamp_nanos`.
     pub readout: RowTimes,
-    /// With a rolling shutter, `vehicle_from_world` at [`ROW_POSES`] rows evenly from the
+    /// With a rolling shutter, `vehicle_from_world` at [`SAMPLED_ROWS`] rows evenly from the
     /// first to the last (empty for a global shutter: `vehicle_from_world` for every row).
     pub row_poses: Vec<Rigid>,
 }
-
-/// Rows of a rolling-shutter image whose vehicle pose is kept (40 ms over 32 steps is 1.25 ms,
-/// 7 mm at 20 km/h).
-pub const ROW_POSES: usize = 33;
 
 impl PhotoImage {
     /// Set `vehicle_from_world` (the middle row's) and the row poses for an image taken at
@@ -122,12 +118,9 @@ impl PhotoImage {
             .inverse();
         self.row_poses.clear();
         if self.readout.first_row_nanos != self.readout.last_row_nanos {
-            for k in 0..ROW_POSES {
-                let fraction = k as f64 / (ROW_POSES - 1) as f64;
-                let y = fraction * self.height as f64 - 0.5;
-                let t = stamp + self.readout.offset_nanos(y, self.height as u32);
+            for offset in self.readout.sampled_offsets_nanos(SAMPLED_ROWS) {
                 self.row_poses
-                    .push(trajectory.world_from_vehicle(t)?.inverse());
+                    .push(trajectory.world_from_vehicle(stamp + offset)?.inverse());
             }
         }
         Ok(())
@@ -147,8 +140,7 @@ impl PhotoImage {
         if self.row_poses.is_empty() {
             return Some((q, px));
         }
-        let fraction = RowTimes::row_fraction(px.y, self.height as u32);
-        let k = (fraction * (ROW_POSES - 1) as f64).round() as usize;
+        let k = RowTimes::nearest_sample(px.y, self.height as u32, SAMPLED_ROWS);
         let q = (camera_from_vehicle * self.row_poses[k]).transform_point(p);
         Some((q, intrinsics.project(q)?))
     }
@@ -741,7 +733,7 @@ mod tests {
             )
         };
         let rolling = problem_with(readout, &mut images);
-        assert_eq!(rolling.images[0].row_poses.len(), ROW_POSES);
+        assert_eq!(rolling.images[0].row_poses.len(), SAMPLED_ROWS);
         let global = problem_with(RowTimes::GLOBAL, &mut images);
         assert!(global.images[0].row_poses.is_empty());
         let (at_rows, at_stamp) = (rolling.cost(truth), global.cost(truth));
