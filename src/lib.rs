@@ -14,6 +14,7 @@
 //!   indexed, lazily decoded drive log.
 //! - [`interop`]: export to and import from the formats other tools read (URDF, ROS, Autoware,
 //!   OpenCV, Kalibr, KITTI, nuScenes, MCAP /tf_static).
+//! - [`pipeline`]: the automatic pipeline (plan, stages, confidence report) every front end runs.
 //! - [`util`]: atomic file writes and small helpers shared by every module.
 
 pub mod bench;
@@ -26,6 +27,7 @@ pub mod geometry;
 pub mod interop;
 pub mod log;
 pub mod optim;
+pub mod pipeline;
 pub mod session;
 pub mod sim;
 pub mod unical;

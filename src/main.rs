@@ -72,10 +72,28 @@ enum Command {
     #[command(after_help = CALIBRATE_EXAMPLES, allow_negative_numbers = true)]
     Calibrate {
         /// The drive (MCAP, ROS 2 or Foxglove schemas).
-        log: PathBuf,
-        /// unical | icp | mi | target | pose-graph | edge
-        #[arg(long)]
+        #[arg(required_unless_present = "print_config")]
+        log: Option<PathBuf>,
+        /// auto (the default: the whole pipeline, every LiDAR and camera) | unical | icp | mi |
+        /// target | pose-graph | edge
+        #[arg(long, default_value = "auto")]
         method: String,
+        /// The pipeline's quality: fast | default (at most about 10 minutes on two cores) |
+        /// paper (the longer schedule, no time budget)
+        #[arg(long)]
+        quality: Option<String>,
+        /// The pipeline's time budget, e.g. 600, 10m, 1h (default: the quality's); the plan
+        /// fits its steps to it and the run stops at it
+        #[arg(long, value_name = "DURATION")]
+        budget: Option<String>,
+        /// The pipeline's whole configuration as YAML: a --print-config output, or an earlier
+        /// output file (its run is repeated)
+        #[arg(long, value_name = "FILE")]
+        config: Option<PathBuf>,
+        /// Print the pipeline's configuration (with --config, --quality, --budget and --seed
+        /// applied) as YAML and exit
+        #[arg(long)]
+        print_config: bool,
         /// Initial guess: a native calibration file, URDF, ROS camera_info YAML (or a directory
         /// of them) or an MCAP's /tf_static; sensors matched by name or frame id. Default: the
         /// log's /tf_static.
@@ -94,8 +112,8 @@ enum Command {
         iterations: Option<usize>,
         /// Seed of every random choice (ray draws, RANSAC, --perturb-*): one seed, one result
         /// at a fixed thread count.
-        #[arg(long, default_value_t = 1)]
-        seed: u64,
+        #[arg(long)]
+        seed: Option<u64>,
         /// Images per camera for the colour term (cameras join the optimisation;
         /// 0 = LiDAR depth stage only)
         #[arg(help_heading = HEADING_UNICAL, long, default_value_t = 0)]
@@ -259,8 +277,8 @@ enum Command {
         #[arg(long, default_value_t = 0.0)]
         perturb_cm: f64,
         /// The native calibration file to write (atomically; see the note below).
-        #[arg(long)]
-        out: PathBuf,
+        #[arg(long, required_unless_present = "print_config")]
+        out: Option<PathBuf>,
     },
     /// Measure a calibration against a reference: pose errors after root alignment, and with a
     /// log the LiDAR–LiDAR, edge-alignment (and checkerboard, photometric) metrics on the data.
@@ -494,6 +512,10 @@ fn run() -> Result<()> {
         Some(Command::Calibrate {
             log,
             method,
+            quality,
+            budget,
+            config,
+            print_config,
             init,
             segment,
             sensors,
@@ -533,14 +555,27 @@ fn run() -> Result<()> {
             out,
         }) => {
             let alignment = alignment.parse().map_err(anyhow::Error::msg)?;
+            let quality = quality
+                .map(|q| q.parse::<rigcal::pipeline::Quality>())
+                .transpose()
+                .map_err(|e| anyhow::anyhow!("--quality {e}"))?;
+            let budget_secs = budget
+                .map(|b| rigcal::pipeline::config::parse_duration_secs(&b))
+                .transpose()
+                .map_err(|e| anyhow::anyhow!("--budget {e}"))?;
+            let (log, out) = (log.unwrap_or_default(), out.unwrap_or_default());
             let args = rigcal::cli::calibrate::CalibrateArgs {
                 log: log.clone(),
                 method,
+                quality,
+                budget_secs,
+                config_file: config,
+                seed_given: seed.is_some(),
                 init,
                 segment,
                 sensors,
                 iterations,
-                seed,
+                seed: seed.unwrap_or(1),
                 camera_frames,
                 lidar_sweeps,
                 scene_radius_m,
@@ -574,6 +609,11 @@ fn run() -> Result<()> {
                 perturb: (perturb_deg, perturb_cm),
                 out: out.clone(),
             };
+            if print_config {
+                let config =
+                    rigcal::cli::pipeline::resolve_config(&args).map_err(anyhow::Error::msg)?;
+                return print_stdout(&config.to_yaml());
+            }
             let started = std::time::Instant::now();
             let mut bar = rigcal::cli::progress::Progress::new("calibrate", 1);
             let (_, moves) = rigcal::cli::calibrate::calibrate(&args, &mut |done, total| {

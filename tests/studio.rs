@@ -95,6 +95,7 @@ fn editing_an_extrinsic_moves_the_overlay() {
 #[test]
 fn the_optimiser_starts_publishes_and_stops() {
     let mut h = harness(pandaset());
+    h.state_mut().optimiser.method = rigcal::app::optimiser::Method::EdgeAlign;
     h.run_steps(2);
     h.get_by_label("Start").click();
     h.run_steps(1);
@@ -844,4 +845,95 @@ fn a_log_opens_in_the_background() {
     );
     assert_eq!(studio.drive.as_ref().unwrap().path(), pandaset());
     let _ = std::fs::remove_dir_all(dir);
+}
+
+/// A small simulated drive with turns: both LiDARs and the front camera, 2° / 20 cm off.
+fn small_drive() -> (tempfile::TempDir, PathBuf) {
+    use rigcal::sim::rigs::{RigPreset, SimRig};
+    use rigcal::sim::synth::{SynthConfig, synthesize};
+    let tmp = tempfile::Builder::new()
+        .prefix("rigcal-studio-pipeline-")
+        .tempdir()
+        .unwrap();
+    let mut rig = SimRig::preset(RigPreset::Pandaset);
+    rig.cameras.retain(|c| c.name == "front_camera");
+    let mut cfg = SynthConfig::new(
+        rigcal::sim::world::SceneKind::Urban,
+        rig,
+        rigcal::sim::trajectories::TrajectoryKind::Circle,
+        4.0,
+        35,
+    );
+    cfg.scale = 0.25;
+    cfg.camera_rate_hz = 2.0;
+    cfg.perturb_deg = 2.0;
+    cfg.perturb_cm = 20.0;
+    let log = tmp.path().join("drive.mcap");
+    synthesize(&cfg, &log, &tmp.path().join("gt.yaml"), &mut |_, _| {}).unwrap();
+    (tmp, log)
+}
+
+/// "Calibrate everything" is the panel's first method, plans as `rigcal calibrate` does from
+/// the same drive, and runs: the plan reaches the status bar, the LiDARs registered while it
+/// prepares move the overlay, and the loss curves fill.
+#[test]
+fn calibrate_everything_runs_the_clis_plan_from_the_optimiser_panel() {
+    use rigcal::app::optimiser::{Method, pipeline_config, pipeline_request};
+    let (_tmp, log) = small_drive();
+    let mut h = harness(log.clone());
+    assert_eq!(h.state().optimiser.method, Method::Pipeline);
+    h.run_steps(2);
+    // The CLI's configuration for this drive, as `--print-config` prints it, and the studio's
+    // give one plan.
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_rigcal"))
+        .args(["calibrate", "--print-config"])
+        .output()
+        .unwrap();
+    assert!(out.status.success());
+    let cli = rigcal::pipeline::PipelineConfig::from_yaml(
+        &String::from_utf8_lossy(&out.stdout),
+        "stdout",
+    )
+    .unwrap();
+    let studio_config = pipeline_config(h.state());
+    assert_eq!(studio_config, cli);
+    let drive = h.state().drive.clone().unwrap();
+    let plan = |config: &rigcal::pipeline::PipelineConfig, request| {
+        rigcal::pipeline::Plan::build(&drive, &drive.rig, request, config, false).unwrap()
+    };
+    let cli_request = rigcal::pipeline::PlanRequest::default();
+    assert_eq!(
+        plan(&studio_config, &pipeline_request(h.state())),
+        plan(&cli, &cli_request)
+    );
+    let start = h.state().current.clone();
+    let before = h.render().unwrap();
+    h.get_by_label("Start").click();
+    h.run_steps(1);
+    assert!(h.state().optimiser.run.is_some(), "{:?}", s_status(&h));
+    assert!(
+        run_until(&mut h, 300.0, |s| s.optimiser.history.len() >= 3),
+        "no losses from the pipeline: {:?} {:?}",
+        s_status(&h),
+        h.state().optimiser.message
+    );
+    let status = s_status(&h).join("\n");
+    assert!(
+        status.contains("plan: lidars: pandar64 (the reference) fitted"),
+        "{status}"
+    );
+    // The LiDARs were registered before UniCal: the overlay draws the moved rig.
+    assert_ne!(h.state().current, start);
+    h.run_steps(3);
+    let after = h.render().unwrap();
+    assert!(changed_pixels(&before, &after) > 500);
+    let losses = &h.state().optimiser.history.last().unwrap().1;
+    assert!(losses.iter().all(|(_, v)| v.is_finite()), "{losses:?}");
+    h.get_by_label("Stop").click();
+    assert!(run_until(&mut h, 120.0, |s| s.optimiser.run.is_none()));
+    assert!(
+        h.state().status.iter().all(|s| !s.starts_with("error")),
+        "{:?}",
+        s_status(&h)
+    );
 }

@@ -211,7 +211,75 @@ pub fn poll(studio: &mut Studio, ctx: &egui::Context) {
     }
 }
 
+/// The pipeline's report of its last run: per sensor, the verdict, how far it moved, each
+/// axis's observability and 1-σ, and the checks before and after.
+fn report_ui(studio: &Studio, ui: &mut egui::Ui) {
+    let report = match studio.optimiser.report.lock() {
+        Ok(slot) => slot.clone(),
+        Err(_) => None,
+    };
+    let Some(report) = report else {
+        return;
+    };
+    use crate::pipeline::report::{Observed, Verdict};
+    ui.heading("Calibration report (the pipeline's last run)");
+    ui.weak(&report.method);
+    egui::Grid::new("pipeline_report")
+        .striped(true)
+        .show(ui, |ui| {
+            for h in [
+                "sensor",
+                "verdict",
+                "moved",
+                "axes (1-σ, ° and cm)",
+                "checks",
+                "why",
+            ] {
+                ui.strong(h);
+            }
+            ui.end_row();
+            for s in &report.sensors {
+                ui.label(&s.name);
+                let colour = match s.verdict {
+                    Verdict::Good => egui::Color32::LIGHT_GREEN,
+                    Verdict::CheckIt => egui::Color32::YELLOW,
+                    Verdict::Failed => egui::Color32::LIGHT_RED,
+                };
+                ui.colored_label(colour, s.verdict.label());
+                ui.label(format!("{:.3}° / {:.2} cm", s.moved_deg, s.moved_cm));
+                let axes: Vec<String> = s
+                    .axes
+                    .iter()
+                    .map(|a| {
+                        let mark = match a.observed {
+                            Observed::Observed => "✔",
+                            Observed::Weak => "~",
+                            Observed::NotObserved => "✘",
+                            Observed::Fixed => "fixed",
+                            Observed::Unknown => "?",
+                        };
+                        match a.sigma {
+                            Some(v) => format!("{} {mark} ±{v:.2}", a.axis),
+                            None => format!("{} {mark}", a.axis),
+                        }
+                    })
+                    .collect();
+                ui.label(axes.join("  "));
+                let checks: Vec<String> = s
+                    .checks
+                    .iter()
+                    .map(|c| format!("{:.2} → {:.2} {}", c.before, c.after, c.unit))
+                    .collect();
+                ui.label(checks.join("; "));
+                ui.label(&s.why);
+                ui.end_row();
+            }
+        });
+    ui.separator();
+}
+
 pub(crate) fn checks_ui(studio: &mut Studio, ui: &mut egui::Ui) {
+    report_ui(studio, ui);
     ui.heading("Reprojection checks");
     ui.label(
         "Edge alignment per camera–LiDAR pair: mean px from projected LiDAR depth \

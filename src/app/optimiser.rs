@@ -17,7 +17,9 @@ use super::Studio;
 /// Methods the panel offers. UniCal and the classical calibrators join as they land.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
 pub enum Method {
+    /// The automatic pipeline, as `rigcal calibrate LOG --out FILE` runs it.
     #[default]
+    Pipeline,
     EdgeAlign,
     Icp,
     MutualInformation,
@@ -29,7 +31,8 @@ pub enum Method {
 
 impl Method {
     /// Every method, in the panel's order.
-    pub const ALL: [Method; 7] = [
+    pub const ALL: [Method; 8] = [
+        Method::Pipeline,
         Method::EdgeAlign,
         Method::Icp,
         Method::MutualInformation,
@@ -42,6 +45,7 @@ impl Method {
     /// The name a session file stores (`rigcal calibrate --method`'s where there is one).
     pub fn key(self) -> &'static str {
         match self {
+            Method::Pipeline => "auto",
             Method::EdgeAlign => "edge",
             Method::Icp => "icp",
             Method::MutualInformation => "mi",
@@ -59,6 +63,7 @@ impl Method {
 
     fn label(self) -> &'static str {
         match self {
+            Method::Pipeline => "Calibrate everything (the pipeline: every LiDAR and camera)",
             Method::EdgeAlign => "Edge alignment (cameras vs LiDAR, rotation)",
             Method::Icp => "Point-to-plane ICP (LiDARs vs the reference LiDAR)",
             Method::MutualInformation => {
@@ -71,7 +76,9 @@ impl Method {
                 "Pairwise + pose graph (ICP, checkerboards or MI; every sensor, reference fixed)"
             }
             Method::UnicalLidar => "UniCal, LiDAR terms (scene + LiDARs; slow on CPU)",
-            Method::Unical => "UniCal, LiDARs + cameras (1/8-size images; slowest)",
+            Method::Unical => {
+                "UniCal, LiDARs + cameras (the fast quality: 1/8-size images, 500 steps)"
+            }
         }
     }
 }
@@ -102,6 +109,8 @@ pub struct OptimiserPanel {
     pub message: Option<String>,
     /// The best rig of the current or last run (shown as "best" in the viewport).
     pub best: Option<Rig>,
+    /// The pipeline's report of its last run (the checks tab shows it).
+    pub report: crate::pipeline::calibrator::ReportSink,
 }
 
 impl OptimiserPanel {
@@ -221,6 +230,85 @@ fn readout_note(
     )
 }
 
+/// The pipeline's configuration from the studio's state: the defaults `rigcal calibrate`
+/// starts from, with the studio's rolling-shutter readout.
+pub fn pipeline_config(studio: &Studio) -> crate::pipeline::PipelineConfig {
+    let mut config = crate::pipeline::PipelineConfig::default();
+    config.cameras.readout_ms = studio.camera_readout_ms;
+    config
+}
+
+/// What the pipeline is asked to calibrate from the studio's state: the ticked cameras (none
+/// ticked: all) and every LiDAR, within the selected segments.
+pub fn pipeline_request(studio: &Studio) -> crate::pipeline::PlanRequest {
+    let sensors = if studio.optimiser.cameras.is_empty() {
+        Vec::new()
+    } else {
+        studio
+            .current
+            .sensors
+            .iter()
+            .filter(|s| s.kind == SensorKind::Lidar || studio.optimiser.cameras.contains(&s.name))
+            .map(|s| s.name.clone())
+            .collect()
+    };
+    crate::pipeline::PlanRequest {
+        root: None,
+        sensors,
+        segments_nanos: studio.segments.clone(),
+    }
+}
+
+/// Start the pipeline on the current rig: the plan is made and its stages before UniCal run
+/// while the run prepares; its decisions and notes reach the status bar, its report the
+/// checks tab.
+fn start_pipeline(studio: &mut Studio, drive: std::sync::Arc<crate::log::Drive>) {
+    let config = pipeline_config(studio);
+    let request = pipeline_request(studio);
+    let rig = studio.current.clone();
+    let notes = studio.optimiser.hand_eye_notes.clone();
+    let sink = studio.optimiser.report.clone();
+    if let Ok(mut slot) = sink.lock() {
+        *slot = None;
+    }
+    studio.optimiser.message =
+        Some("planning: reading the drive's motion and checking the cameras' start…".into());
+    studio.optimiser.run = Some(Run::spawn_preparing(move |preparing| {
+        let started = std::time::Instant::now();
+        let drive = match config.cameras.readout_ms {
+            Some((first, last)) => {
+                let options = crate::log::DriveOptions {
+                    camera_readout: RowTimes::from_millis(first, last),
+                    ..crate::log::DriveOptions::default()
+                };
+                std::sync::Arc::new(
+                    crate::log::Drive::open_with(drive.path(), &options)
+                        .map_err(|e| format!("cannot read the log with the readout: {e}"))?,
+                )
+            }
+            None => drive,
+        };
+        preparing.report("planning", 0, 1);
+        let plan = crate::pipeline::Plan::build(&drive, &rig, &request, &config, true)
+            .map_err(|e| e.to_string())?;
+        if let Ok(mut notes) = notes.lock() {
+            notes.extend(plan.decisions.iter().map(|d| format!("plan: {d}")));
+        }
+        let run = crate::pipeline::calibrator::PipelineCalibrator::prepare(
+            drive,
+            rig,
+            plan,
+            started,
+            &|phase, done, total| preparing.report(phase, done, total),
+        )?
+        .with_report_sink(sink);
+        if let Ok(mut notes) = notes.lock() {
+            notes.extend(run.notes().iter().cloned());
+        }
+        Ok(Box::new(run) as Box<dyn Calibrator>)
+    }));
+}
+
 /// Start a run with the panel's settings.
 pub fn start(studio: &mut Studio) {
     let Some(drive) = studio.drive.clone() else {
@@ -259,6 +347,10 @@ pub fn start(studio: &mut Studio) {
     ));
     studio.optimiser.started_from = Some(rig);
     let method = studio.optimiser.method;
+    if method == Method::Pipeline {
+        start_pipeline(studio, drive);
+        return;
+    }
     if matches!(method, Method::UnicalLidar | Method::Unical) {
         studio.optimiser.message = Some(format!(
             "preparing the neural scene from {frames} sweep(s) per LiDAR{}…",
@@ -279,7 +371,9 @@ pub fn start(studio: &mut Studio) {
             })
             .map(|s| s.name.clone())
             .collect();
+        // The single-method UniCal run is the quick look: the fast quality's steps and scale.
         let mut config = crate::unical::depth_calib::DepthCalibConfig {
+            iterations: crate::pipeline::Quality::Fast.preset().iterations,
             frozen_sensor: Some(lidar),
             held_sensors,
             correspondence_cache: Some(crate::session::state_dir().join("matches")),
@@ -353,7 +447,7 @@ pub fn start(studio: &mut Studio) {
                     &drive,
                     frames,
                     &segments,
-                    0.125,
+                    crate::pipeline::Quality::Fast.preset().image_scale,
                     &|phase, done, total| preparing.report(phase, done, total),
                 )?
             } else {
@@ -501,7 +595,14 @@ pub fn optimiser_ui(studio: &mut Studio, ui: &mut egui::Ui) {
                 }
             }
         });
-        ui.add(egui::Slider::new(&mut studio.optimiser.frames, 1..=12).text("frames"));
+        if studio.optimiser.method == Method::Pipeline {
+            ui.weak(
+                "the plan, its images, scale and steps are rigcal calibrate's (quality default, \
+                 10 min budget); its decisions appear in the status bar, its report under Checks",
+            );
+        } else {
+            ui.add(egui::Slider::new(&mut studio.optimiser.frames, 1..=12).text("frames"));
+        }
         if studio.optimiser.method == Method::Unical {
             ui.checkbox(
                 &mut studio.optimiser.hold_lidars,
@@ -518,8 +619,10 @@ pub fn optimiser_ui(studio: &mut Studio, ui: &mut egui::Ui) {
                  learned. Takes about 5 s per camera; a straight drive keeps the cameras.",
             );
         }
-        if matches!(studio.optimiser.method, Method::Unical | Method::EdgeAlign)
-            && let Some((first, last)) = studio.camera_readout_ms
+        if matches!(
+            studio.optimiser.method,
+            Method::Unical | Method::EdgeAlign | Method::Pipeline
+        ) && let Some((first, last)) = studio.camera_readout_ms
         {
             ui.weak(format!(
                 "rolling shutter: rows from {first:+.1} to {last:+.1} ms after each stamp \

@@ -208,6 +208,30 @@ fn run_into(
         }
     }
     match &case.method {
+        Method::Pipeline(config) => {
+            let drive = std::sync::Arc::new(drive);
+            let plan = crate::pipeline::Plan::build(
+                &drive,
+                &initial,
+                &crate::pipeline::PlanRequest::default(),
+                &crate::pipeline::PipelineConfig {
+                    seed: case.seed,
+                    ..(**config).clone()
+                },
+                true,
+            )
+            .map_err(|e| e.to_string())?;
+            let optimised: Vec<String> = initial.sensors.iter().map(|s| s.name.clone()).collect();
+            let mut run = crate::pipeline::calibrator::PipelineCalibrator::prepare(
+                drive,
+                initial.clone(),
+                plan,
+                started,
+                &|_, _, _| {},
+            )?;
+            out.prepare_secs = started.elapsed().as_secs_f64();
+            optimise(&mut run, &reference, &initial, &optimised, progress, out)?;
+        }
         Method::UniCal(settings) => {
             let mut stage = unical_stage(&drive, &initial, settings, case.seed)?;
             let mut optimised: Vec<String> = Vec::new();

@@ -120,6 +120,8 @@ pub struct UnicalSettings {
 /// A calibration method as the bench runs it.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub enum Method {
+    /// The automatic pipeline, as `rigcal calibrate LOG --out FILE` runs it.
+    Pipeline(Box<crate::pipeline::PipelineConfig>),
     UniCal(UnicalSettings),
     /// Target-free edge alignment of every camera against the root LiDAR.
     Edge {
@@ -131,6 +133,7 @@ pub enum Method {
 impl Method {
     pub fn label(&self) -> &'static str {
         match self {
+            Method::Pipeline(_) => "pipeline",
             Method::UniCal(s) if s.camera_frames == 0 => "UniCal (LiDAR only)",
             Method::UniCal(s) if !s.lidar_supervision => "UniCal (camera only)",
             Method::UniCal(_) => "UniCal",
@@ -184,6 +187,8 @@ struct Scale {
     /// UniCal on the real drive (full-size images: a smaller camera scale).
     unical_log: UnicalSettings,
     edge: Method,
+    /// The pipeline as the perturbation protocol runs it.
+    pipeline: crate::pipeline::PipelineConfig,
     ablations: &'static [&'static str],
     /// Run the correspondence ablation (Table A9) on the recorded drive as well.
     correspondence_on_log: bool,
@@ -230,6 +235,11 @@ impl Suite {
                     frames: 2,
                     max_steps: 60,
                 },
+                pipeline: crate::pipeline::PipelineConfig {
+                    quality: crate::pipeline::Quality::Fast,
+                    iterations: Some(120),
+                    ..Default::default()
+                },
                 ablations: &["no geometry initialisation"],
                 correspondence_on_log: false,
             },
@@ -240,20 +250,24 @@ impl Suite {
     /// The paper's protocols at full length (hours on two cores: the suite's report records
     /// each run's wall time).
     pub fn paper(pandaset: Option<PathBuf>) -> Self {
+        // UniCal's own defaults (stated once, in DepthCalibConfig) at the paper quality's steps
+        // and scale.
+        let d = crate::unical::depth_calib::DepthCalibConfig::default();
+        let paper = crate::pipeline::Quality::Paper.preset();
         let unical = UnicalSettings {
-            iterations: 2000,
-            geometry_init_steps: 150,
-            geometry_init_rays: 8192,
-            pose_warmup: 200,
-            pose_ramp: 150,
-            rays_per_sensor: 1024,
-            rays_per_camera: 512,
+            iterations: paper.iterations,
+            geometry_init_steps: d.geometry_init_steps,
+            geometry_init_rays: d.geometry_init_rays,
+            pose_warmup: d.pose_warmup,
+            pose_ramp: d.pose_ramp,
+            rays_per_sensor: d.rays_per_sensor,
+            rays_per_camera: d.rays_per_camera,
             sweeps_per_lidar: 8,
             camera_frames: 4,
-            camera_scale: 0.25,
+            camera_scale: paper.image_scale,
             newton_lidar_poses: false,
             lidar_supervision: true,
-            alignment: AlignmentLoss::SurfaceAlignment,
+            alignment: d.alignment,
         };
         Self::build(
             "paper",
@@ -279,6 +293,7 @@ impl Suite {
                     frames: 4,
                     max_steps: 300,
                 },
+                pipeline: crate::pipeline::PipelineConfig::default(),
                 ablations: &["no geometry initialisation", "preconditioned LiDAR poses"],
                 correspondence_on_log: true,
             },
@@ -316,8 +331,9 @@ impl Suite {
                     .iter()
                     .map(|c| (format!("Transl {c} cm"), 0.0, *c)),
             );
+        let pipeline = Method::Pipeline(Box::new(s.pipeline.clone()));
         for (row, deg, cm) in levels {
-            for method in [&unical, &s.edge] {
+            for method in [&pipeline, &unical, &s.edge] {
                 for seed in 1..=s.seeds {
                     cases.push(case(
                         Protocol::Perturbation,

@@ -293,6 +293,18 @@ pub const MAX_SENSOR_OFFSET_M: f64 = 1000.0;
 /// The deepest `[ … ]` / `{ … }` nesting a calibration file may have.
 const MAX_FLOW_NESTING: usize = 64;
 
+/// Refuse YAML whose flow collections nest deeper than [`MAX_FLOW_NESTING`] before it is
+/// parsed (the parser's time grows steeply with the depth).
+pub(crate) fn check_nesting(text: &str) -> Result<(), String> {
+    let depth = flow_nesting_depth(text);
+    if depth > MAX_FLOW_NESTING {
+        return Err(format!(
+            "brackets nested {depth} deep (at most {MAX_FLOW_NESTING})"
+        ));
+    }
+    Ok(())
+}
+
 /// How deep YAML flow collections (`[`, `{`) nest in `text`, outside quoted strings and
 /// comments.
 fn flow_nesting_depth(text: &str) -> usize {

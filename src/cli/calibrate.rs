@@ -145,6 +145,14 @@ pub struct CalibrateArgs {
     /// direction drawn from `seed`; (0, 0) leaves it), to measure recovery from a known start.
     pub perturb: (f64, f64),
     pub out: PathBuf,
+    /// The pipeline (`auto`): the quality preset (`None`: the configuration's).
+    pub quality: Option<crate::pipeline::Quality>,
+    /// The pipeline: the wall-time budget in seconds (`None`: the quality's).
+    pub budget_secs: Option<f64>,
+    /// The pipeline: a configuration file (a `--print-config` output or an earlier output).
+    pub config_file: Option<PathBuf>,
+    /// Whether `--seed` was typed (over a `--config` file's seed).
+    pub seed_given: bool,
 }
 
 /// UniCal's options that act on the camera images it trains on (`--camera-frames`).
@@ -315,6 +323,11 @@ impl CalibrateArgs {
             put(flag, value);
         }
         m
+    }
+
+    /// The perturbation of the initial guess when there is a valid one.
+    pub(crate) fn perturb_given(&self) -> Option<(f64, f64)> {
+        self.perturbation().ok().flatten()
     }
 
     /// The perturbation of the initial guess, `None` when there is none; an error for
@@ -605,10 +618,20 @@ pub fn parse_segment(text: &str, t0_nanos: i64) -> Result<(i64, i64), String> {
 }
 
 /// The values `--method` takes.
-const METHODS: [&str; 6] = ["unical", "icp", "mi", "target", "pose-graph", "edge"];
+const METHODS: [&str; 7] = [
+    "auto",
+    "unical",
+    "icp",
+    "mi",
+    "target",
+    "pose-graph",
+    "edge",
+];
 
 fn unknown_method(method: &str) -> String {
-    format!("unknown --method '{method}' (expected unical, icp, mi, target, pose-graph or edge)")
+    format!(
+        "unknown --method '{method}' (expected auto, unical, icp, mi, target, pose-graph or edge)"
+    )
 }
 
 /// `--sensors` naming a sensor the method does not calibrate (a camera for ICP, a LiDAR for
@@ -654,61 +677,14 @@ fn check_segment_in_log(
     ))
 }
 
-/// Run the calibration; `progress(step, max_steps)` is called after every step. Returns the
-/// written document and how far each sensor moved from the initial guess ([`moves_report`]).
-pub fn calibrate(
+/// The drive, the initial guess (after `--init` and `--perturb-*`) and the segments of a run,
+/// each checked against the log.
+pub(crate) fn open_inputs(
     args: &CalibrateArgs,
-    progress: &mut dyn FnMut(usize, usize),
-) -> Result<(CalibrationFile, String), String> {
-    let perturbation = args.perturbation()?;
-    if !METHODS.contains(&args.method.as_str()) {
-        return Err(unknown_method(&args.method));
-    }
-    if matches!(args.method.as_str(), "icp" | "pose-graph") && args.iterations.is_some() {
-        return Err(format!(
-            "--iterations: --method {} runs until it converges",
-            args.method
-        ));
-    }
-    let unical_only: Vec<&str> = args.unical_options().into_iter().map(|(f, _)| f).collect();
-    if args.method != "unical" && !unical_only.is_empty() {
-        return Err(format!(
-            "{} appl{} to --method unical only",
-            unical_only.join(", "),
-            if unical_only.len() == 1 { "ies" } else { "y" }
-        ));
-    }
-    if let Ok(crate::util::OutputTarget::Direct(_)) = crate::util::output_target(&args.out) {
-        return Err(format!(
-            "--out {} is not a regular file (a device or pipe); calibrate writes its file at the start and replaces it every 30 s",
-            args.out.display()
-        ));
-    }
-    if crate::util::same_file(&args.out, &args.log) {
-        return Err(format!(
-            "--out {} is the log itself; the calibration would overwrite it",
-            args.out.display()
-        ));
-    }
-    if args.method == "unical" && args.iterations == Some(0) {
-        return Err("--iterations 0: UniCal needs at least one step".into());
-    }
-    if !args.camera_time_offset_ms.is_finite() || args.camera_time_offset_ms.abs() > 1000.0 {
-        return Err(format!(
-            "--camera-time-offset-ms must be a number of milliseconds within ±1000, not {}",
-            args.camera_time_offset_ms
-        ));
-    }
-    let camera_readout = match args.camera_readout_ms.as_deref() {
-        Some(s) => parse_readout(s)?,
-        None => crate::geometry::RowTimes::GLOBAL,
-    };
-    let options = crate::log::DriveOptions {
-        camera_time_offset_nanos: (args.camera_time_offset_ms * 1e6).round() as i64,
-        camera_readout,
-        ..crate::log::DriveOptions::default()
-    };
-    let drive = Drive::open_with(&args.log, &options).map_err(|e| e.to_string())?;
+    options: &crate::log::DriveOptions,
+    perturbation: Option<(f64, f64)>,
+) -> Result<(Drive, Rig, Vec<(i64, i64)>), String> {
+    let drive = Drive::open_with(&args.log, options).map_err(|e| e.to_string())?;
     let mut rig = drive.rig.clone();
     if let Some(init) = &args.init {
         let imported = crate::interop::import::load_initial_guess(init, &rig)
@@ -735,9 +711,6 @@ pub fn calibrate(
     if let Some((deg, cm)) = perturbation {
         rig = crate::sim::synth::perturb_rig(&rig, deg, cm, args.seed);
     }
-    // What the user gave (after --init and --perturb-*), to say at the end how far each sensor
-    // moved from it.
-    let initial_guess = rig.clone();
     let asked = args.sensors.iter().map(|s| ("--sensors", s));
     for (option, s) in asked.chain(args.root.iter().map(|s| ("--root", s))) {
         if rig.sensor(s).is_none() {
@@ -747,7 +720,6 @@ pub fn calibrate(
             ));
         }
     }
-    check_sensor_kinds(args, &rig)?;
     let range = drive.time_range_nanos();
     let t0 = range.map_or(0, |r| r.0);
     let segments: Vec<(i64, i64)> = match &args.segment {
@@ -760,6 +732,100 @@ pub fn calibrate(
         }
         None => Vec::new(),
     };
+    Ok((drive, rig, segments))
+}
+
+/// Run the calibration; `progress(step, max_steps)` is called after every step. Returns the
+/// written document and how far each sensor moved from the initial guess ([`moves_report`]).
+pub fn calibrate(
+    args: &CalibrateArgs,
+    progress: &mut dyn FnMut(usize, usize),
+) -> Result<(CalibrationFile, String), String> {
+    let perturbation = args.perturbation()?;
+    if !METHODS.contains(&args.method.as_str()) {
+        return Err(unknown_method(&args.method));
+    }
+    if matches!(args.method.as_str(), "icp" | "pose-graph") && args.iterations.is_some() {
+        return Err(format!(
+            "--iterations: --method {} runs until it converges",
+            args.method
+        ));
+    }
+    let pipeline_only = [
+        ("--quality", args.quality.is_some()),
+        ("--budget", args.budget_secs.is_some()),
+        ("--config", args.config_file.is_some()),
+    ];
+    let pipeline_only: Vec<&str> = pipeline_only
+        .iter()
+        .filter(|(_, given)| *given)
+        .map(|(f, _)| *f)
+        .collect();
+    if args.method != "auto" && !pipeline_only.is_empty() {
+        return Err(format!(
+            "{} appl{} to the pipeline (no --method, or --method auto) only",
+            pipeline_only.join(", "),
+            if pipeline_only.len() == 1 { "ies" } else { "y" }
+        ));
+    }
+    let unical_only: Vec<&str> = args
+        .unical_options()
+        .into_iter()
+        .map(|(f, _)| f)
+        .filter(|f| !(args.method == "auto" && *f == "--camera-readout-ms"))
+        .collect();
+    if args.method == "auto" && !unical_only.is_empty() {
+        return Err(format!(
+            "{} {} UniCal's own: the pipeline reads its UniCal settings from --config FILE (see --print-config), or give --method unical",
+            unical_only.join(", "),
+            if unical_only.len() == 1 { "is" } else { "are" }
+        ));
+    }
+    if args.method != "unical" && !unical_only.is_empty() {
+        return Err(format!(
+            "{} appl{} to --method unical only",
+            unical_only.join(", "),
+            if unical_only.len() == 1 { "ies" } else { "y" }
+        ));
+    }
+    if let Ok(crate::util::OutputTarget::Direct(_)) = crate::util::output_target(&args.out) {
+        return Err(format!(
+            "--out {} is not a regular file (a device or pipe); calibrate writes its file at the start and replaces it every 30 s",
+            args.out.display()
+        ));
+    }
+    if crate::util::same_file(&args.out, &args.log) {
+        return Err(format!(
+            "--out {} is the log itself; the calibration would overwrite it",
+            args.out.display()
+        ));
+    }
+    if matches!(args.method.as_str(), "unical" | "auto") && args.iterations == Some(0) {
+        return Err("--iterations 0: UniCal needs at least one step".into());
+    }
+    if args.method == "auto" {
+        return super::pipeline::calibrate_auto(args, perturbation, progress);
+    }
+    if !args.camera_time_offset_ms.is_finite() || args.camera_time_offset_ms.abs() > 1000.0 {
+        return Err(format!(
+            "--camera-time-offset-ms must be a number of milliseconds within ±1000, not {}",
+            args.camera_time_offset_ms
+        ));
+    }
+    let camera_readout = match args.camera_readout_ms.as_deref() {
+        Some(s) => parse_readout(s)?,
+        None => crate::geometry::RowTimes::GLOBAL,
+    };
+    let options = crate::log::DriveOptions {
+        camera_time_offset_nanos: (args.camera_time_offset_ms * 1e6).round() as i64,
+        camera_readout,
+        ..crate::log::DriveOptions::default()
+    };
+    let (drive, mut rig, segments) = open_inputs(args, &options, perturbation)?;
+    // What the user gave (after --init and --perturb-*), to say at the end how far each sensor
+    // moved from it.
+    let initial_guess = rig.clone();
+    check_sensor_kinds(args, &rig)?;
     let mut calibrator: Box<dyn Calibrator> = match args.method.as_str() {
         "edge" => {
             let lidar = reference_lidar(args, &rig)?;

@@ -4,4 +4,5 @@
 pub mod calibrate;
 pub mod eval;
 pub mod inspect;
+pub mod pipeline;
 pub mod progress;

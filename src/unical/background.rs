@@ -18,7 +18,8 @@ use super::field::{FieldSample, samples_backward};
 use super::hash_grid::{GradSink, HashGrid, HashGridConfig};
 use super::mlp::{Mlp, MlpGrad};
 
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
 pub struct BackgroundConfig {
     pub grid: HashGridConfig,
     pub hidden: usize,

@@ -44,7 +44,7 @@ pub fn alpha_from_sdf(sdf: f32, beta: f32) -> (f32, f32, f32) {
 /// `α_i = max(0, 1 − Φ(s_{i+1})/Φ(s_i))` with `Φ(s) = sigmoid(β s)`, placed at the section's
 /// midpoint: unbiased on a plane at every incidence and β. The last sample closes the last
 /// section and holds no opacity of its own.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub enum OpacityModel {
     #[default]
     PerSample,

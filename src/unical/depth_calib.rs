@@ -48,7 +48,8 @@ use crate::log::LidarSweep;
 /// The camera ray budget [`DepthCalibConfig::lr_camera_pose`] is meant for.
 pub const CAMERA_RATE_RAYS: usize = 512;
 
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
 pub struct DepthCalibConfig {
     pub field: FieldConfig,
     pub rays_per_sensor: usize,
@@ -93,6 +94,7 @@ pub struct DepthCalibConfig {
     /// run the colour field is still coarse, and a camera stepping at full rate can slide into
     /// a wrong basin degrees away and not come back (BENCHMARKS.md, "Large initial errors");
     /// the bound keeps it in the trust region its start earned. Empty: no bound.
+    #[serde(skip)]
     pub camera_rotation_bounds_deg: Vec<(String, f64)>,
     /// The first iterations fit the SDF directly to the LiDAR returns ([`super::sdf_init`])
     /// with this many rays each (split evenly across LiDARs); poses stay fixed.
@@ -124,7 +126,9 @@ pub struct DepthCalibConfig {
     /// already close, and the correspondence term, with translations still off, turns them
     /// to make up for the offset; BENCHMARKS.md, "The cameras' first move").
     pub alignment_release_rotates: bool,
+    #[serde(skip)]
     pub iterations: usize,
+    #[serde(skip)]
     pub seed: u64,
     /// Camera rays per camera and step (the budget is split evenly across sensors, §7).
     pub rays_per_camera: usize,
@@ -155,9 +159,11 @@ pub struct DepthCalibConfig {
     pub background: Option<BackgroundConfig>,
     /// A sensor whose extrinsic stays fixed (the root); `None`: all move, the trajectory fixes
     /// the gauge (§11).
+    #[serde(skip)]
     pub frozen_sensor: Option<String>,
     /// Further sensors whose extrinsics stay at their initial values (they still shape the
     /// scene): the sensors a user did not ask to calibrate.
+    #[serde(skip)]
     pub held_sensors: Vec<String>,
     /// The correspondence term between cameras (§9; the Table A9 ablation switch).
     pub alignment: AlignmentLoss,
@@ -167,6 +173,7 @@ pub struct DepthCalibConfig {
     pub alignment_matches_per_camera: usize,
     pub alignment_settings: AlignSettings,
     /// Where matched correspondences are kept between runs (`None`: matched every run).
+    #[serde(skip)]
     pub correspondence_cache: Option<std::path::PathBuf>,
     /// Coarse-to-fine sampling (§10): from this fraction of the iterations on, camera pixels
     /// are drawn from keypoint heat maps (the paper: 2000 of 30 000); 1.0 keeps them uniform.
@@ -352,7 +359,8 @@ impl Default for DepthCalibConfig {
 }
 
 /// A coarse-to-fine schedule of the scene's hash-grid levels.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct CoarseToFine {
     pub start_levels: f32,
     pub end_fraction: f32,

@@ -13,7 +13,8 @@ use super::composite::Opacity;
 use super::hash_grid::{GradSink, HashGrid, HashGridConfig};
 use super::mlp::{Mlp, MlpGrad, Trace};
 
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
 pub struct FieldConfig {
     pub grid: HashGridConfig,
     pub hidden: usize,

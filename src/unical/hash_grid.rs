@@ -18,7 +18,8 @@ pub const F: usize = 2;
 
 const PRIMES: [u32; 3] = [1, 2_654_435_761, 805_459_861];
 
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
 pub struct HashGridConfig {
     pub levels: usize,
     pub log2_table_size: u32,

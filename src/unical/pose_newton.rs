@@ -31,7 +31,7 @@ use super::pose::PoseParams;
 use crate::geometry::{Rigid, so3, spd};
 
 /// How LiDAR poses are updated.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub enum PoseUpdate {
     /// Adam on the 6D rotation and translation (the paper, §12).
     Adam,
@@ -39,7 +39,8 @@ pub enum PoseUpdate {
     Newton(NewtonConfig),
 }
 
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
 pub struct NewtonConfig {
     /// Levenberg damping: `λ` times the diagonal of `H` is added to it.
     pub damping: f64,

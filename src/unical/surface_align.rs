@@ -28,7 +28,7 @@ use crate::geometry::camera::CameraIntrinsics;
 use crate::geometry::{Rigid, so3};
 
 /// Which correspondence term the optimisation uses (the paper's Table A9 ablation).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, serde::Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
 pub enum AlignmentLoss {
     /// No correspondence loss.
     #[default]
@@ -60,7 +60,8 @@ pub struct AlignCamera<'a> {
 }
 
 /// The term's settings.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
 pub struct AlignSettings {
     /// Matches with a reprojection error above this (1920-wide pixels) are left out.
     pub max_error_px: f64,

@@ -23,7 +23,8 @@ use crate::geometry::{Rigid, Trajectory};
 use crate::log::pointcloud::LidarSweep;
 
 /// How the look-through test is made.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
 pub struct TransientSettings {
     /// Range-image bin across azimuth (degrees).
     pub azimuth_bin_deg: f64,

@@ -1,0 +1,201 @@
+//! `rigcal calibrate LOG --out FILE` with no method (or `--method auto`): the automatic
+//! pipeline ([`crate::pipeline`]). The plan's decisions are printed with their reasons, the
+//! stages run with progress, UniCal runs until its schedule ends, every pose has settled or
+//! the budget is spent, and the report ends the run: printed, and written in the output's
+//! `metrics.report`. The output is written before the first step and every 30 s (atomically).
+
+use std::path::PathBuf;
+use std::time::Instant;
+
+use crate::calib::{CalibrationFile, Rig};
+use crate::optim::runner::Calibrator;
+use crate::pipeline::calibrator::PipelineCalibrator;
+use crate::pipeline::plan::format_secs;
+use crate::pipeline::{PipelineConfig, Plan, PlanRequest};
+
+use super::calibrate::{CalibrateArgs, moves_report, open_inputs};
+
+/// Seconds between checkpoints of a running calibration.
+const CHECKPOINT_SECS: f64 = 30.0;
+
+/// The configuration `args` asks for: `--config` (a `--print-config` output or an earlier
+/// output file), then `--quality`, `--budget`, `--seed`, `--iterations` and the cameras'
+/// timing options over it.
+pub fn resolve_config(args: &CalibrateArgs) -> Result<PipelineConfig, String> {
+    let mut config = match &args.config_file {
+        Some(path) => PipelineConfig::load(path).map_err(|e| format!("--config: {e}"))?,
+        None => PipelineConfig::default(),
+    };
+    if let Some(q) = args.quality {
+        config.quality = q;
+    }
+    if let Some(b) = args.budget_secs {
+        config.budget_secs = Some(b);
+    }
+    if args.seed_given || args.config_file.is_none() {
+        config.seed = args.seed;
+    }
+    if let Some(n) = args.iterations {
+        config.iterations = Some(n);
+    }
+    if let Some(text) = &args.camera_readout_ms {
+        let rows = super::calibrate::parse_readout(text)?;
+        config.cameras.readout_ms = Some((
+            rows.first_row_nanos as f64 * 1e-6,
+            rows.last_row_nanos as f64 * 1e-6,
+        ));
+    }
+    if args.camera_time_offset_ms != 0.0 {
+        config.cameras.time_offset_ms = args.camera_time_offset_ms;
+    }
+    config.check().map_err(|e| e.to_string())?;
+    Ok(config)
+}
+
+/// Run the pipeline; `progress(step, steps)` follows UniCal's steps. Returns the written
+/// document and the closing text (moves and report).
+pub fn calibrate_auto(
+    args: &CalibrateArgs,
+    perturbation: Option<(f64, f64)>,
+    progress: &mut dyn FnMut(usize, usize),
+) -> Result<(CalibrationFile, String), String> {
+    let config = resolve_config(args)?;
+    let options = crate::log::DriveOptions {
+        camera_time_offset_nanos: (config.cameras.time_offset_ms * 1e6).round() as i64,
+        camera_readout: match config.cameras.readout_ms {
+            Some((a, b)) => crate::geometry::RowTimes::from_millis(a, b),
+            None => crate::geometry::RowTimes::GLOBAL,
+        },
+        ..crate::log::DriveOptions::default()
+    };
+    let (drive, initial, segments) = open_inputs(args, &options, perturbation)?;
+    let started = Instant::now();
+    let request = PlanRequest {
+        root: args.root.clone(),
+        sensors: args.sensors.clone(),
+        segments_nanos: segments,
+    };
+    let bars = super::progress::PhasedProgress::default();
+    let plan = Plan::build(&drive, &initial, &request, &config, true).map_err(|e| e.to_string())?;
+    for line in &plan.decisions {
+        eprintln!("plan: {line}");
+    }
+    let report_progress = |phase: &str, done, total| bars.report(phase, done, total);
+    let drive = std::sync::Arc::new(drive);
+    let mut run =
+        PipelineCalibrator::prepare(drive, initial.clone(), plan, started, &report_progress)?;
+    bars.finish();
+    for line in run.notes() {
+        eprintln!("{line}");
+    }
+    let write = |run: &PipelineCalibrator, status: String, losses: &[(String, f64)]| {
+        let mut doc = document(
+            args,
+            &run.best(),
+            run.plan(),
+            &run.resolved_config(),
+            status,
+        );
+        for (name, value) in losses {
+            doc.metrics
+                .insert(name.clone(), serde_yaml::Value::from(*value));
+        }
+        if let Some(r) = run.report() {
+            doc.metrics.insert("report".into(), r.to_yaml());
+        }
+        doc.save(&args.out).map_err(|e| e.to_string()).map(|()| doc)
+    };
+    let steps = run.max_steps();
+    write(&run, format!("running: step 0 of {steps}"), &[])?;
+    let mut saved_at = Instant::now();
+    let mut last = Vec::new();
+    let mut first_update = false;
+    let optimising = Instant::now();
+    for step in 1..=steps {
+        let r = run.step();
+        if !r.losses.is_empty() {
+            last = r.losses;
+        }
+        if !first_update && rig_moved(&initial, &run.current()) {
+            first_update = true;
+            eprintln!(
+                "first extrinsic update: step {step}, {:.1} s into the optimisation",
+                optimising.elapsed().as_secs_f64()
+            );
+        }
+        progress(step, steps);
+        if r.done {
+            break;
+        }
+        if saved_at.elapsed().as_secs_f64() >= CHECKPOINT_SECS {
+            write(&run, format!("running: step {step} of {steps}"), &last)?;
+            saved_at = Instant::now();
+        }
+    }
+    if let Some(why) = run.stopped() {
+        eprintln!("\n{why}");
+    }
+    let doc = write(&run, "complete".into(), &last)?;
+    let result = run.best();
+    let report = run.report().map(|r| r.to_text()).unwrap_or_default();
+    let text = format!(
+        "{}{report}total {}\n",
+        moves_report(&initial, &result),
+        format_secs(started.elapsed().as_secs_f64())
+    );
+    Ok((doc, text))
+}
+
+/// Whether any sensor of `now` differs from `start`.
+fn rig_moved(start: &Rig, now: &Rig) -> bool {
+    start.sensors.iter().any(|s| {
+        now.sensor(&s.name).is_some_and(|n| {
+            let (r, t) = s.vehicle_from_sensor.difference(n.vehicle_from_sensor);
+            r + t > 1e-9
+        })
+    })
+}
+
+/// The native file of `rig` with the pipeline's provenance: the resolved configuration (which
+/// `--config` reads back), the plan's decisions, input, date and status.
+fn document(
+    args: &CalibrateArgs,
+    rig: &Rig,
+    plan: &Plan,
+    config: &PipelineConfig,
+    status: String,
+) -> CalibrationFile {
+    let mut doc = CalibrationFile::from_rig(rig);
+    let v = |s: String| serde_yaml::Value::String(s);
+    let input: PathBuf = std::path::absolute(&args.log).unwrap_or_else(|_| args.log.clone());
+    let p = &mut doc.provenance;
+    p.insert("input".into(), v(input.display().to_string()));
+    p.insert("method".into(), v("pipeline".into()));
+    p.insert(
+        "config".into(),
+        serde_yaml::to_value(config).unwrap_or(serde_yaml::Value::Null),
+    );
+    p.insert(
+        "plan".into(),
+        serde_yaml::Value::Sequence(plan.decisions.iter().cloned().map(v).collect()),
+    );
+    p.insert("date".into(), v(crate::util::now_utc()));
+    if let Some(s) = &args.segment {
+        p.insert("time_range".into(), v(format!("{s} s")));
+    }
+    if let Some(i) = &args.init {
+        p.insert("init".into(), v(i.display().to_string()));
+    }
+    if let Some((deg, cm)) = args.perturb_given() {
+        p.insert(
+            "init_perturbed".into(),
+            v(format!("{deg}° and {cm} cm per sensor, seed {}", args.seed)),
+        );
+    }
+    p.insert(
+        "version".into(),
+        v(format!("rigcal {}", env!("CARGO_PKG_VERSION"))),
+    );
+    p.insert("status".into(), v(status));
+    doc
+}

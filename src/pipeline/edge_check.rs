@@ -1,0 +1,279 @@
+//! A camera's target-free check against a LiDAR, shared by the plan and the report: the
+//! edge-alignment score (mean truncated distance, px, from the LiDAR's depth discontinuities
+//! to the image's edges; [`EdgeAlignment`]), whether a nearby pose aligns clearly better, and
+//! how well the images pin each axis of the camera's pose down.
+//!
+//! How the uncertainty is found: the cost is a sum over frames, `S(x) = Σ_k S_k(x)`, of each
+//! frame's summed edge distances, with `x` a right perturbation of `vehicle_from_camera` in the
+//! camera's own frame (three rotations, three translations). Its Hessian `H` comes from central
+//! differences at a step of about the sensor's expected error, and the frames' gradients `g_k`
+//! from the same evaluations. The frames are independent samples of the drive, so the
+//! covariance of the minimiser is the sandwich (M-estimator) one, `H⁻¹ B H⁻¹` with `B` the
+//! centred scatter of the frames' gradients times their count. A direction along which `H`
+//! is flat or not convex is one the images do not observe.
+
+use glam::DVec3;
+
+use crate::calib::Rig;
+use crate::geometry::Rigid;
+use crate::log::Drive;
+use crate::optim::edge_align::EdgeAlignment;
+
+/// The finite-difference steps: rotations (rad) and translations (m).
+const STEP_RAD: f64 = 0.3 * std::f64::consts::PI / 180.0;
+const STEP_M: f64 = 0.03;
+/// Rotations are compared with translations as the displacement they cause at this lever (m).
+const LEVER_M: f64 = 10.0;
+
+/// One camera against one LiDAR, over a few frames.
+#[derive(Clone, Debug)]
+pub struct EdgeCheck {
+    pub camera: String,
+    pub lidar: String,
+    /// One problem per frame (their points are fixed at construction: a point that later
+    /// leaves the image costs the truncation instead of dropping out).
+    frames: Vec<EdgeAlignment>,
+}
+
+/// Per axis (rotations about the camera's x, y, z, then translations along them): the 1-σ
+/// uncertainty (rad, m; infinite where the images do not observe it).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct AxisSigmas(pub [f64; 6]);
+
+impl EdgeCheck {
+    /// Prepare `frames` frames of `camera` against `lidar` (at their extrinsics in `rig`)
+    /// within `segments_nanos`, the points kept where `rig`'s camera pose sees them.
+    pub fn new(
+        drive: &Drive,
+        rig: &Rig,
+        camera: &str,
+        lidar: &str,
+        frames: usize,
+        segments_nanos: &[(i64, i64)],
+    ) -> Result<Self, String> {
+        let problem = EdgeAlignment::from_drive(drive, rig, camera, lidar, frames, segments_nanos)
+            .map_err(|e| format!("{camera} × {lidar}: {e}"))?;
+        let mut problem = problem;
+        let all = std::mem::take(&mut problem.frames);
+        let frames = all
+            .into_iter()
+            .filter(|f| !f.points_in_vehicle.is_empty())
+            .map(|f| EdgeAlignment {
+                frames: vec![f],
+                ..problem.clone()
+            })
+            .collect::<Vec<_>>();
+        if frames.is_empty() {
+            return Err(format!(
+                "{camera} × {lidar}: no LiDAR silhouette inside the image"
+            ));
+        }
+        Ok(Self {
+            camera: camera.into(),
+            lidar: lidar.into(),
+            frames,
+        })
+    }
+
+    pub fn frame_count(&self) -> usize {
+        self.frames.len()
+    }
+
+    /// Each frame's summed edge distance (px) through `vehicle_from_camera`.
+    fn frame_sums(&self, vehicle_from_camera: Rigid) -> Vec<f64> {
+        self.frames
+            .iter()
+            .map(|f| {
+                f.distances(vehicle_from_camera)
+                    .iter()
+                    .map(|&d| d as f64)
+                    .sum()
+            })
+            .collect()
+    }
+
+    /// The mean truncated edge distance (px) over every frame's points.
+    pub fn score(&self, vehicle_from_camera: Rigid) -> f64 {
+        let points: usize = self.frames.iter().map(|f| f.point_count()).sum();
+        self.frame_sums(vehicle_from_camera).iter().sum::<f64>() / points.max(1) as f64
+    }
+
+    /// A nearby pose that aligns clearly better than `start` (by at least `margin`, e.g. 0.1
+    /// for 10 %): tried turns of 1° and 2.5° about each camera axis and shifts of 20 cm along
+    /// each. Returns a description of the best such pose and its score.
+    pub fn better_nearby(&self, start: Rigid, margin: f64) -> Option<(String, f64)> {
+        let here = self.score(start);
+        let names = ["x", "y", "z"];
+        let mut best: Option<(String, f64)> = None;
+        for (axis, name) in names.iter().enumerate() {
+            let unit = DVec3::from_array(std::array::from_fn(|k| (k == axis) as u8 as f64));
+            for sign in [-1.0, 1.0] {
+                let mut tries = vec![
+                    (
+                        format!("a {:+.1}° turn about its {name} axis", sign),
+                        start.perturbed_right(unit * sign * 1f64.to_radians(), DVec3::ZERO),
+                    ),
+                    (
+                        format!("a {:+.1}° turn about its {name} axis", sign * 2.5),
+                        start.perturbed_right(unit * sign * 2.5f64.to_radians(), DVec3::ZERO),
+                    ),
+                ];
+                tries.push((
+                    format!("a {:+.0} cm shift along its {name} axis", sign * 20.0),
+                    start.perturbed_right(DVec3::ZERO, unit * sign * 0.2),
+                ));
+                for (what, pose) in tries {
+                    let s = self.score(pose);
+                    if s < here * (1.0 - margin) && best.as_ref().is_none_or(|(_, b)| s < *b) {
+                        best = Some((what, s));
+                    }
+                }
+            }
+        }
+        best.map(|(what, s)| {
+            (
+                format!(
+                    "{what} aligns its edges with {}'s {:.0} % better ({:.2} px against {:.2} px)",
+                    self.lidar,
+                    100.0 * (1.0 - s / here),
+                    s,
+                    here
+                ),
+                s,
+            )
+        })
+    }
+
+    /// The 1-σ uncertainty of each axis of the camera's pose at `at` (module doc).
+    pub fn sigmas(&self, at: Rigid) -> AxisSigmas {
+        let step = [STEP_RAD, STEP_RAD, STEP_RAD, STEP_M, STEP_M, STEP_M];
+        let pose = |dx: [f64; 6]| {
+            at.perturbed_right(
+                DVec3::new(dx[0], dx[1], dx[2]),
+                DVec3::new(dx[3], dx[4], dx[5]),
+            )
+        };
+        let unit = |i: usize, s: f64| -> [f64; 6] {
+            std::array::from_fn(|k| if k == i { s * step[i] } else { 0.0 })
+        };
+        let total = |v: &[f64]| v.iter().sum::<f64>();
+        let centre = self.frame_sums(at);
+        let s0 = total(&centre);
+        let plus: Vec<Vec<f64>> = (0..6)
+            .map(|i| self.frame_sums(pose(unit(i, 1.0))))
+            .collect();
+        let minus: Vec<Vec<f64>> = (0..6)
+            .map(|i| self.frame_sums(pose(unit(i, -1.0))))
+            .collect();
+        let mut h = [[0.0; 6]; 6];
+        for i in 0..6 {
+            h[i][i] = (total(&plus[i]) + total(&minus[i]) - 2.0 * s0) / (step[i] * step[i]);
+            for j in i + 1..6 {
+                let at2 = |a: f64, b: f64| {
+                    let mut d = unit(i, a);
+                    d[j] = b * step[j];
+                    total(&self.frame_sums(pose(d)))
+                };
+                let v = (at2(1.0, 1.0) - at2(1.0, -1.0) - at2(-1.0, 1.0) + at2(-1.0, -1.0))
+                    / (4.0 * step[i] * step[j]);
+                h[i][j] = v;
+                h[j][i] = v;
+            }
+        }
+        // Each frame's gradient, centred, and their scatter.
+        let k = centre.len();
+        let grads: Vec<[f64; 6]> = (0..k)
+            .map(|f| std::array::from_fn(|i| (plus[i][f] - minus[i][f]) / (2.0 * step[i])))
+            .collect();
+        let mean: [f64; 6] =
+            std::array::from_fn(|i| grads.iter().map(|g| g[i]).sum::<f64>() / k as f64);
+        let mut b = [[0.0; 6]; 6];
+        for g in &grads {
+            for r in 0..6 {
+                for c in 0..6 {
+                    b[r][c] += (g[r] - mean[r]) * (g[c] - mean[c]);
+                }
+            }
+        }
+        let scale_b = if k > 1 {
+            k as f64 / (k as f64 - 1.0)
+        } else {
+            1.0
+        };
+        b.iter_mut().flatten().for_each(|v| *v *= scale_b.max(1.0));
+        AxisSigmas(sandwich_sigmas(h, b, k))
+    }
+}
+
+/// The per-axis σ of `H⁻¹ B H⁻¹` (rotations first, rad and m), infinite along the axes a flat
+/// or concave direction of `H` touches.
+fn sandwich_sigmas(h: [[f64; 6]; 6], b: [[f64; 6]; 6], frames: usize) -> [f64; 6] {
+    // Rotations counted at a lever so the two halves share a scale.
+    let s = [LEVER_M, LEVER_M, LEVER_M, 1.0, 1.0, 1.0];
+    let hs: [[f64; 6]; 6] =
+        std::array::from_fn(|r| std::array::from_fn(|c| h[r][c] / (s[r] * s[c])));
+    let bs: [[f64; 6]; 6] =
+        std::array::from_fn(|r| std::array::from_fn(|c| b[r][c] / (s[r] * s[c])));
+    let (values, vectors) = crate::geometry::spd::symmetric_eigen(hs);
+    let largest = values.iter().cloned().fold(0.0f64, f64::max);
+    let mut unobserved = [false; 6];
+    // H⁻¹ on the observed directions.
+    let mut inv = [[0.0; 6]; 6];
+    for e in 0..6 {
+        let v: [f64; 6] = std::array::from_fn(|r| vectors[r][e]);
+        if largest > 0.0 && values[e] > 1e-4 * largest {
+            for r in 0..6 {
+                for c in 0..6 {
+                    inv[r][c] += v[r] * v[c] / values[e];
+                }
+            }
+        } else {
+            for (axis, x) in v.iter().enumerate() {
+                if x.abs() > 0.3 {
+                    unobserved[axis] = true;
+                }
+            }
+        }
+    }
+    // With one frame the scatter is unknown: the Hessian's own scale stands in.
+    let cov = if frames > 1 {
+        mul(mul(inv, bs), inv)
+    } else {
+        inv
+    };
+    std::array::from_fn(|axis| {
+        if unobserved[axis] || largest <= 0.0 {
+            f64::INFINITY
+        } else {
+            cov[axis][axis].max(0.0).sqrt() / s[axis]
+        }
+    })
+}
+
+fn mul(a: [[f64; 6]; 6], b: [[f64; 6]; 6]) -> [[f64; 6]; 6] {
+    std::array::from_fn(|r| std::array::from_fn(|c| (0..6).map(|k| a[r][k] * b[k][c]).sum()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_flat_direction_is_not_observed_and_the_scatter_sets_the_others() {
+        // H = diag(4, 4, 4, 1, 1, 0): the last translation is flat.
+        let mut h = [[0.0; 6]; 6];
+        for (i, v) in [4.0, 4.0, 4.0, 1.0, 1.0, 0.0].iter().enumerate() {
+            h[i][i] = *v;
+        }
+        let mut b = [[0.0; 6]; 6];
+        for i in 0..6 {
+            b[i][i] = 1.0;
+        }
+        let s = sandwich_sigmas(h, b, 8);
+        assert!(s[5].is_infinite());
+        // Rotations: H/λ² = 4/100 → H⁻¹ = 25, scaled B = 1/100 → variance 25·0.01·25, σ in
+        // rad = sqrt(6.25)/10.
+        assert!((s[0] - 0.25).abs() < 1e-9, "{s:?}");
+        assert!((s[3] - 1.0).abs() < 1e-9, "{s:?}");
+    }
+}

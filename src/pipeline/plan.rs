@@ -1,0 +1,435 @@
+//! What the pipeline will do with a drive, decided from the data: the stages, each with the
+//! reason it was chosen or skipped, and the settings it resolved (images, scale, steps) from the
+//! quality preset and the time budget.
+//!
+//! The decisions, in order:
+//! - a log that hardly moves (under a metre) is a stationary one: its cameras are calibrated
+//!   against the reference LiDAR by checkerboards where boards are found, else by edge
+//!   alignment, and no neural scene is learned;
+//! - LiDARs: the reference (the root, else the first) is fitted to the trajectory where the
+//!   drive turns enough ([`MIN_TURN_DEG`]), otherwise left; every other LiDAR is registered to
+//!   it by point-to-plane ICP; then UniCal holds them;
+//! - cameras: the hand-eye start where the drive turns enough and the starting alignment looks
+//!   far off (a nearby pose aligns the LiDAR's edges clearly better); then UniCal with every
+//!   camera, on the quality's images at its scale, for as many steps as the budget allows.
+//!
+//! The same [`Plan`] runs from the CLI, the studio and `bench` ([`super::run`]).
+
+use crate::calib::{Rig, SensorKind};
+use crate::classical::trajectory_icp::MIN_TURN_DEG;
+use crate::geometry::so3;
+use crate::log::Drive;
+use crate::unical::depth_calib::DepthCalibConfig;
+
+use super::config::{HandEye, PipelineConfig};
+use super::edge_check::EdgeCheck;
+
+/// A log whose vehicle moves less than this (m) is a stationary one.
+const STATIONARY_M: f64 = 1.0;
+/// Frames of each camera the start check looks at.
+const CHECK_FRAMES: usize = 4;
+/// A nearby pose must align the edges this much better for the start to look far off.
+const FAR_OFF_MARGIN: f64 = 0.1;
+/// Seconds a UniCal step is planned at per camera ray and per LiDAR ray, and the preparation
+/// per camera image (measured on a 2-core Xeon with AVX-512; BENCHMARKS.md, "The pipeline").
+/// The run stops at the budget whatever the estimate said.
+const SECS_PER_CAMERA_RAY: f64 = 1.3e-4;
+const SECS_PER_LIDAR_RAY: f64 = 6.0e-5;
+const PREPARE_SECS_PER_IMAGE: f64 = 0.4;
+const PREPARE_SECS: f64 = 30.0;
+
+/// The sensors and times a plan is made for, besides the configuration.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct PlanRequest {
+    /// The sensor whose extrinsic stays fixed (a LiDAR: also the reference).
+    pub root: Option<String>,
+    /// The sensors to calibrate (empty: all).
+    pub sensors: Vec<String>,
+    /// Time ranges (ns) to use (empty: the whole drive).
+    pub segments_nanos: Vec<(i64, i64)>,
+}
+
+/// One stage of a plan.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Stage {
+    /// Fit the reference LiDAR to the trajectory by its own sweeps.
+    LidarToTrajectory { lidar: String },
+    /// Register each LiDAR to the reference by point-to-plane ICP.
+    LidarIcp {
+        reference: String,
+        lidars: Vec<String>,
+    },
+    /// Fit each camera to its own motion (and its translation to the LiDAR map).
+    CameraHandEye { cameras: Vec<String> },
+    /// UniCal: one scene with every sensor; the held ones stay.
+    Unical {
+        cameras: Vec<String>,
+        images_per_camera: usize,
+        image_scale: f64,
+        iterations: usize,
+    },
+    /// A stationary log: checkerboards where boards are found, else edge alignment.
+    StationaryCameras {
+        reference: String,
+        cameras: Vec<String>,
+    },
+}
+
+/// What the pipeline will do, and why.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Plan {
+    pub stages: Vec<Stage>,
+    /// One line per decision, with its reason.
+    pub decisions: Vec<String>,
+    /// The LiDAR others are registered to and cameras checked against.
+    pub reference_lidar: Option<String>,
+    /// The configuration with every choice resolved (images, scale, steps, budget), as the
+    /// output's provenance records it.
+    pub config: PipelineConfig,
+    /// UniCal's configuration for this drive (steps, seed, root, held sensors); the run gives
+    /// the cameras the hand-eye fitted its schedule ([`DepthCalibConfig::after_hand_eye`]).
+    pub unical: DepthCalibConfig,
+    pub request: PlanRequest,
+}
+
+/// A drive the pipeline cannot plan for.
+#[derive(Debug, thiserror::Error, PartialEq)]
+pub enum PlanError {
+    #[error("{0}")]
+    Config(#[from] super::config::ConfigError),
+    #[error("--sensors: no sensor '{name}' in {log}")]
+    UnknownSensor { name: String, log: String },
+    #[error("--root: no sensor '{name}' in {log}")]
+    UnknownRoot { name: String, log: String },
+    #[error("{log} has no LiDAR with sweeps: the pipeline needs one to calibrate against")]
+    NoLidar { log: String },
+}
+
+/// How the vehicle moves within the request's time.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Motion {
+    pub distance_m: f64,
+    /// The largest heading change from the first pose (degrees).
+    pub turn_deg: f64,
+}
+
+impl Motion {
+    /// The motion over `segments_nanos` (empty: the whole trajectory), poses every 0.25 s.
+    pub fn of(drive: &Drive, segments_nanos: &[(i64, i64)]) -> Motion {
+        let Some((lo, hi)) = drive.trajectory.time_range_nanos() else {
+            return Motion {
+                distance_m: 0.0,
+                turn_deg: 0.0,
+            };
+        };
+        let ranges = if segments_nanos.is_empty() {
+            vec![(lo, hi)]
+        } else {
+            segments_nanos.to_vec()
+        };
+        let (mut distance_m, mut turn_deg) = (0.0, 0.0f64);
+        let mut first = None;
+        for (a, b) in ranges {
+            let stamps =
+                crate::geometry::Trajectory::sample_stamps(a.max(lo), b.min(hi), 250_000_000, 4000);
+            let poses: Vec<_> = stamps
+                .iter()
+                .filter_map(|&t| drive.trajectory.world_from_vehicle(t).ok())
+                .collect();
+            for w in poses.windows(2) {
+                distance_m += (w[1].translation - w[0].translation).length();
+            }
+            for p in &poses {
+                let f = *first.get_or_insert(p.rotation);
+                // The heading: the vehicle's x axis on the ground plane.
+                let heading = |q: glam::DQuat| {
+                    let x = q * glam::DVec3::X;
+                    x.y.atan2(x.x)
+                };
+                let d = so3::angle_rad(glam::DQuat::from_rotation_z(
+                    heading(p.rotation) - heading(f),
+                ));
+                turn_deg = turn_deg.max(d.to_degrees());
+            }
+        }
+        Motion {
+            distance_m,
+            turn_deg,
+        }
+    }
+}
+
+impl Plan {
+    /// Decide the stages for `rig` on `drive`. `checks` runs the cameras' start check (it
+    /// reads a few images): off, the hand-eye's `auto` takes the start as close enough.
+    pub fn build(
+        drive: &Drive,
+        rig: &Rig,
+        request: &PlanRequest,
+        config: &PipelineConfig,
+        checks: bool,
+    ) -> Result<Plan, PlanError> {
+        config.check()?;
+        let log = drive.path().display().to_string();
+        for name in &request.sensors {
+            if rig.sensor(name).is_none() {
+                return Err(PlanError::UnknownSensor {
+                    name: name.clone(),
+                    log,
+                });
+            }
+        }
+        if let Some(root) = &request.root
+            && rig.sensor(root).is_none()
+        {
+            return Err(PlanError::UnknownRoot {
+                name: root.clone(),
+                log,
+            });
+        }
+        let asked =
+            |name: &str| request.sensors.is_empty() || request.sensors.iter().any(|s| s == name);
+        let with_data = |name: &str| drive.stream(name).is_some_and(|s| !s.frames.is_empty());
+        let lidars: Vec<String> = rig
+            .lidars()
+            .filter(|l| with_data(&l.name))
+            .map(|l| l.name.clone())
+            .collect();
+        let reference = match &request.root {
+            Some(r) if lidars.contains(r) => r.clone(),
+            _ => lidars.first().cloned().ok_or(PlanError::NoLidar { log })?,
+        };
+        let cameras: Vec<String> = rig
+            .cameras()
+            .filter(|c| c.camera.is_some() && with_data(&c.name) && asked(&c.name))
+            .map(|c| c.name.clone())
+            .collect();
+        let motion = Motion::of(drive, &request.segments_nanos);
+        let preset = config.quality.preset();
+        let mut resolved = config.clone();
+        resolved.budget_secs = config.budget_secs.or(preset.budget_secs);
+        let mut stages = Vec::new();
+        let mut decisions = vec![format!(
+            "drive: {:.0} m, turning {:.0}° at most from its first heading; {} LiDAR(s), {} camera(s) to calibrate; quality {}{}",
+            motion.distance_m,
+            motion.turn_deg,
+            lidars.len(),
+            cameras.len(),
+            config.quality.name(),
+            match resolved.budget_secs {
+                Some(b) => format!(", budget {}", format_secs(b)),
+                None => ", no time budget".into(),
+            }
+        )];
+        let stationary = motion.distance_m < STATIONARY_M;
+        // LiDARs.
+        let root_is_reference = request.root.as_deref() == Some(reference.as_str());
+        if config.lidars.register {
+            if root_is_reference {
+                decisions.push(format!(
+                    "lidars: {reference} is the root: it stays where the initial guess puts it"
+                ));
+            } else if !asked(&reference) {
+                decisions.push(format!(
+                    "lidars: {reference} (the reference) is not among --sensors: it stays"
+                ));
+            } else if stationary {
+                decisions.push(format!(
+                    "lidars: {reference} (the reference) stays: the vehicle does not move, so the trajectory cannot place it"
+                ));
+            } else if motion.turn_deg < MIN_TURN_DEG {
+                decisions.push(format!(
+                    "lidars: {reference} (the reference) stays where the initial guess puts it: the drive turns {:.0}°, too little to fit it to the trajectory (at least {MIN_TURN_DEG:.0}°)",
+                    motion.turn_deg
+                ));
+            } else {
+                stages.push(Stage::LidarToTrajectory {
+                    lidar: reference.clone(),
+                });
+                decisions.push(format!(
+                    "lidars: {reference} (the reference) fitted to the trajectory by its own sweeps: the drive turns {:.0}°",
+                    motion.turn_deg
+                ));
+            }
+            let others: Vec<String> = lidars
+                .iter()
+                .filter(|l| **l != reference && asked(l))
+                .cloned()
+                .collect();
+            if !others.is_empty() {
+                decisions.push(format!(
+                    "lidars: {} registered to {reference} by point-to-plane ICP, then held",
+                    others.join(", ")
+                ));
+                stages.push(Stage::LidarIcp {
+                    reference: reference.clone(),
+                    lidars: others,
+                });
+            }
+        } else {
+            decisions.push(
+                "lidars: not registered first (lidars.register off): UniCal moves them".into(),
+            );
+        }
+        // Cameras.
+        let mut hand_eye = Vec::new();
+        if cameras.is_empty() {
+            decisions.push("cameras: none with intrinsics and images to calibrate".into());
+        } else if stationary {
+            decisions.push(format!(
+                "cameras: the vehicle does not move ({:.1} m): {} calibrated against {reference} by checkerboards where boards are found, else by edge alignment",
+                motion.distance_m,
+                cameras.join(", ")
+            ));
+            stages.push(Stage::StationaryCameras {
+                reference: reference.clone(),
+                cameras: cameras.clone(),
+            });
+        } else {
+            match config.cameras.hand_eye {
+                HandEye::Never => decisions.push("cameras: no hand-eye start (cameras.hand_eye: never)".into()),
+                _ if motion.turn_deg < MIN_TURN_DEG => decisions.push(format!(
+                    "cameras: no hand-eye start: the drive turns {:.0}°, too little for the cameras' own motion to place them",
+                    motion.turn_deg
+                )),
+                HandEye::Always => {
+                    hand_eye = cameras.clone();
+                    decisions.push("cameras: every camera fitted to its own motion first (cameras.hand_eye: always)".into());
+                }
+                HandEye::Auto if !checks => decisions.push(
+                    "cameras: no hand-eye start: the start was not checked".into(),
+                ),
+                HandEye::Auto => {
+                    for camera in &cameras {
+                        match EdgeCheck::new(drive, rig, camera, &reference, CHECK_FRAMES, &request.segments_nanos) {
+                            Ok(check) => {
+                                let start = rig.sensor(camera).map(|s| s.vehicle_from_sensor).unwrap_or_default();
+                                if let Some((why, _)) = check.better_nearby(start, FAR_OFF_MARGIN) {
+                                    decisions.push(format!("cameras: {camera} looks far off ({why}): fitted to its own motion first"));
+                                    hand_eye.push(camera.clone());
+                                }
+                            }
+                            Err(e) => decisions.push(format!("cameras: {camera}'s start not checked: {e}")),
+                        }
+                    }
+                    if hand_eye.is_empty() {
+                        decisions.push(format!(
+                            "cameras: no hand-eye start: every camera's start aligns with {reference}'s edges better than nearby poses"
+                        ));
+                    }
+                }
+            }
+            if !hand_eye.is_empty() {
+                stages.push(Stage::CameraHandEye {
+                    cameras: hand_eye.clone(),
+                });
+            }
+        }
+        // UniCal.
+        let images = config
+            .cameras
+            .images_per_camera
+            .unwrap_or(preset.images_per_camera);
+        let scale = config.cameras.image_scale.unwrap_or(preset.image_scale);
+        let unical_cameras: Vec<String> = if stationary {
+            Vec::new()
+        } else {
+            cameras.clone()
+        };
+        let lidars_move = !config.lidars.register;
+        let mut iterations = config.iterations.unwrap_or(preset.iterations);
+        let run_unical = !unical_cameras.is_empty() || lidars_move;
+        if run_unical {
+            let camera_rays = (unical_cameras.len() * config.unical.rays_per_camera) as f64;
+            let lidar_rays = (lidars.len() * config.unical.rays_per_sensor) as f64;
+            let step_secs = camera_rays * SECS_PER_CAMERA_RAY + lidar_rays * SECS_PER_LIDAR_RAY;
+            let prepare =
+                PREPARE_SECS + PREPARE_SECS_PER_IMAGE * (images * unical_cameras.len()) as f64;
+            if let (None, Some(budget)) = (config.iterations, resolved.budget_secs) {
+                let fits = ((budget - prepare) / step_secs.max(1e-6)).floor().max(0.0) as usize;
+                // Fewer steps than the poses' warm-up and ramp would leave them unmoved.
+                let least = config.unical.pose_warmup + config.unical.pose_ramp;
+                let cut = fits.max(least).min(iterations);
+                if cut < iterations {
+                    decisions.push(format!(
+                        "unical: {cut} steps instead of the quality's {iterations} to fit the budget (about {:.2} s a step planned; the run stops at the budget)",
+                        step_secs
+                    ));
+                    iterations = cut;
+                }
+            }
+            let what = if unical_cameras.is_empty() {
+                "every LiDAR".to_string()
+            } else {
+                format!(
+                    "{} camera(s) on {images} image(s) each at scale {scale}",
+                    unical_cameras.len()
+                )
+            };
+            decisions.push(format!(
+                "unical: one scene, {what}, {iterations} steps (about {} planned){}",
+                format_secs(prepare + iterations as f64 * step_secs),
+                if lidars_move { "" } else { "; the LiDARs held" }
+            ));
+            stages.push(Stage::Unical {
+                cameras: unical_cameras,
+                images_per_camera: images,
+                image_scale: scale,
+                iterations,
+            });
+        }
+        resolved.iterations = Some(iterations);
+        resolved.cameras.images_per_camera = Some(images);
+        resolved.cameras.image_scale = Some(scale);
+        let held: Vec<String> = rig
+            .sensors
+            .iter()
+            .filter(|s| !asked(&s.name) || (config.lidars.register && s.kind == SensorKind::Lidar))
+            .map(|s| s.name.clone())
+            .collect();
+        let unical = DepthCalibConfig {
+            iterations,
+            seed: config.seed,
+            frozen_sensor: request.root.clone(),
+            held_sensors: held,
+            ..config.unical.clone()
+        };
+        Ok(Plan {
+            stages,
+            decisions,
+            reference_lidar: Some(reference),
+            config: resolved,
+            unical,
+            request: request.clone(),
+        })
+    }
+
+    /// The UniCal stage, if the plan has one.
+    pub fn unical_stage(&self) -> Option<&Stage> {
+        self.stages
+            .iter()
+            .find(|s| matches!(s, Stage::Unical { .. }))
+    }
+
+    /// The cameras the hand-eye fits first.
+    pub fn hand_eye_cameras(&self) -> &[String] {
+        self.stages
+            .iter()
+            .find_map(|s| match s {
+                Stage::CameraHandEye { cameras } => Some(cameras.as_slice()),
+                _ => None,
+            })
+            .unwrap_or(&[])
+    }
+}
+
+/// `9 min 30 s`, `45 s`.
+pub fn format_secs(secs: f64) -> String {
+    let s = secs.max(0.0).round() as u64;
+    match (s / 3600, (s % 3600) / 60, s % 60) {
+        (0, 0, s) => format!("{s} s"),
+        (0, m, 0) => format!("{m} min"),
+        (0, m, s) => format!("{m} min {s} s"),
+        (h, m, _) => format!("{h} h {m} min"),
+    }
+}

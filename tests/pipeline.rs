@@ -1,0 +1,246 @@
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+//! The automatic pipeline: its plan follows the drive (a drive with turns fits the reference
+//! LiDAR to the trajectory and may start the cameras by hand-eye; a straight one says why it
+//! does neither), a printed configuration read back plans the same, a bad configuration is a
+//! one-line error naming the key, and the plain command `rigcal calibrate LOG --out FILE`
+//! writes a calibration with its plan, its resolved configuration and a per-sensor report.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use rigcal::calib::CalibrationFile;
+use rigcal::log::Drive;
+use rigcal::pipeline::{PipelineConfig, Plan, PlanRequest, Quality, Stage};
+use rigcal::sim::rigs::{RigPreset, SimRig};
+use rigcal::sim::synth::{SynthConfig, synthesize};
+use rigcal::sim::trajectories::TrajectoryKind;
+use rigcal::sim::world::SceneKind;
+use tempfile::TempDir;
+
+/// A small drive: both LiDARs and the front camera of the pandaset rig, 2° / 20 cm off.
+fn drive(trajectory: TrajectoryKind, seconds: f64, seed: u64) -> (TempDir, PathBuf, PathBuf) {
+    let tmp = tempfile::Builder::new()
+        .prefix("rigcal-pipeline-")
+        .tempdir()
+        .unwrap();
+    let mut rig = SimRig::preset(RigPreset::Pandaset);
+    rig.cameras.retain(|c| c.name == "front_camera");
+    let mut cfg = SynthConfig::new(SceneKind::Urban, rig, trajectory, seconds, seed);
+    cfg.scale = 0.25;
+    cfg.camera_rate_hz = 2.0;
+    cfg.perturb_deg = 2.0;
+    cfg.perturb_cm = 20.0;
+    let (log, gt) = (tmp.path().join("drive.mcap"), tmp.path().join("gt.yaml"));
+    synthesize(&cfg, &log, &gt, &mut |_, _| {}).unwrap();
+    (tmp, log, gt)
+}
+
+fn plan(log: &Path, config: &PipelineConfig) -> Plan {
+    let drive = Drive::open(log).unwrap();
+    Plan::build(&drive, &drive.rig, &PlanRequest::default(), config, false).unwrap()
+}
+
+#[test]
+fn plans_for_a_turning_and_a_straight_drive_differ_and_say_why() {
+    let (_a, turning, _) = drive(TrajectoryKind::Figure8, 6.0, 31);
+    let (_b, straight, _) = drive(TrajectoryKind::Straight, 4.0, 32);
+    let config = PipelineConfig {
+        cameras: rigcal::pipeline::config::CameraSettings {
+            hand_eye: rigcal::pipeline::config::HandEye::Always,
+            ..Default::default()
+        },
+        ..PipelineConfig::default()
+    };
+    let turns = plan(&turning, &config);
+    let flat = plan(&straight, &config);
+    let text = |p: &Plan| p.decisions.join("\n");
+    // With turns: the reference LiDAR is fitted to the trajectory, the cameras to their motion.
+    assert!(
+        turns.stages.contains(&Stage::LidarToTrajectory {
+            lidar: "pandar64".into()
+        }),
+        "{}",
+        text(&turns)
+    );
+    assert_eq!(turns.hand_eye_cameras(), ["front_camera".to_string()]);
+    // Straight: neither, each with its reason; the other LiDAR is still registered by ICP.
+    assert!(
+        !flat.stages.iter().any(|s| matches!(
+            s,
+            Stage::LidarToTrajectory { .. } | Stage::CameraHandEye { .. }
+        )),
+        "{}",
+        text(&flat)
+    );
+    assert!(
+        text(&flat).contains("too little to fit it to the trajectory"),
+        "{}",
+        text(&flat)
+    );
+    assert!(text(&flat).contains("no hand-eye start"), "{}", text(&flat));
+    for p in [&turns, &flat] {
+        assert!(p.stages.contains(&Stage::LidarIcp {
+            reference: "pandar64".into(),
+            lidars: vec!["pandar_gt".into()],
+        }));
+        // UniCal with the camera; the LiDARs held.
+        match p.unical_stage() {
+            Some(Stage::Unical { cameras, .. }) => assert_eq!(cameras, &["front_camera"]),
+            other => panic!("{other:?}"),
+        }
+        assert!(p.unical.held_sensors.contains(&"pandar_gt".to_string()));
+    }
+}
+
+#[test]
+fn a_printed_configuration_read_back_plans_the_same_and_the_budget_sets_the_steps() {
+    let (_a, log, _) = drive(TrajectoryKind::Circle, 4.0, 33);
+    let config = PipelineConfig {
+        quality: Quality::Fast,
+        budget_secs: Some(60.0),
+        seed: 12,
+        ..PipelineConfig::default()
+    };
+    let first = plan(&log, &config);
+    let again = PipelineConfig::from_yaml(&config.to_yaml(), "printed.yaml").unwrap();
+    assert_eq!(plan(&log, &again), first);
+    // The resolved configuration (what the output records) plans the same too.
+    let resolved = PipelineConfig::from_yaml(&first.config.to_yaml(), "out.yaml").unwrap();
+    assert_eq!(plan(&log, &resolved).unical, first.unical);
+    // A minute leaves fewer steps than the fast preset's; a longer budget all of them.
+    let steps = |p: &Plan| p.config.iterations.unwrap();
+    assert!(
+        steps(&first) < Quality::Fast.preset().iterations,
+        "{:?}",
+        first.decisions
+    );
+    let roomy = plan(
+        &log,
+        &PipelineConfig {
+            budget_secs: Some(3600.0),
+            ..config.clone()
+        },
+    );
+    assert_eq!(steps(&roomy), Quality::Fast.preset().iterations);
+    assert_eq!(first.unical.seed, 12);
+}
+
+fn rigcal(args: &[&str]) -> (bool, String, String) {
+    let o = Command::new(env!("CARGO_BIN_EXE_rigcal"))
+        .args(args)
+        .output()
+        .unwrap();
+    (
+        o.status.success(),
+        String::from_utf8_lossy(&o.stdout).into_owned(),
+        String::from_utf8_lossy(&o.stderr).into_owned(),
+    )
+}
+
+#[test]
+fn print_config_and_a_bad_config_from_the_command_line() {
+    let (ok, yaml, err) = rigcal(&[
+        "calibrate",
+        "--print-config",
+        "--quality",
+        "fast",
+        "--seed",
+        "4",
+    ]);
+    assert!(ok, "{err}");
+    let config = PipelineConfig::from_yaml(&yaml, "stdout").unwrap();
+    assert_eq!((config.quality, config.seed), (Quality::Fast, 4));
+    let dir = tempfile::tempdir().unwrap();
+    let bad = dir.path().join("bad.yaml");
+    std::fs::write(&bad, "cameras:\n  hand_eye: auto\n  imagse_per_camera: 8\n").unwrap();
+    let (ok, _, err) = rigcal(&[
+        "calibrate",
+        "--print-config",
+        "--config",
+        bad.to_str().unwrap(),
+    ]);
+    assert!(!ok);
+    assert_eq!(err.lines().count(), 1, "{err}");
+    assert!(
+        err.contains("imagse_per_camera") && err.contains("bad.yaml"),
+        "{err}"
+    );
+    std::fs::write(&bad, "seed: [1, 2]\n").unwrap();
+    let (ok, _, err) = rigcal(&[
+        "calibrate",
+        "--print-config",
+        "--config",
+        bad.to_str().unwrap(),
+    ]);
+    assert!(
+        !ok && err.contains("seed") && err.lines().count() == 1,
+        "{err}"
+    );
+    // UniCal's own options belong to --method unical or the configuration.
+    let (ok, _, err) = rigcal(&[
+        "calibrate",
+        "x.mcap",
+        "--out",
+        "y.yaml",
+        "--camera-frames",
+        "8",
+    ]);
+    assert!(!ok && err.contains("--config"), "{err}");
+    let (ok, _, err) = rigcal(&[
+        "calibrate",
+        "x.mcap",
+        "--out",
+        "y.yaml",
+        "--method",
+        "icp",
+        "--quality",
+        "fast",
+    ]);
+    assert!(
+        !ok && err.contains("--quality applies to the pipeline"),
+        "{err}"
+    );
+}
+
+#[test]
+fn the_plain_command_calibrates_and_reports_every_sensor() {
+    let (tmp, log, _) = drive(TrajectoryKind::Circle, 4.0, 34);
+    let out = tmp.path().join("calib.yaml");
+    let (ok, _, err) = rigcal(&[
+        "calibrate",
+        log.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--quality",
+        "fast",
+        "--iterations",
+        "40",
+    ]);
+    assert!(ok, "{err}");
+    assert!(
+        err.contains("plan: lidars: pandar64 (the reference) fitted"),
+        "{err}"
+    );
+    assert!(err.contains("report (σ"), "{err}");
+    let doc = CalibrationFile::load(&out).unwrap();
+    assert_eq!(
+        doc.provenance.get("status").and_then(|v| v.as_str()),
+        Some("complete")
+    );
+    // The report names every sensor with a verdict and six axes.
+    let report = doc.metrics.get("report").unwrap();
+    let sensors = report.get("sensors").unwrap().as_sequence().unwrap();
+    assert_eq!(sensors.len(), 3);
+    for s in sensors {
+        let verdict = s.get("verdict").unwrap().as_str().unwrap();
+        assert!(
+            ["good", "check-it", "failed"].contains(&verdict),
+            "{verdict}"
+        );
+        assert_eq!(s.get("axes").unwrap().as_sequence().unwrap().len(), 6);
+    }
+    // The output's configuration repeats the run's plan.
+    let again = PipelineConfig::load(&out).unwrap();
+    assert_eq!(again.iterations, Some(40));
+    assert_eq!(again.cameras.images_per_camera, Some(8));
+}
