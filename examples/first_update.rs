@@ -1,6 +1,6 @@
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 //! How soon a UniCal run's extrinsics first change for a listener: the stage is prepared as
-//! `rigcal calibrate --method unical --lidar-icp` prepares it (the CPU preset, every LiDAR
+//! the pipeline prepares it after its LiDAR stage (the CPU preset, every LiDAR
 //! held where the log puts it, the cameras free), then handed to [`Run::spawn`], the worker
 //! the studio and the CLI use, and the caller polls its packets as the studio does. Printed:
 //! the time from the spawn to the first packet, and to the first packet whose rig differs from

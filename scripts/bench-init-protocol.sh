@@ -43,8 +43,10 @@ for seed in $seeds; do
   [ -f "$run/eval.md" ] && continue
   mkdir -p "$run"
   start=$(date +%s)
-  "$bin" calibrate "$drive" --method unical --lidar-icp --camera-hand-eye --camera-frames 16 \
-    --camera-scale 0.25 --iterations 1400 "${perturb[@]}" --seed "$seed" \
+  # The pipeline with the hand-eye start for every camera (the old --lidar-icp
+  # --camera-hand-eye --camera-frames 16 --camera-scale 0.25 --iterations 1400 command).
+  printf 'cameras:\n  hand_eye: always\n  images_per_camera: 16\n  image_scale: 0.25\niterations: 1400\nbudget_secs: 36000\n' >"$run/config.yaml"
+  "$bin" calibrate "$drive" --config "$run/config.yaml" "${perturb[@]}" --seed "$seed" \
     --out "$run/out.yaml" 2>"$run/log.txt"
   echo "$(( $(date +%s) - start ))" >"$run/wall_secs"
   "$bin" eval --calibration "$run/out.yaml" --ground-truth "$truth" >"$run/eval.tmp"

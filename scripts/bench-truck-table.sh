@@ -33,8 +33,9 @@ for m in $methods; do
   case $m in
     # The start every method shares: the calibration collect's /tf_static.
     initial) "$bin" calibrate "$work/boards.mcap" --method edge --iterations 0 --out "$out" >/dev/null 2>"$work/$m.log" ;;
-    unical) "$bin" calibrate "$work/drive.mcap" --init "$work/boards.mcap" --method unical --camera-frames 2 \
-              --out "$out" >/dev/null 2>"$work/$m.log" ;;
+    unical) printf 'cameras:\n  images_per_camera: 2\n' >"$work/unical-config.yaml"
+            "$bin" calibrate "$work/drive.mcap" --init "$work/boards.mcap" --method unical \
+              --config "$work/unical-config.yaml" --out "$out" >/dev/null 2>"$work/$m.log" ;;
     *) "$bin" calibrate "$work/boards.mcap" --method "$m" --out "$out" >/dev/null 2>"$work/$m.log" ;;
   esac
   end=$(date +%s.%N)

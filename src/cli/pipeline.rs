@@ -1,5 +1,5 @@
 //! `rigcal calibrate LOG --out FILE` with no method (or `--method auto`): the automatic
-//! pipeline ([`crate::pipeline`]). The plan's decisions are printed with their reasons, the
+//! pipeline ([`crate::pipeline`]); `--method unical` is its UniCal stage alone. The plan's decisions are printed with their reasons, the
 //! stages run with progress, UniCal runs until its schedule ends, every pose has settled or
 //! the budget is spent, and the report ends the run: printed, and written in the output's
 //! `metrics.report`. The output is written before the first step and every 30 s (atomically).
@@ -19,8 +19,8 @@ use super::calibrate::{CalibrateArgs, moves_report, open_inputs};
 const CHECKPOINT_SECS: f64 = 30.0;
 
 /// The configuration `args` asks for: `--config` (a `--print-config` output or an earlier
-/// output file), then `--quality`, `--budget`, `--seed`, `--iterations` and the cameras'
-/// timing options over it.
+/// output file), then `--quality`, `--budget`, `--seed` and `--iterations` over it; with
+/// `--method unical`, no classical LiDAR stage and no hand-eye.
 pub fn resolve_config(args: &CalibrateArgs) -> Result<PipelineConfig, String> {
     let mut config = match &args.config_file {
         Some(path) => PipelineConfig::load(path).map_err(|e| format!("--config: {e}"))?,
@@ -38,15 +38,10 @@ pub fn resolve_config(args: &CalibrateArgs) -> Result<PipelineConfig, String> {
     if let Some(n) = args.iterations {
         config.iterations = Some(n);
     }
-    if let Some(text) = &args.camera_readout_ms {
-        let rows = super::calibrate::parse_readout(text)?;
-        config.cameras.readout_ms = Some((
-            rows.first_row_nanos as f64 * 1e-6,
-            rows.last_row_nanos as f64 * 1e-6,
-        ));
-    }
-    if args.camera_time_offset_ms != 0.0 {
-        config.cameras.time_offset_ms = args.camera_time_offset_ms;
+    if args.method == "unical" {
+        // UniCal alone: every sensor in one scene, no classical stage before it.
+        config.lidars.register = false;
+        config.cameras.hand_eye = crate::pipeline::config::HandEye::Never;
     }
     config.check().map_err(|e| e.to_string())?;
     Ok(config)
@@ -170,7 +165,14 @@ fn document(
     let input: PathBuf = std::path::absolute(&args.log).unwrap_or_else(|_| args.log.clone());
     let p = &mut doc.provenance;
     p.insert("input".into(), v(input.display().to_string()));
-    p.insert("method".into(), v("pipeline".into()));
+    p.insert(
+        "method".into(),
+        v(if args.method == "unical" {
+            "unical".into()
+        } else {
+            "pipeline".into()
+        }),
+    );
     p.insert(
         "config".into(),
         serde_yaml::to_value(config).unwrap_or(serde_yaml::Value::Null),

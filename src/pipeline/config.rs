@@ -285,8 +285,97 @@ impl PipelineConfig {
                 "expected at least one sweep each (two for the trajectory)",
             );
         }
-        if self.unical.rays_per_camera == 0 {
-            return bad("unical.rays_per_camera", "expected at least one ray");
+        self.check_unical()
+    }
+
+    /// UniCal's settings a run could not use.
+    fn check_unical(&self) -> Result<(), ConfigError> {
+        let u = &self.unical;
+        let bad = |key, message: &str| {
+            Err(ConfigError::Value {
+                key,
+                message: message.to_string(),
+            })
+        };
+        let within = |v: f64, lo: f64, hi: f64| v.is_finite() && v >= lo && v <= hi;
+        if u.rays_per_camera == 0 || u.rays_per_sensor == 0 {
+            return bad(
+                "unical.rays_per_camera, unical.rays_per_sensor",
+                "expected at least one ray",
+            );
+        }
+        if !(u.lr_camera_pose.is_finite() && u.lr_camera_pose > 0.0) {
+            return bad("unical.lr_camera_pose", "expected a rate above 0");
+        }
+        if !(u.camera_translation_rate.is_finite() && u.camera_translation_rate >= 0.0) {
+            return bad(
+                "unical.camera_translation_rate",
+                "expected a multiple of 0 or more",
+            );
+        }
+        if let Some(f) = u.camera_translation_final_fraction
+            && !(f.is_finite() && f > 0.0 && f <= 1.0)
+        {
+            return bad(
+                "unical.camera_translation_final_fraction",
+                "expected a fraction in (0, 1]",
+            );
+        }
+        if !(u.alignment_release_rate > 0.0 && u.alignment_release_rate <= 1.0) {
+            return bad(
+                "unical.alignment_release_rate",
+                "expected a fraction in (0, 1]",
+            );
+        }
+        if let Some(r) = u.camera_hold_unobserved
+            && !(r.is_finite() && r > 0.0 && r < 1.0)
+        {
+            return bad(
+                "unical.camera_hold_unobserved",
+                "expected a fraction in (0, 1)",
+            );
+        }
+        if !within(u.silhouette_share, 0.0, 1.0) {
+            return bad("unical.silhouette_share", "expected a fraction from 0 to 1");
+        }
+        if !within(u.camera_target_blur_px, 0.0, 10.0) {
+            return bad(
+                "unical.camera_target_blur_px",
+                "expected a σ in pixels from 0 to 10",
+            );
+        }
+        if let Some(l) = u.colour_pose_levels
+            && !within(f64::from(l), 0.0, 64.0)
+        {
+            return bad("unical.colour_pose_levels", "expected levels from 0 to 64");
+        }
+        if !(12..=24).contains(&u.field.grid.log2_table_size) {
+            return bad(
+                "unical.field.grid.log2_table_size",
+                "expected a power of two from 12 to 24",
+            );
+        }
+        if !within(f64::from(u.pose_average_fraction), 0.0, 1.0) {
+            return bad(
+                "unical.pose_average_fraction",
+                "expected a fraction of the run from 0 to 1",
+            );
+        }
+        if let Some(r) = u.scene_radius_m
+            && !(r.is_finite() && r >= 5.0)
+        {
+            return bad(
+                "unical.scene_radius_m",
+                "expected a distance of 5 m or more",
+            );
+        }
+        if let Some(c) = u.coarse_to_fine
+            && !(c.start_levels >= 1.0 && c.end_fraction > 0.0 && c.end_fraction <= 1.0)
+        {
+            return bad(
+                "unical.coarse_to_fine",
+                "expected start_levels ≥ 1 and end_fraction in (0, 1]",
+            );
         }
         Ok(())
     }
@@ -374,6 +463,27 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert_eq!(e, "cameras.image_scale: expected a scale in (0, 1]");
+        for (yaml, key) in [
+            ("unical:\n  lr_camera_pose: 0\n", "unical.lr_camera_pose"),
+            (
+                "unical:\n  silhouette_share: 1.5\n",
+                "unical.silhouette_share",
+            ),
+            ("unical:\n  scene_radius_m: 4\n", "unical.scene_radius_m"),
+            (
+                "unical:\n  field:\n    grid:\n      log2_table_size: 30\n",
+                "unical.field.grid.log2_table_size",
+            ),
+            (
+                "unical:\n  camera_hold_unobserved: 1\n",
+                "unical.camera_hold_unobserved",
+            ),
+        ] {
+            let e = PipelineConfig::from_yaml(yaml, "c.yaml")
+                .unwrap_err()
+                .to_string();
+            assert!(e.starts_with(key), "{e}");
+        }
     }
 
     #[test]
