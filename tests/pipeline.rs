@@ -17,6 +17,8 @@ use rigcal::sim::trajectories::TrajectoryKind;
 use rigcal::sim::world::SceneKind;
 use tempfile::TempDir;
 
+mod common;
+
 /// A small drive: both LiDARs and the front camera of the pandaset rig, 2° / 20 cm off.
 fn drive(trajectory: TrajectoryKind, seconds: f64, seed: u64) -> (TempDir, PathBuf, PathBuf) {
     let tmp = tempfile::Builder::new()
@@ -243,4 +245,43 @@ fn the_plain_command_calibrates_and_reports_every_sensor() {
     let again = PipelineConfig::load(&out).unwrap();
     assert_eq!(again.iterations, Some(40));
     assert_eq!(again.cameras.images_per_camera, Some(8));
+}
+
+/// A log that stands still is planned as one: no trajectory fit, no hand-eye, no neural scene;
+/// its cameras come to the checkerboards against the reference LiDAR.
+#[test]
+fn a_stationary_log_is_calibrated_by_its_checkerboards() {
+    let (tmp, log, gt) = common::checkerboard_drive("pipeline-stationary", 36);
+    let out = tmp.path().join("calib.yaml");
+    let (ok, _, err) = rigcal(&[
+        "calibrate",
+        log.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--sensors",
+        "pandar64,front_camera",
+    ]);
+    assert!(ok, "{err}");
+    assert!(
+        err.contains("plan: cameras: the vehicle does not move"),
+        "{err}"
+    );
+    assert!(!err.contains("plan: unical"), "{err}");
+    assert!(err.contains("by checkerboards against pandar64"), "{err}");
+    let truth = CalibrationFile::load_rig(&gt).unwrap();
+    let result = CalibrationFile::load(&out).unwrap().to_rig(&out).unwrap();
+    let start = Drive::open(&log).unwrap().rig;
+    // Camera against LiDAR: the relative pose is what the boards observe.
+    let relative = |rig: &rigcal::calib::Rig| {
+        let p = |n: &str| rig.sensor(n).unwrap().vehicle_from_sensor;
+        p("pandar64").inverse() * p("front_camera")
+    };
+    let (before, _) = relative(&truth).difference(relative(&start));
+    let (after, _) = relative(&truth).difference(relative(&result));
+    assert!(
+        after < before * 0.5,
+        "{:.3}° -> {:.3}°",
+        before.to_degrees(),
+        after.to_degrees()
+    );
 }

@@ -176,6 +176,78 @@ pub fn fit_cameras(
     (out, fitted, notes)
 }
 
+/// A log that stands still: calibrate `cameras` against `reference` by checkerboards where
+/// boards are found, else by edge alignment, each run to its end. Returns the rig and one line
+/// per decision or result.
+pub fn stationary_cameras(
+    drive: &Drive,
+    rig: &Rig,
+    reference: &str,
+    cameras: &[String],
+    segments_nanos: &[(i64, i64)],
+    progress: Progress,
+) -> (Rig, Vec<String>) {
+    use crate::classical::target::TargetConfig;
+    use crate::classical::target_calibrator::TargetCalibrator;
+    let mut notes = Vec::new();
+    let mut run = |calibrator: &mut dyn Calibrator, phase: &str| {
+        let total = calibrator.max_steps();
+        for step in 1..=total {
+            progress(phase, step, total);
+            if calibrator.step().done {
+                break;
+            }
+        }
+        calibrator.best()
+    };
+    let targets = TargetCalibrator::from_drive(
+        drive,
+        rig,
+        reference,
+        cameras,
+        segments_nanos,
+        TargetConfig::default(),
+        &Default::default(),
+    );
+    let (result, how) = match targets {
+        Ok(mut t) => (run(&mut t, "checkerboards"), "checkerboards"),
+        Err(e) => {
+            notes.push(format!(
+                "stationary cameras: no checkerboards to use ({e}): edge alignment instead"
+            ));
+            match crate::optim::edge_refine::EdgeRefiner::new(
+                drive,
+                rig,
+                reference,
+                cameras,
+                4,
+                segments_nanos,
+            ) {
+                Ok(mut edge) => (run(&mut edge, "edge alignment"), "edge alignment"),
+                Err(e) => {
+                    notes.push(format!(
+                        "stationary cameras: kept: no edge alignment either ({e})"
+                    ));
+                    return (rig.clone(), notes);
+                }
+            }
+        }
+    };
+    let mut out = rig.clone();
+    for name in cameras {
+        if let (Some(s), Some(r)) = (out.sensor_mut(name), result.sensor(name)) {
+            let (rot, trans) = s.vehicle_from_sensor.difference(r.vehicle_from_sensor);
+            notes.push(format!(
+                "stationary cameras: {name} moved {:.3}° / {:.1} cm by {how} against {reference}",
+                rot.to_degrees(),
+                trans * 100.0
+            ));
+            s.vehicle_from_sensor = r.vehicle_from_sensor;
+        }
+    }
+    (out, notes)
+}
+
 /// What the stages before UniCal did.
 #[derive(Clone, Debug, Default)]
 pub struct Prepared {
@@ -228,6 +300,16 @@ pub fn prepare(
         out.rig = rig;
         out.notes.extend(notes);
         out.lidars = evidence;
+    }
+    if let Some(Stage::StationaryCameras { reference, cameras }) = plan
+        .stages
+        .iter()
+        .find(|s| matches!(s, Stage::StationaryCameras { .. }))
+    {
+        let (rig, notes) =
+            stationary_cameras(drive, &out.rig, reference, cameras, segments, progress);
+        out.rig = rig;
+        out.notes.extend(notes);
     }
     let cameras = plan.hand_eye_cameras();
     if !cameras.is_empty() {
