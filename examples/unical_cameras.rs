@@ -18,8 +18,7 @@
 //! --rounds`), `RIGCAL_SILHOUETTE` (share of
 //! heat-map draws around LiDAR silhouettes), `RIGCAL_UNIFORM` (share of uniform draws once the
 //! heat maps are on), `RIGCAL_C2F=LEVELS,FRACTION|off` (coarse-to-fine hash grid; the preset's by default), `RIGCAL_VECTORS` (print every
-//! camera's error vector and their mean), `RIGCAL_BLUR` (σ in working pixels the training
-//! images are blurred by, `calibrate --camera-blur`). Frozen-scene probe: with `RIGCAL_PROBE=N` the cameras
+//! camera's error vector and their mean). Frozen-scene probe: with `RIGCAL_PROBE=N` the cameras
 //! start at the truth and the scene learns for N iterations (poses fixed), then the cameras
 //! jump to their start and only their poses move (the scene frozen unless `RIGCAL_JOINT` is
 //! set).
@@ -104,7 +103,6 @@ fn main() {
         heatmap_uniform_share: env("RIGCAL_UNIFORM", defaults.heatmap_uniform_share),
         opacity: common::opacity_from_env(defaults.opacity),
         beta_init: env("RIGCAL_BETA", defaults.beta_init),
-        camera_target_blur_px: env("RIGCAL_BLUR", defaults.camera_target_blur_px),
         correspondence_cache: Some(std::env::temp_dir().join("rigcal-probe-matches")),
         ..defaults
     };

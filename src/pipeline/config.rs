@@ -338,12 +338,6 @@ impl PipelineConfig {
         if !within(u.silhouette_share, 0.0, 1.0) {
             return bad("unical.silhouette_share", "expected a fraction from 0 to 1");
         }
-        if !within(u.camera_target_blur_px, 0.0, 10.0) {
-            return bad(
-                "unical.camera_target_blur_px",
-                "expected a σ in pixels from 0 to 10",
-            );
-        }
         if let Some(l) = u.colour_pose_levels
             && !within(f64::from(l), 0.0, 64.0)
         {

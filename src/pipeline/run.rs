@@ -190,7 +190,7 @@ pub fn stationary_cameras(
     use crate::classical::target::TargetConfig;
     use crate::classical::target_calibrator::TargetCalibrator;
     let mut notes = Vec::new();
-    let mut run = |calibrator: &mut dyn Calibrator, phase: &str| {
+    let run = |calibrator: &mut dyn Calibrator, phase: &str| {
         let total = calibrator.max_steps();
         for step in 1..=total {
             progress(phase, step, total);

@@ -235,11 +235,7 @@ impl UnicalLidarStage {
             let mut frames = Vec::new();
             for i in picked {
                 let img = drive.load_image(&cam.name, i).map_err(|e| e.to_string())?;
-                let resized = training_image(
-                    img.as_ref(),
-                    &small,
-                    self.calib.config.camera_target_blur_px,
-                );
+                let resized = working_image(img.as_ref(), &small);
                 let stamp_nanos = stream.frames[i].stamp_nanos;
                 // Masks are grown around what they cover: the middle row's time will do.
                 let masked = self.transient_mask(
@@ -405,67 +401,4 @@ pub fn working_image(img: &image::RgbImage, intrinsics: &CameraIntrinsics) -> im
         intrinsics.height.max(1),
         image::imageops::FilterType::Triangle,
     )
-}
-
-/// A camera image as the colour term fits it: [`working_image`], then blurred by a Gaussian
-/// of σ `blur_px` working pixels when above 0 ([`DepthCalibConfig::camera_target_blur_px`]).
-fn training_image(
-    img: &image::RgbImage,
-    intrinsics: &CameraIntrinsics,
-    blur_px: f64,
-) -> image::RgbImage {
-    let resized = working_image(img, intrinsics);
-    if blur_px > 0.0 {
-        image::imageops::blur(&resized, blur_px as f32)
-    } else {
-        resized
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::geometry::camera::CameraModel;
-
-    /// A vertical black-to-white edge: kept sharp without blur, spread over a few pixels
-    /// either side with it, and the same brightness on average (the blur moves no edge).
-    #[test]
-    fn training_images_are_blurred_only_when_asked() {
-        let (w, h) = (64u32, 16u32);
-        let img = image::RgbImage::from_fn(w, h, |x, _| {
-            image::Rgb(if x < w / 2 { [0; 3] } else { [255; 3] })
-        });
-        let intrinsics = CameraIntrinsics {
-            width: w,
-            height: h,
-            model: CameraModel::Pinhole,
-            fx: 50.0,
-            fy: 50.0,
-            cx: 31.5,
-            cy: 7.5,
-            distortion: Vec::new(),
-        };
-        let row =
-            |im: &image::RgbImage| -> Vec<u8> { (0..w).map(|x| im.get_pixel(x, 8)[0]).collect() };
-        let sharp = row(&training_image(&img, &intrinsics, 0.0));
-        assert_eq!(sharp, row(&img), "σ = 0 leaves a same-size image as it is");
-        let soft = row(&training_image(&img, &intrinsics, 2.0));
-        let (left, right) = (w as usize / 2 - 1, w as usize / 2);
-        assert!(
-            soft[left] > 40 && soft[right] < 215,
-            "the edge is spread: {soft:?}"
-        );
-        assert!(
-            soft[left - 6] < 5 && soft[right + 6] > 250,
-            "far from it nothing changes"
-        );
-        // Symmetric about the edge: the two pixels beside it sum to white.
-        let sum = soft[left] as i32 + soft[right] as i32;
-        assert!(
-            (sum - 255).abs() <= 2,
-            "centred on the edge: {} + {}",
-            soft[left],
-            soft[right]
-        );
-    }
 }

@@ -74,11 +74,6 @@ pub struct DepthCalibConfig {
     /// the reference LiDAR at) is the colour term's weakest direction; each camera alone sees
     /// it through its own noisy gradient, their sum sees it with √n less noise.
     pub shared_camera_translation: bool,
-    /// Whether a camera's three translation coordinates share Adam's denominator (the root of
-    /// their largest second moment, [`DenseAdam::step_grouped`]): a direction the drive hardly
-    /// observes then steps by its share of the gradient rather than by the full rate, which
-    /// per-coordinate Adam gives any direction, noise alone included.
-    pub grouped_camera_translation: bool,
     /// What the camera pose rate decays to by the last iteration, as a fraction of
     /// `lr_camera_pose` (geometric from the end of the warm-up).
     pub camera_pose_final_fraction: f32,
@@ -224,12 +219,6 @@ pub struct DepthCalibConfig {
     /// camera away from what it sees (BENCHMARKS.md, "Blurred colour targets", "Where the real
     /// drive's right camera comes to rest"). Off: every direction moves (the paper).
     pub camera_hold_axial: bool,
-    /// Gaussian σ (pixels of the working image) the camera images are blurred by before
-    /// their colour becomes the colour term's target. The scene's colour field is blurrier
-    /// than a sharp image; against sharp edges a camera may lower that mismatch by backing
-    /// away from what it sees (the edges' blur then covers fewer pixels), a bias along its
-    /// axis. Blurred targets meet the field halfway. 0 uses the images as they are (the paper).
-    pub camera_target_blur_px: f64,
     /// How many of the hash grids' coarsest levels the colour term's camera-pose gradient
     /// flows through (`None`: every open level, the paper). The scene still learns its detail
     /// from every open level; only ∂L/∂x, which moves the cameras, is limited: the finest
@@ -267,7 +256,6 @@ impl Default for DepthCalibConfig {
             // PandaSet drive the six cameras drift together, 14.5 cm instead of 8.3 cm
             // (BENCHMARKS.md, "A translation the cameras share"); `--shared-camera-translation`.
             shared_camera_translation: false,
-            grouped_camera_translation: false,
             camera_pose_final_fraction: 0.01,
             camera_translation_final_fraction: None,
             camera_rotation_bounds_deg: Vec::new(),
@@ -339,11 +327,6 @@ impl Default for DepthCalibConfig {
             camera_rays_below_lidar_top: false,
             camera_hold_unobserved: None,
             camera_hold_axial: false,
-            // Off: with σ = 1 px the simulator's cameras move along their axes towards what
-            // they see, but drive 7 has no backing away left to undo (0.068° / 1.54 cm against
-            // 0.040° / 1.29 cm), and on PandaSet the left pair jumped 500 steps sooner
-            // (BENCHMARKS.md, "Blurred colour targets").
-            camera_target_blur_px: 0.0,
             // Off: with 12 of 16 levels the real PandaSet drive's left pair no longer turned off
             // on seed 1, but the simulator's drive 7 lost its back camera (0.24° / 9.6 cm), and
             // the limited gradient is not that of any loss (BENCHMARKS.md, "Camera poses moved
@@ -835,7 +818,6 @@ fn pose_step(
     grad: &[f32; 9],
     lr: f32,
     translation_scale: f64,
-    grouped_translation: bool,
 ) {
     if lr == 0.0 {
         return;
@@ -846,11 +828,7 @@ fn pose_step(
             .chain(p.translation_m.to_array().iter().map(|v| *v as f32))
             .collect();
     let before = flat.clone();
-    if grouped_translation {
-        opt.step_grouped(&mut flat, grad, lr, std::slice::from_ref(&(6..9)));
-    } else {
-        opt.step(&mut flat, grad, lr);
-    }
+    opt.step(&mut flat, grad, lr);
     for k in 0..6 {
         p.r6[k] += (flat[k] - before[k]) as f64;
     }
@@ -924,7 +902,6 @@ impl CameraStage {
                 &grads[k],
                 lr,
                 translation_scale,
-                config.grouped_camera_translation,
             );
             if config.camera_hold_axial {
                 hold_axial(&mut self.poses[k], &before);
@@ -2113,7 +2090,6 @@ impl DepthCalibration {
                         &pose_grad,
                         lr_pose,
                         1.0,
-                        false,
                     ),
                     // The step fraction follows the pose learning rate's schedule.
                     // Full steps after the warm-up: each solves the gathered rows, which
