@@ -295,6 +295,70 @@ fn one_line_usage(rendered: &str) -> String {
 }
 
 /// `calibrate`'s options with a default value (UniCal's), by their argument ids.
+/// `calibrate`'s options that moved to the configuration file (0.2), and their keys.
+const MOVED_TO_CONFIG: [(&str, &str); 28] = [
+    ("--camera-frames", "cameras.images_per_camera"),
+    ("--camera-scale", "cameras.image_scale"),
+    ("--camera-hand-eye", "cameras.hand_eye: always"),
+    ("--camera-readout-ms", "cameras.readout_ms: [FIRST, LAST]"),
+    ("--camera-time-offset-ms", "cameras.time_offset_ms"),
+    ("--lidar-icp", "lidars.register"),
+    ("--lidar-sweeps", "lidars.scene_sweeps"),
+    ("--alignment", "unical.alignment"),
+    ("--camera-rays", "unical.rays_per_camera"),
+    ("--camera-lr", "unical.lr_camera_pose"),
+    (
+        "--camera-translation-rate",
+        "unical.camera_translation_rate",
+    ),
+    (
+        "--camera-translation-final",
+        "unical.camera_translation_final_fraction",
+    ),
+    ("--camera-early-release", "unical.alignment_release"),
+    ("--coarse-to-fine", "unical.coarse_to_fine"),
+    ("--hash-table-log2", "unical.field.grid.log2_table_size"),
+    ("--pose-average", "unical.pose_average_fraction"),
+    ("--scene-radius", "unical.scene_radius_m"),
+    ("--cubic-scene-box", "unical.field.cubic_box"),
+    (
+        "--drop-moving",
+        "unical.transient_returns and unical.mask_own_vehicle",
+    ),
+    ("--silhouette-share", "unical.silhouette_share"),
+    ("--camera-hold-unobserved", "unical.camera_hold_unobserved"),
+    ("--camera-hold-axial", "unical.camera_hold_axial"),
+    (
+        "--shared-camera-translation",
+        "unical.shared_camera_translation",
+    ),
+    (
+        "--camera-rays-below-lidar-top",
+        "unical.camera_rays_below_lidar_top",
+    ),
+    ("--colour-pose-levels", "unical.colour_pose_levels"),
+    ("--rounds", "nothing: it was removed"),
+    ("--grouped-camera-translation", "nothing: it was removed"),
+    ("--camera-blur", "nothing: it was removed"),
+];
+
+/// For an unknown option that moved to the configuration file, where it went.
+fn moved_option(e: &clap::Error) -> Option<String> {
+    let arg = match e.get(clap::error::ContextKind::InvalidArg)? {
+        clap::error::ContextValue::String(s) => s.clone(),
+        _ => return None,
+    };
+    let flag = arg.split('=').next().unwrap_or(&arg);
+    MOVED_TO_CONFIG
+        .iter()
+        .find(|(f, _)| *f == flag)
+        .map(|(f, key)| {
+            format!(
+                "{f} is no longer an option of calibrate: its setting is {key} in the configuration file (rigcal calibrate --print-config prints it; --config FILE reads it)"
+            )
+        })
+}
+
 fn run() -> Result<()> {
     use clap::{CommandFactory, FromArgMatches};
     let parsed = Cli::command()
@@ -302,6 +366,14 @@ fn run() -> Result<()> {
         .and_then(|m| Cli::from_arg_matches(&m));
     let cli = match parsed {
         Ok(parsed) => parsed,
+        Err(e)
+            if e.kind() == clap::error::ErrorKind::UnknownArgument
+                && std::env::args().nth(1).as_deref() == Some("calibrate")
+                && moved_option(&e).is_some() =>
+        {
+            eprintln!("rigcal: {}", moved_option(&e).unwrap_or_default());
+            std::process::exit(2);
+        }
         Err(e)
             if e.use_stderr()
                 && e.kind() != clap::error::ErrorKind::DisplayHelpOnMissingArgumentOrSubcommand =>

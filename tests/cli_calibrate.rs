@@ -145,7 +145,11 @@ fn bad_arguments_fail_with_one_line() {
     );
     // Options that left the command line for the configuration are unknown to it.
     let (ok, err) = run(&["--method", "unical", "--camera-frames", "8"]);
-    assert!(!ok && err.contains("--camera-frames"), "{err}");
+    assert!(
+        !ok && err.contains("--camera-frames is no longer an option of calibrate: its setting is cameras.images_per_camera"),
+        "{err}"
+    );
+    assert_eq!(err.trim().lines().count(), 1, "{err}");
     let (ok, err) = run(&["--method", "UniCal"]);
     assert!(!ok && err.contains("unknown --method 'UniCal'"), "{err}");
     let (ok, err) = run(&["--method", "pose-graph", "--iterations", "5"]);

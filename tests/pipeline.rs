@@ -187,7 +187,10 @@ fn print_config_and_a_bad_config_from_the_command_line() {
         "--camera-frames",
         "8",
     ]);
-    assert!(!ok && err.contains("--config"), "{err}");
+    assert!(
+        !ok && err.contains("cameras.images_per_camera in the configuration file"),
+        "{err}"
+    );
     let (ok, _, err) = rigcal(&[
         "calibrate",
         "x.mcap",
@@ -208,17 +211,25 @@ fn print_config_and_a_bad_config_from_the_command_line() {
 fn the_plain_command_calibrates_and_reports_every_sensor() {
     let (tmp, log, _) = drive(TrajectoryKind::Circle, 4.0, 34);
     let out = tmp.path().join("calib.yaml");
+    // A budget's shortening, as an earlier run recorded it, is replayed: at step 20 the
+    // schedule is cut to 30 steps in all.
+    let config = tmp.path().join("rigcal.yaml");
+    std::fs::write(&config, "budget_cuts: [[20, 30]]\n").unwrap();
     let (ok, _, err) = rigcal(&[
         "calibrate",
         log.to_str().unwrap(),
         "--out",
         out.to_str().unwrap(),
+        "--config",
+        config.to_str().unwrap(),
         "--quality",
         "fast",
         "--iterations",
         "40",
     ]);
     assert!(ok, "{err}");
+    assert!(err.contains("calibrate: 30/30"), "{err}");
+    assert!(!err.contains("calibrate: 40/40"), "{err}");
     assert!(
         err.contains("plan: lidars: pandar64 (the reference) fitted"),
         "{err}"
@@ -244,6 +255,7 @@ fn the_plain_command_calibrates_and_reports_every_sensor() {
     // The output's configuration repeats the run's plan.
     let again = PipelineConfig::load(&out).unwrap();
     assert_eq!(again.iterations, Some(40));
+    assert_eq!(again.budget_cuts, [(20, 30)]);
     assert_eq!(again.cameras.images_per_camera, Some(8));
 }
 

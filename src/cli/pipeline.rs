@@ -118,7 +118,8 @@ pub fn calibrate_auto(
                 optimising.elapsed().as_secs_f64()
             );
         }
-        progress(step, steps);
+        // The budget may shorten the schedule as the run goes.
+        progress(step, run.max_steps());
         if r.done {
             break;
         }

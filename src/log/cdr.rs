@@ -110,20 +110,18 @@ impl<'a> CdrReader<'a> {
     }
 
     pub fn f64_seq(&mut self, what: &str) -> DecodeResult<Vec<f64>> {
-        let n = self.u32(what)? as usize;
-        if n > self.data.len() {
-            return Err(DecodeError::new(format!(
-                "{what}: sequence length {n} exceeds the payload"
-            )));
-        }
+        let n = self.seq_len_of(what, 8)?;
         (0..n).map(|_| self.f64(what)).collect()
     }
 
-    pub fn seq_len(&mut self, what: &str) -> DecodeResult<usize> {
+    /// A sequence's element count, each element at least `min_wire_bytes` on the wire: a count
+    /// the bytes remaining cannot hold is an error before anything is allocated for it.
+    pub fn seq_len_of(&mut self, what: &str, min_wire_bytes: usize) -> DecodeResult<usize> {
         let n = self.u32(what)? as usize;
-        if n > self.data.len() {
+        let remaining = self.data.len().saturating_sub(self.pos);
+        if n > remaining / min_wire_bytes.max(1) {
             return Err(DecodeError::new(format!(
-                "{what}: sequence length {n} exceeds the payload"
+                "{what}: sequence length {n} exceeds the {remaining} bytes left in the payload"
             )));
         }
         Ok(n)
@@ -133,6 +131,21 @@ impl<'a> CdrReader<'a> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_sequence_count_is_bounded_by_the_bytes_left() {
+        // Header, then a count of 3 elements of at least 8 bytes with 16 bytes left.
+        let mut p = vec![0, 1, 0, 0, 3, 0, 0, 0];
+        p.extend_from_slice(&[0; 16]);
+        let mut r = CdrReader::new(&p).unwrap();
+        let e = r.seq_len_of("poses", 8).unwrap_err();
+        assert!(
+            e.0.contains("poses: sequence length 3 exceeds the 16 bytes"),
+            "{e:?}"
+        );
+        let mut r = CdrReader::new(&p).unwrap();
+        assert_eq!(r.seq_len_of("poses", 4).unwrap(), 3);
+    }
 
     #[test]
     fn reads_aligned_little_endian() {

@@ -60,7 +60,7 @@ fn pb_stamp(f: &[(u32, Value<'_>)], n: u32) -> DecodeResult<i64> {
     let t = pb_msg(pb::get(f, n))?;
     let sec = pb::get(&t, 1).map_or(0, |v| v.as_u64() as i64);
     let nsec = pb::get(&t, 2).map_or(0, |v| v.as_u64() as u32);
-    Ok(stamp_nanos(sec, nsec))
+    stamp_nanos(sec, nsec)
 }
 
 fn pb_vec3(f: &[(u32, Value<'_>)], n: u32) -> DecodeResult<[f64; 3]> {
@@ -226,7 +226,7 @@ pub fn decode_protobuf(kind: FoxgloveType, payload: &[u8]) -> DecodeResult<Decod
 
 // ---------- JSON ----------
 
-fn j_stamp(v: &Json) -> i64 {
+fn j_stamp(v: &Json) -> DecodeResult<i64> {
     let t = &v["timestamp"];
     stamp_nanos(
         t["sec"].as_i64().unwrap_or(0),
@@ -288,7 +288,7 @@ fn j_transform(v: &Json) -> DecodeResult<TransformMsg> {
     let t = &v["translation"];
     let q = &v["rotation"];
     Ok(TransformMsg {
-        stamp_nanos: j_stamp(v),
+        stamp_nanos: j_stamp(v)?,
         parent: j_str(&v["parent_frame_id"]),
         child: j_str(&v["child_frame_id"]),
         parent_from_child: super::ros2::rigid_from(
@@ -327,7 +327,7 @@ pub fn decode_json(kind: FoxgloveType, payload: &[u8]) -> DecodeResult<Decoded<'
                 (data.len() / stride as usize) as u32
             };
             Decoded::PointCloud(RawPointCloud {
-                stamp_nanos: j_stamp(&v),
+                stamp_nanos: j_stamp(&v)?,
                 frame_id: j_str(&v["frame_id"]),
                 fields,
                 width,
@@ -340,13 +340,13 @@ pub fn decode_json(kind: FoxgloveType, payload: &[u8]) -> DecodeResult<Decoded<'
             })
         }
         FoxgloveType::CompressedImage => Decoded::CompressedImage(CompressedImage {
-            stamp_nanos: j_stamp(&v),
+            stamp_nanos: j_stamp(&v)?,
             frame_id: j_str(&v["frame_id"]),
             format: j_str(&v["format"]),
             data: j_data(&v["data"])?.into(),
         }),
         FoxgloveType::RawImage => Decoded::Image(RawImage {
-            stamp_nanos: j_stamp(&v),
+            stamp_nanos: j_stamp(&v)?,
             frame_id: j_str(&v["frame_id"]),
             width: j_u32(&v["width"]),
             height: j_u32(&v["height"]),
@@ -356,7 +356,7 @@ pub fn decode_json(kind: FoxgloveType, payload: &[u8]) -> DecodeResult<Decoded<'
             data: j_data(&v["data"])?.into(),
         }),
         FoxgloveType::CameraCalibration => calibration(
-            j_stamp(&v),
+            j_stamp(&v)?,
             j_str(&v["frame_id"]),
             j_u32(&v["width"]),
             j_u32(&v["height"]),
@@ -374,13 +374,13 @@ pub fn decode_json(kind: FoxgloveType, payload: &[u8]) -> DecodeResult<Decoded<'
                 .collect::<DecodeResult<_>>()?,
         ),
         FoxgloveType::PoseInFrame => Decoded::Pose(PoseMsg {
-            stamp_nanos: j_stamp(&v),
+            stamp_nanos: j_stamp(&v)?,
             frame_id: j_str(&v["frame_id"]),
             child_frame_id: None,
             frame_from_body: j_pose(&v["pose"])?,
         }),
         FoxgloveType::PosesInFrame => {
-            let stamp = j_stamp(&v);
+            let stamp = j_stamp(&v)?;
             let frame_id = j_str(&v["frame_id"]);
             Decoded::Poses(
                 v["poses"]

@@ -49,7 +49,7 @@ fn header(r: &mut CdrReader<'_>) -> DecodeResult<Header> {
     let nsec = r.u32("header.stamp.nanosec")?;
     let frame_id = r.string("header.frame_id")?;
     Ok(Header {
-        stamp_nanos: stamp_nanos(sec as i64, nsec),
+        stamp_nanos: stamp_nanos(sec as i64, nsec)?,
         frame_id,
     })
 }
@@ -92,7 +92,9 @@ pub fn decode(kind: Ros2Type, payload: &[u8]) -> DecodeResult<Decoded<'_>> {
     let mut r = CdrReader::new(payload)?;
     Ok(match kind {
         Ros2Type::TfMessage => {
-            let n = r.seq_len("transforms")?;
+            // A TransformStamped holds at least a header (a stamp of 8 bytes and a frame id of
+            // 5), a child frame id (5) and seven f64 (56).
+            let n = r.seq_len_of("transforms", 74)?;
             let mut out = Vec::with_capacity(n);
             for _ in 0..n {
                 let h = header(&mut r)?;
@@ -147,7 +149,8 @@ pub fn decode(kind: Ros2Type, payload: &[u8]) -> DecodeResult<Decoded<'_>> {
             let h = header(&mut r)?;
             let height = r.u32("height")?;
             let width = r.u32("width")?;
-            let n = r.seq_len("fields")?;
+            // A PointField holds at least a name (5 bytes), an offset, a type and a count (9).
+            let n = r.seq_len_of("fields", 14)?;
             let mut fields = Vec::with_capacity(n);
             for _ in 0..n {
                 let name = r.string("fields.name")?;

@@ -4,8 +4,14 @@ use crate::geometry::Rigid;
 use crate::geometry::camera::CameraIntrinsics;
 
 /// Nanoseconds since the epoch from a (sec, nsec) stamp.
-pub fn stamp_nanos(sec: i64, nsec: u32) -> i64 {
-    sec * 1_000_000_000 + nsec as i64
+pub fn stamp_nanos(sec: i64, nsec: u32) -> super::error::DecodeResult<i64> {
+    sec.checked_mul(1_000_000_000)
+        .and_then(|ns| ns.checked_add(i64::from(nsec)))
+        .ok_or_else(|| {
+            super::error::DecodeError::new(format!(
+                "stamp {sec} s {nsec} ns is outside the range of nanosecond stamps"
+            ))
+        })
 }
 
 /// One edge of the TF tree: `parent_from_child` at `stamp_nanos`.
@@ -158,5 +164,16 @@ impl Decoded<'_> {
             Decoded::Pose(p) => Some((p.stamp_nanos, &p.frame_id)),
             _ => None,
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn a_stamp_beyond_nanosecond_range_is_an_error_not_a_wrap() {
+        assert_eq!(super::stamp_nanos(1, 5).unwrap(), 1_000_000_005);
+        let e = super::stamp_nanos(i64::MAX / 10, 0).unwrap_err();
+        assert!(e.0.contains("outside the range"), "{e:?}");
+        assert!(super::stamp_nanos(i64::MIN, 0).is_err());
     }
 }

@@ -17,6 +17,9 @@ use super::plan::{Plan, format_secs};
 use super::report::Report;
 use super::run::{Prepared, Progress, SETTLE_EVERY, Settling};
 
+/// Seconds kept from the budget for the report at the end of a run.
+const REPORT_MARGIN_SECS: f64 = 20.0;
+
 /// Where a finished run leaves its report (the studio's checks tab reads it).
 pub type ReportSink = Arc<Mutex<Option<Report>>>;
 
@@ -33,6 +36,9 @@ pub struct PipelineCalibrator {
     settle_from: usize,
     stopped: Option<String>,
     stop_at_step: Option<usize>,
+    /// The budget's shortenings made so far, and when the last check was (step, seconds).
+    cuts: Vec<(usize, usize)>,
+    last_check: (usize, f64),
     finished: Option<(Report, Rig)>,
     sink: Option<ReportSink>,
 }
@@ -75,6 +81,8 @@ impl PipelineCalibrator {
             settle_from,
             stopped: None,
             stop_at_step: None,
+            cuts: Vec::new(),
+            last_check: (0, 0.0),
             finished: None,
             sink: None,
         })
@@ -112,7 +120,54 @@ impl PipelineCalibrator {
         if self.stop_at_step.is_some() {
             c.stop_at_step = self.stop_at_step;
         }
+        if c.budget_cuts.is_empty() {
+            c.budget_cuts = self.cuts.clone();
+        }
         c
+    }
+
+    /// Fit the rest of the schedule to the budget: at a quarter, half and three quarters of
+    /// the run, the steps since the last check give the pace, and a schedule that would end
+    /// past the budget (less a margin for the report) is shortened to end within it. A
+    /// configuration that records its cuts replays them instead.
+    fn fit_budget(&mut self, step: usize) {
+        let Some(stage) = self.stage.as_mut() else {
+            return;
+        };
+        let recorded = &self.plan.config.budget_cuts;
+        if !recorded.is_empty() {
+            if let Some(&(_, n)) = recorded.iter().find(|(k, _)| *k == step) {
+                stage.set_iterations(n);
+                self.steps = stage.max_steps();
+            }
+            return;
+        }
+        let Some(budget) = self.plan.config.budget_secs else {
+            return;
+        };
+        if self.plan.config.stop_at_step.is_some() {
+            return;
+        }
+        let total = self.steps;
+        let checks = [total / 4, total / 2, 3 * total / 4];
+        if !checks.contains(&step) {
+            return;
+        }
+        let now = self.started.elapsed().as_secs_f64();
+        let (since_step, since_secs) = self.last_check;
+        self.last_check = (step, now);
+        if step <= since_step {
+            return;
+        }
+        let pace = (now - since_secs) / (step - since_step) as f64;
+        let left = budget - now - REPORT_MARGIN_SECS;
+        let fits = step + (left.max(0.0) / pace.max(1e-6)) as usize;
+        if fits < total {
+            let n = fits.max(step + 1);
+            stage.set_iterations(n);
+            self.steps = stage.max_steps();
+            self.cuts.push((step, self.steps));
+        }
     }
 
     /// UniCal's best rig, or the prepared one, with the sensors not asked for at the initial
@@ -178,13 +233,16 @@ impl Calibrator for PipelineCalibrator {
         let mut r = stage.step();
         self.step += 1;
         let step = self.step;
+        self.fit_budget(step);
         if !r.done && step >= self.steps {
             r.done = true;
         }
+        let current = self.stage.as_ref().map(|s| s.current());
         if !r.done
             && step >= self.settle_from
             && step.is_multiple_of(SETTLE_EVERY)
-            && self.settling.push(stage.current())
+            && let Some(current) = current
+            && self.settling.push(current)
         {
             self.stopped = Some(format!(
                 "stopped at step {step} of {}: every pose has settled ({})",

@@ -151,9 +151,14 @@ pub struct PipelineConfig {
     pub seed: u64,
     /// UniCal's steps (`None`: the quality's, fitted to the budget).
     pub iterations: Option<usize>,
-    /// Stop the run after this many steps, whatever the schedule (what a run the budget cut
-    /// records, so that its configuration repeats it).
+    /// Stop the run after this many steps, whatever the schedule (what a run the budget
+    /// stopped records, so that its configuration repeats it).
     pub stop_at_step: Option<usize>,
+    /// Where the budget shortened UniCal's schedule: at step `k` (the first of each pair) the
+    /// run went on to `n` steps in all (the second), its rates decaying and its hash levels
+    /// opening to the new end. A run records the shortenings it made; given here they are
+    /// applied at those steps and the budget is not measured again (the run repeats).
+    pub budget_cuts: Vec<(usize, usize)>,
     pub lidars: LidarSettings,
     pub cameras: CameraSettings,
     /// UniCal's scene and optimiser (the run-time parts — root, held sensors, steps, seed —
@@ -169,6 +174,7 @@ impl Default for PipelineConfig {
             seed: 1,
             iterations: None,
             stop_at_step: None,
+            budget_cuts: Vec::new(),
             lidars: LidarSettings::default(),
             cameras: CameraSettings::default(),
             unical: DepthCalibConfig::default(),

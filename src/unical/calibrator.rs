@@ -305,6 +305,13 @@ impl UnicalLidarStage {
         &self.calib
     }
 
+    /// Shorten (or lengthen) the schedule to `iterations` steps in all from now on: the rates
+    /// decay, the hash levels open and the heat maps start by the new end (each is a fraction
+    /// of the run, read at every step). Never below the steps already taken.
+    pub fn set_iterations(&mut self, iterations: usize) {
+        self.calib.config.iterations = iterations.max(self.calib.iteration + 1);
+    }
+
     /// The optimisation, to step it directly (probes and benchmarks).
     pub fn calibration_mut(&mut self) -> &mut DepthCalibration {
         &mut self.calib
