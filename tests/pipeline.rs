@@ -39,7 +39,7 @@ fn drive(trajectory: TrajectoryKind, seconds: f64, seed: u64) -> (TempDir, PathB
 
 fn plan(log: &Path, config: &PipelineConfig) -> Plan {
     let drive = Drive::open(log).unwrap();
-    Plan::build(&drive, &drive.rig, &PlanRequest::default(), config, false).unwrap()
+    Plan::build(&drive, &drive.rig, &PlanRequest::default(), config).unwrap()
 }
 
 #[test]
@@ -226,9 +226,23 @@ fn the_plain_command_calibrates_and_reports_every_sensor() {
         "fast",
         "--iterations",
         "40",
+        // A loaded machine must not stop this debug build at the fast quality's 4 minutes.
+        "--budget",
+        "1h",
     ]);
     assert!(ok, "{err}");
     assert!(err.contains("calibrate: 30/30"), "{err}");
+    // The drive turns: the camera is fitted to its motion, and a fit within 5° / 50 cm of
+    // its 2° / 20 cm start is dropped for UniCal to refine the start.
+    assert!(
+        err.contains("plan: cameras: each camera fitted to its own motion first"),
+        "{err}"
+    );
+    assert!(
+        err.contains("camera hand-eye: front_camera: its fit lies")
+            && err.contains("the start is kept for UniCal"),
+        "{err}"
+    );
     assert!(!err.contains("calibrate: 40/40"), "{err}");
     assert!(
         err.contains("plan: lidars: pandar64 (the reference) fitted"),

@@ -901,7 +901,7 @@ fn calibrate_everything_runs_the_clis_plan_from_the_optimiser_panel() {
     assert_eq!(studio_config, cli);
     let drive = h.state().drive.clone().unwrap();
     let plan = |config: &rigcal::pipeline::PipelineConfig, request| {
-        rigcal::pipeline::Plan::build(&drive, &drive.rig, request, config, false).unwrap()
+        rigcal::pipeline::Plan::build(&drive, &drive.rig, request, config).unwrap()
     };
     let cli_request = rigcal::pipeline::PlanRequest::default();
     assert_eq!(

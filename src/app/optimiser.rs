@@ -289,7 +289,7 @@ fn start_pipeline(studio: &mut Studio, drive: std::sync::Arc<crate::log::Drive>)
             None => drive,
         };
         preparing.report("planning", 0, 1);
-        let plan = crate::pipeline::Plan::build(&drive, &rig, &request, &config, true)
+        let plan = crate::pipeline::Plan::build(&drive, &rig, &request, &config)
             .map_err(|e| e.to_string())?;
         if let Ok(mut notes) = notes.lock() {
             notes.extend(plan.decisions.iter().map(|d| format!("plan: {d}")));

@@ -218,7 +218,6 @@ fn run_into(
                     seed: case.seed,
                     ..(**config).clone()
                 },
-                true,
             )
             .map_err(|e| e.to_string())?;
             let optimised: Vec<String> = initial.sensors.iter().map(|s| s.name.clone()).collect();

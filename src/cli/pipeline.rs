@@ -71,7 +71,7 @@ pub fn calibrate_auto(
         segments_nanos: segments,
     };
     let bars = super::progress::PhasedProgress::default();
-    let plan = Plan::build(&drive, &initial, &request, &config, true).map_err(|e| e.to_string())?;
+    let plan = Plan::build(&drive, &initial, &request, &config).map_err(|e| e.to_string())?;
     for line in &plan.decisions {
         eprintln!("plan: {line}");
     }

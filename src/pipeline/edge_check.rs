@@ -1,7 +1,6 @@
-//! A camera's target-free check against a LiDAR, shared by the plan and the report: the
-//! edge-alignment score (mean truncated distance, px, from the LiDAR's depth discontinuities
-//! to the image's edges; [`EdgeAlignment`]), whether a nearby pose aligns clearly better, and
-//! how well the images pin each axis of the camera's pose down.
+//! A camera's target-free check against a LiDAR, for the report: the edge-alignment score
+//! (mean truncated distance, px, from the LiDAR's depth discontinuities to the image's edges;
+//! [`EdgeAlignment`]) and how well the images pin each axis of the camera's pose down.
 //!
 //! How the uncertainty is found: the cost is a sum over frames, `S(x) = Σ_k S_k(x)`, of each
 //! frame's summed edge distances, with `x` a right perturbation of `vehicle_from_camera` in the
@@ -96,52 +95,6 @@ impl EdgeCheck {
     pub fn score(&self, vehicle_from_camera: Rigid) -> f64 {
         let points: usize = self.frames.iter().map(|f| f.point_count()).sum();
         self.frame_sums(vehicle_from_camera).iter().sum::<f64>() / points.max(1) as f64
-    }
-
-    /// A nearby pose that aligns clearly better than `start` (by at least `margin`, e.g. 0.1
-    /// for 10 %): tried turns of 1° and 2.5° about each camera axis and shifts of 20 cm along
-    /// each. Returns a description of the best such pose and its score.
-    pub fn better_nearby(&self, start: Rigid, margin: f64) -> Option<(String, f64)> {
-        let here = self.score(start);
-        let names = ["x", "y", "z"];
-        let mut best: Option<(String, f64)> = None;
-        for (axis, name) in names.iter().enumerate() {
-            let unit = DVec3::from_array(std::array::from_fn(|k| (k == axis) as u8 as f64));
-            for sign in [-1.0, 1.0] {
-                let mut tries = vec![
-                    (
-                        format!("a {:+.1}° turn about its {name} axis", sign),
-                        start.perturbed_right(unit * sign * 1f64.to_radians(), DVec3::ZERO),
-                    ),
-                    (
-                        format!("a {:+.1}° turn about its {name} axis", sign * 2.5),
-                        start.perturbed_right(unit * sign * 2.5f64.to_radians(), DVec3::ZERO),
-                    ),
-                ];
-                tries.push((
-                    format!("a {:+.0} cm shift along its {name} axis", sign * 20.0),
-                    start.perturbed_right(DVec3::ZERO, unit * sign * 0.2),
-                ));
-                for (what, pose) in tries {
-                    let s = self.score(pose);
-                    if s < here * (1.0 - margin) && best.as_ref().is_none_or(|(_, b)| s < *b) {
-                        best = Some((what, s));
-                    }
-                }
-            }
-        }
-        best.map(|(what, s)| {
-            (
-                format!(
-                    "{what} aligns its edges with {}'s {:.0} % better ({:.2} px against {:.2} px)",
-                    self.lidar,
-                    100.0 * (1.0 - s / here),
-                    s,
-                    here
-                ),
-                s,
-            )
-        })
     }
 
     /// The 1-σ uncertainty of each axis of the camera's pose at `at` (module doc).

@@ -9,9 +9,10 @@
 //! - LiDARs: the reference (the root, else the first) is fitted to the trajectory where the
 //!   drive turns enough ([`MIN_TURN_DEG`]), otherwise left; every other LiDAR is registered to
 //!   it by point-to-plane ICP; then UniCal holds them;
-//! - cameras: the hand-eye start where the drive turns enough and the starting alignment looks
-//!   far off (a nearby pose aligns the LiDAR's edges clearly better); then UniCal with every
-//!   camera, on the quality's images at its scale, for as many steps as the budget allows.
+//! - cameras: where the drive turns enough, each camera is fitted to its own motion (hand-eye)
+//!   and the fit kept where it moves the camera far (the start was far off: [`FAR_OFF_DEG`],
+//!   [`FAR_OFF_M`]); then UniCal with every camera, on the quality's images at its scale, for
+//!   as many steps as the budget allows.
 //!
 //! The same [`Plan`] runs from the CLI, the studio and `bench` ([`super::run`]).
 
@@ -22,14 +23,16 @@ use crate::log::Drive;
 use crate::unical::depth_calib::DepthCalibConfig;
 
 use super::config::{HandEye, PipelineConfig};
-use super::edge_check::EdgeCheck;
 
 /// A log whose vehicle moves less than this (m) is a stationary one.
 const STATIONARY_M: f64 = 1.0;
-/// Frames of each camera the start check looks at.
-const CHECK_FRAMES: usize = 4;
-/// A nearby pose must align the edges this much better for the start to look far off.
-const FAR_OFF_MARGIN: f64 = 0.1;
+/// With `cameras.hand_eye: auto`, a hand-eye fit is used only when it moves its camera further
+/// than this from the start (degrees, metres): on the simulator's figure-8 from 2° / 20 cm the
+/// fits landed up to 1.6° from the truth (a right camera moved 3.6°), which UniCal's bound of
+/// 0.5° around the fit then kept (BENCHMARKS.md, "The pipeline"), while from 10° or a metre the
+/// fit is what brings the scene within reach.
+pub const FAR_OFF_DEG: f64 = 5.0;
+pub const FAR_OFF_M: f64 = 0.5;
 /// Seconds a UniCal step is planned at per camera ray and per LiDAR ray, and the preparation
 /// per camera image (measured on a 2-core Xeon with AVX-512; BENCHMARKS.md, "The pipeline").
 /// The run stops at the budget whatever the estimate said.
@@ -59,8 +62,12 @@ pub enum Stage {
         reference: String,
         lidars: Vec<String>,
     },
-    /// Fit each camera to its own motion (and its translation to the LiDAR map).
-    CameraHandEye { cameras: Vec<String> },
+    /// Fit each camera to its own motion (and its translation to the LiDAR map); with
+    /// `only_far`, a fit within [`FAR_OFF_DEG`] and [`FAR_OFF_M`] of the start is dropped.
+    CameraHandEye {
+        cameras: Vec<String>,
+        only_far: bool,
+    },
     /// UniCal: one scene with every sensor; the held ones stay.
     Unical {
         cameras: Vec<String>,
@@ -160,14 +167,13 @@ impl Motion {
 }
 
 impl Plan {
-    /// Decide the stages for `rig` on `drive`. `checks` runs the cameras' start check (it
-    /// reads a few images): off, the hand-eye's `auto` takes the start as close enough.
+    /// Decide the stages for `rig` on `drive` (from its motion and its sensors: no image is
+    /// read).
     pub fn build(
         drive: &Drive,
         rig: &Rig,
         request: &PlanRequest,
         config: &PipelineConfig,
-        checks: bool,
     ) -> Result<Plan, PlanError> {
         config.check()?;
         let log = drive.path().display().to_string();
@@ -296,32 +302,19 @@ impl Plan {
                     hand_eye = cameras.clone();
                     decisions.push("cameras: every camera fitted to its own motion first (cameras.hand_eye: always)".into());
                 }
-                HandEye::Auto if !checks => decisions.push(
-                    "cameras: no hand-eye start: the start was not checked".into(),
-                ),
                 HandEye::Auto => {
-                    for camera in &cameras {
-                        match EdgeCheck::new(drive, rig, camera, &reference, CHECK_FRAMES, &request.segments_nanos) {
-                            Ok(check) => {
-                                let start = rig.sensor(camera).map(|s| s.vehicle_from_sensor).unwrap_or_default();
-                                if let Some((why, _)) = check.better_nearby(start, FAR_OFF_MARGIN) {
-                                    decisions.push(format!("cameras: {camera} looks far off ({why}): fitted to its own motion first"));
-                                    hand_eye.push(camera.clone());
-                                }
-                            }
-                            Err(e) => decisions.push(format!("cameras: {camera}'s start not checked: {e}")),
-                        }
-                    }
-                    if hand_eye.is_empty() {
-                        decisions.push(format!(
-                            "cameras: no hand-eye start: every camera's start aligns with {reference}'s edges better than nearby poses"
-                        ));
-                    }
+                    hand_eye = cameras.clone();
+                    decisions.push(format!(
+                        "cameras: each camera fitted to its own motion first (the drive turns {:.0}°); a fit within {FAR_OFF_DEG}° and {:.0} cm of its start is dropped, for UniCal refines such a start better than the hand-eye places it",
+                        motion.turn_deg,
+                        FAR_OFF_M * 100.0
+                    ));
                 }
             }
             if !hand_eye.is_empty() {
                 stages.push(Stage::CameraHandEye {
                     cameras: hand_eye.clone(),
+                    only_far: config.cameras.hand_eye == HandEye::Auto,
                 });
             }
         }
@@ -416,10 +409,17 @@ impl Plan {
         self.stages
             .iter()
             .find_map(|s| match s {
-                Stage::CameraHandEye { cameras } => Some(cameras.as_slice()),
+                Stage::CameraHandEye { cameras, .. } => Some(cameras.as_slice()),
                 _ => None,
             })
             .unwrap_or(&[])
+    }
+
+    /// Whether the hand-eye keeps only the fits that move their camera far.
+    pub fn hand_eye_only_far(&self) -> bool {
+        self.stages
+            .iter()
+            .any(|s| matches!(s, Stage::CameraHandEye { only_far: true, .. }))
     }
 }
 

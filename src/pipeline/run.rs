@@ -313,10 +313,39 @@ pub fn prepare(
     }
     let cameras = plan.hand_eye_cameras();
     if !cameras.is_empty() {
-        let (rig, fitted, notes) = fit_cameras(drive, &out.rig, cameras, segments, progress);
+        let (mut rig, mut fitted, notes) =
+            fit_cameras(drive, &out.rig, cameras, segments, progress);
+        out.notes.extend(notes);
+        if plan.hand_eye_only_far() {
+            // A fit close to its start is dropped: UniCal refines such a start better.
+            fitted.retain(|name| {
+                let (Some(before), Some(after)) = (out.rig.sensor(name), rig.sensor(name)) else {
+                    return false;
+                };
+                let (rot, trans) = before.vehicle_from_sensor.difference(after.vehicle_from_sensor);
+                let far = rot.to_degrees() > super::plan::FAR_OFF_DEG || trans > super::plan::FAR_OFF_M;
+                if !far {
+                    out.notes.push(format!(
+                        "camera hand-eye: {name}: its fit lies {:.2}° / {:.1} cm from the start, within {}° / {:.0} cm: the start is kept for UniCal",
+                        rot.to_degrees(),
+                        trans * 100.0,
+                        super::plan::FAR_OFF_DEG,
+                        super::plan::FAR_OFF_M * 100.0
+                    ));
+                }
+                far
+            });
+            for s in &mut rig.sensors {
+                if cameras.contains(&s.name)
+                    && !fitted.contains(&s.name)
+                    && let Some(before) = out.rig.sensor(&s.name)
+                {
+                    s.vehicle_from_sensor = before.vehicle_from_sensor;
+                }
+            }
+        }
         out.rig = rig;
         out.fitted = fitted;
-        out.notes.extend(notes);
     }
     Ok(out)
 }
