@@ -499,12 +499,12 @@ mod tests {
         };
         assert_eq!(
             perturbation(&quick),
-            2 * 2 * 2,
-            "2 levels × 2 methods × 2 seeds"
+            2 * 3 * 2,
+            "2 levels × 3 methods (pipeline, UniCal, edge) × 2 seeds"
         );
-        assert_eq!(perturbation(&quick.clone().with_seeds(1)), 4);
+        assert_eq!(perturbation(&quick.clone().with_seeds(1)), 6);
         let paper = Suite::paper(Some(PathBuf::from("p")));
-        assert_eq!(perturbation(&paper), 6 * 2 * 10);
+        assert_eq!(perturbation(&paper), 6 * 3 * 10);
         assert!(paper.cases.iter().any(|c| c.protocol == Protocol::PandaSet));
         let on_log = |s: &Suite| {
             s.cases
