@@ -363,9 +363,13 @@ impl McapContainer {
                             length: len + 9,
                         });
                         match decompress_chunk(&body) {
-                            Ok(data) => for_each_record(&data, |op, body, _| {
-                                collect_definition(op, body, &mut schemas, &mut raw_channels)
-                            }),
+                            Ok(data) => {
+                                // The message walk reports a chunk's damage; here only the
+                                // definitions are collected.
+                                let _ = for_each_record(&data, |op, body, _| {
+                                    collect_definition(op, body, &mut schemas, &mut raw_channels)
+                                });
+                            }
                             Err(what) => self
                                 .problems
                                 .push(Problem::file(format!("chunk at byte {offset}: {what}"))),
@@ -543,7 +547,7 @@ impl McapContainer {
                         return (kept, problems);
                     }
                 };
-                for_each_record(&data, |opcode, body, body_start| {
+                let damage = for_each_record(&data, |opcode, body, body_start| {
                     if opcode != op::MESSAGE || body.len() < 22 {
                         return;
                     }
@@ -571,6 +575,9 @@ impl McapContainer {
                         kept.push((r, t));
                     }
                 });
+                if let Some(what) = damage {
+                    problems.push(Problem::file(format!("chunk {index}: {what}")));
+                }
                 (kept, problems)
             })
             .collect();
@@ -657,21 +664,36 @@ fn collect_definition(
 
 /// Call `f(opcode, body, body_offset)` for each record in a decompressed chunk; stops quietly at
 /// a record that runs past the end (the caller sees fewer messages, never a panic).
-fn for_each_record(data: &[u8], mut f: impl FnMut(u8, &[u8], usize)) {
+/// Call `f(opcode, body, body_start)` for each record of a chunk's records. Returns what
+/// was wrong where the walk had to stop before the end (a record running past the chunk, or
+/// a few bytes too short for a record's prefix), so the records it lost are reported.
+fn for_each_record(data: &[u8], mut f: impl FnMut(u8, &[u8], usize)) -> Option<String> {
     let mut pos = 0usize;
     while pos + 9 <= data.len() {
         let opcode = data[pos];
         let len = u64::from_le_bytes(data[pos + 1..pos + 9].try_into().unwrap_or([0; 8]));
         let start = pos + 9;
-        let Some(end) = usize::try_from(len).ok().and_then(|l| start.checked_add(l)) else {
-            return;
-        };
-        if end > data.len() {
-            return;
+        let end = usize::try_from(len).ok().and_then(|l| start.checked_add(l));
+        match end {
+            Some(end) if end <= data.len() => {
+                f(opcode, &data[start..end], start);
+                pos = end;
+            }
+            _ => {
+                return Some(format!(
+                    "a record at byte {pos} of the chunk's {} claims {len} bytes, past the chunk's end: the {} bytes after it are skipped",
+                    data.len(),
+                    data.len() - pos
+                ));
+            }
         }
-        f(opcode, &data[start..end], start);
-        pos = end;
     }
+    (pos < data.len()).then(|| {
+        format!(
+            "the chunk's last {} bytes are too few for a record: skipped",
+            data.len() - pos
+        )
+    })
 }
 
 /// Decompress a chunk record body (without its 9-byte prefix) into its records.
@@ -777,6 +799,32 @@ impl ChunkCache {
 
 #[cfg(test)]
 mod tests {
+
+    #[test]
+    fn a_record_past_its_chunks_end_is_reported() {
+        // One whole record (opcode 5, 2 bytes), then one that claims 100 bytes of the 3 left.
+        let mut data = vec![5u8];
+        data.extend_from_slice(&2u64.to_le_bytes());
+        data.extend_from_slice(&[7, 7]);
+        data.push(5);
+        data.extend_from_slice(&100u64.to_le_bytes());
+        data.extend_from_slice(&[1, 2, 3]);
+        let mut seen = Vec::new();
+        let damage = for_each_record(&data, |op, body, _| seen.push((op, body.to_vec())));
+        assert_eq!(seen, [(5, vec![7, 7])]);
+        let damage = damage.unwrap();
+        assert!(
+            damage.contains("claims 100 bytes, past the chunk's end"),
+            "{damage}"
+        );
+        // A clean chunk reports nothing; a short tail does.
+        assert_eq!(for_each_record(&data[..11], |_, _, _| {}), None);
+        assert!(
+            for_each_record(&data[..15], |_, _, _| {})
+                .unwrap()
+                .contains("too few")
+        );
+    }
     use super::*;
 
     #[test]

@@ -10,8 +10,8 @@
 //!   drive turns enough ([`MIN_TURN_DEG`]), otherwise left; every other LiDAR is registered to
 //!   it by point-to-plane ICP; then UniCal holds them;
 //! - cameras: where the drive turns enough, each camera is fitted to its own motion (hand-eye)
-//!   and the fit kept where it moves the camera far (the start was far off: [`FAR_OFF_DEG`],
-//!   [`FAR_OFF_M`]); then UniCal with every camera, on the quality's images at its scale, for
+//!   and the fit kept where the camera's edges align with the reference LiDAR's at least as well
+//!   as at the start; then UniCal with every camera, on the quality's images at its scale, for
 //!   as many steps as the budget allows.
 //!
 //! The same [`Plan`] runs from the CLI, the studio and `bench` ([`super::run`]).
@@ -26,13 +26,7 @@ use super::config::{HandEye, PipelineConfig};
 
 /// A log whose vehicle moves less than this (m) is a stationary one.
 const STATIONARY_M: f64 = 1.0;
-/// With `cameras.hand_eye: auto`, a hand-eye fit is used only when it moves its camera further
-/// than this from the start (degrees, metres): on the simulator's figure-8 from 2° / 20 cm the
-/// fits landed up to 1.6° from the truth (a right camera moved 3.6°), which UniCal's bound of
-/// 0.5° around the fit then kept (BENCHMARKS.md, "The pipeline"), while from 10° or a metre the
-/// fit is what brings the scene within reach.
-pub const FAR_OFF_DEG: f64 = 5.0;
-pub const FAR_OFF_M: f64 = 0.5;
+
 /// Seconds a UniCal step is planned at per camera ray and per LiDAR ray, and the preparation
 /// per camera image (measured on a 2-core Xeon with AVX-512; BENCHMARKS.md, "The pipeline").
 /// The run stops at the budget whatever the estimate said.
@@ -63,11 +57,9 @@ pub enum Stage {
         lidars: Vec<String>,
     },
     /// Fit each camera to its own motion (and its translation to the LiDAR map); with
-    /// `only_far`, a fit within [`FAR_OFF_DEG`] and [`FAR_OFF_M`] of the start is dropped.
-    CameraHandEye {
-        cameras: Vec<String>,
-        only_far: bool,
-    },
+    /// `checked`, a fit is kept only where the camera's edges align with the reference LiDAR's
+    /// at least as well as at the start.
+    CameraHandEye { cameras: Vec<String>, checked: bool },
     /// UniCal: one scene with every sensor; the held ones stay.
     Unical {
         cameras: Vec<String>,
@@ -305,16 +297,15 @@ impl Plan {
                 HandEye::Auto => {
                     hand_eye = cameras.clone();
                     decisions.push(format!(
-                        "cameras: each camera fitted to its own motion first (the drive turns {:.0}°); a fit within {FAR_OFF_DEG}° and {:.0} cm of its start is dropped, for UniCal refines such a start better than the hand-eye places it",
-                        motion.turn_deg,
-                        FAR_OFF_M * 100.0
+                        "cameras: each camera fitted to its own motion first (the drive turns {:.0}°), the fit kept where the camera's edges align with {reference}'s better than at the start",
+                        motion.turn_deg
                     ));
                 }
             }
             if !hand_eye.is_empty() {
                 stages.push(Stage::CameraHandEye {
                     cameras: hand_eye.clone(),
-                    only_far: config.cameras.hand_eye == HandEye::Auto,
+                    checked: config.cameras.hand_eye == HandEye::Auto,
                 });
             }
         }
@@ -415,11 +406,11 @@ impl Plan {
             .unwrap_or(&[])
     }
 
-    /// Whether the hand-eye keeps only the fits that move their camera far.
-    pub fn hand_eye_only_far(&self) -> bool {
+    /// Whether the hand-eye keeps only the fits its edge check prefers to the start.
+    pub fn hand_eye_checked(&self) -> bool {
         self.stages
             .iter()
-            .any(|s| matches!(s, Stage::CameraHandEye { only_far: true, .. }))
+            .any(|s| matches!(s, Stage::CameraHandEye { checked: true, .. }))
     }
 }
 

@@ -14,6 +14,9 @@ use crate::unical::calibrator::UnicalLidarStage;
 
 use super::plan::{Plan, Stage};
 
+/// Frames of each camera the hand-eye's fit is checked on against its start.
+const HAND_EYE_CHECK_FRAMES: usize = 6;
+
 /// `(phase, done, total)`.
 pub type Progress<'a> = &'a (dyn Fn(&str, usize, usize) + Sync);
 
@@ -316,24 +319,38 @@ pub fn prepare(
         let (mut rig, mut fitted, notes) =
             fit_cameras(drive, &out.rig, cameras, segments, progress);
         out.notes.extend(notes);
-        if plan.hand_eye_only_far() {
-            // A fit close to its start is dropped: UniCal refines such a start better.
+        if plan.hand_eye_checked() {
+            // A fit is kept where the images agree with it at least as well as with the start:
+            // edge alignment against the reference LiDAR, now registered.
+            let reference = plan.reference_lidar.clone().unwrap_or_default();
             fitted.retain(|name| {
                 let (Some(before), Some(after)) = (out.rig.sensor(name), rig.sensor(name)) else {
                     return false;
                 };
-                let (rot, trans) = before.vehicle_from_sensor.difference(after.vehicle_from_sensor);
-                let far = rot.to_degrees() > super::plan::FAR_OFF_DEG || trans > super::plan::FAR_OFF_M;
-                if !far {
-                    out.notes.push(format!(
-                        "camera hand-eye: {name}: its fit lies {:.2}° / {:.1} cm from the start, within {}° / {:.0} cm: the start is kept for UniCal",
-                        rot.to_degrees(),
-                        trans * 100.0,
-                        super::plan::FAR_OFF_DEG,
-                        super::plan::FAR_OFF_M * 100.0
-                    ));
-                }
-                far
+                let check = super::edge_check::EdgeCheck::new(
+                    drive,
+                    &out.rig,
+                    name,
+                    &reference,
+                    HAND_EYE_CHECK_FRAMES,
+                    segments,
+                );
+                let (start, fit) = match &check {
+                    Ok(c) => (c.score(before.vehicle_from_sensor), c.score(after.vehicle_from_sensor)),
+                    Err(e) => {
+                        out.notes.push(format!(
+                            "camera hand-eye: {name}: its fit is not checked ({e}): kept"
+                        ));
+                        return true;
+                    }
+                };
+                let keep = fit <= start;
+                out.notes.push(format!(
+                    "camera hand-eye: {name}: its edges align with {reference}'s {} at its fit ({fit:.2} px) than at the start ({start:.2} px): {}",
+                    if keep { "better" } else { "worse" },
+                    if keep { "the fit is kept" } else { "the start is kept" }
+                ));
+                keep
             });
             for s in &mut rig.sensors {
                 if cameras.contains(&s.name)
