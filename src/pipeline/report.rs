@@ -521,26 +521,7 @@ fn lidar_sigmas(info: &[f64; 36], vehicle_from_lidar: Rigid) -> [f64; 6] {
     put(&mut j, lower, 3, 0);
     put(&mut j, rt, 3, 3);
     let h: [[f64; 6]; 6] = std::array::from_fn(|a| std::array::from_fn(|b| info[a * 6 + b]));
-    let (values, vectors) = crate::geometry::spd::symmetric_eigen(h);
-    let largest = values.iter().cloned().fold(0.0f64, f64::max);
-    let mut cov = [[0.0; 6]; 6];
-    let mut unobserved = [false; 6];
-    for e in 0..6 {
-        let v: [f64; 6] = std::array::from_fn(|k| vectors[k][e]);
-        if largest > 0.0 && values[e] > 1e-9 * largest {
-            for a in 0..6 {
-                for b in 0..6 {
-                    cov[a][b] += v[a] * v[b] / values[e];
-                }
-            }
-        } else {
-            for (k, x) in v.iter().enumerate() {
-                if x.abs() > 0.3 {
-                    unobserved[k] = true;
-                }
-            }
-        }
-    }
+    let (cov, unobserved, largest) = super::edge_check::observed_inverse(h, 1e-9);
     // Σ_s = J Σ_v Jᵀ.
     let jc: [[f64; 6]; 6] =
         std::array::from_fn(|a| std::array::from_fn(|b| (0..6).map(|k| j[a][k] * cov[k][b]).sum()));
