@@ -26,11 +26,22 @@ pub fn resolve_config(args: &CalibrateArgs) -> Result<PipelineConfig, String> {
         Some(path) => PipelineConfig::load(path).map_err(|e| format!("--config: {e}"))?,
         None => PipelineConfig::default(),
     };
+    // A new quality, budget or step count plans afresh: what an earlier output resolved (its
+    // images, scale, steps and the budget's cuts) gives way.
+    if args.quality.is_some() || args.budget_secs.is_some() || args.iterations.is_some() {
+        config.stop_at_step = None;
+        config.budget_cuts.clear();
+    }
     if let Some(q) = args.quality {
         config.quality = q;
+        config.iterations = None;
+        config.budget_secs = None;
+        config.cameras.images_per_camera = None;
+        config.cameras.image_scale = None;
     }
     if let Some(b) = args.budget_secs {
         config.budget_secs = Some(b);
+        config.iterations = None;
     }
     if args.seed_given || args.config_file.is_none() {
         config.seed = args.seed;
@@ -124,7 +135,11 @@ pub fn calibrate_auto(
             break;
         }
         if saved_at.elapsed().as_secs_f64() >= CHECKPOINT_SECS {
-            write(&run, format!("running: step {step} of {steps}"), &last)?;
+            write(
+                &run,
+                format!("running: step {step} of {}", run.max_steps()),
+                &last,
+            )?;
             saved_at = Instant::now();
         }
     }

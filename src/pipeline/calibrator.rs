@@ -68,6 +68,8 @@ impl PipelineCalibrator {
                 .unical
                 .coarse_to_fine
                 .map_or(0.5, |c| c.end_fraction.max(0.5))) as usize;
+        // The pace is measured from the first step, not from the start of the preparation.
+        let prepared_at = started.elapsed().as_secs_f64();
         Ok(Self {
             drive,
             initial,
@@ -82,7 +84,7 @@ impl PipelineCalibrator {
             stopped: None,
             stop_at_step: None,
             cuts: Vec::new(),
-            last_check: (0, 0.0),
+            last_check: (0, prepared_at),
             finished: None,
             sink: None,
         })
@@ -138,7 +140,9 @@ impl PipelineCalibrator {
         if !recorded.is_empty() {
             if let Some(&(_, n)) = recorded.iter().find(|(k, _)| *k == step) {
                 stage.set_iterations(n);
-                self.steps = stage.max_steps();
+                self.steps = stage
+                    .max_steps()
+                    .min(self.plan.config.stop_at_step.unwrap_or(usize::MAX));
             }
             return;
         }
@@ -163,7 +167,9 @@ impl PipelineCalibrator {
         let left = budget - now - REPORT_MARGIN_SECS;
         let fits = step + (left.max(0.0) / pace.max(1e-6)) as usize;
         if fits < total {
-            let n = fits.max(step + 1);
+            // Not below the poses' warm-up and ramp: they would never move.
+            let least = self.plan.unical.pose_warmup + self.plan.unical.pose_ramp;
+            let n = fits.max(step + 1).max(least.min(total));
             stage.set_iterations(n);
             self.steps = stage.max_steps();
             self.cuts.push((step, self.steps));
@@ -253,8 +259,9 @@ impl Calibrator for PipelineCalibrator {
         }
         if !r.done
             && self.plan.config.stop_at_step.is_none()
+            && self.plan.config.budget_cuts.is_empty()
             && let Some(budget) = self.plan.config.budget_secs
-            && self.started.elapsed().as_secs_f64() >= budget
+            && self.started.elapsed().as_secs_f64() >= budget - REPORT_MARGIN_SECS
         {
             self.stopped = Some(format!(
                 "stopped at step {step} of {}: the budget of {} is spent (the output's configuration records stop_at_step {step}, which repeats this run)",

@@ -89,7 +89,8 @@ impl std::str::FromStr for Quality {
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum HandEye {
-    /// Where the drive turns enough and the starting alignment looks far off.
+    /// Where the drive turns enough; a fit is kept where the camera's edges align with the
+    /// reference LiDAR's at least as well as at its start.
     #[default]
     Auto,
     Always,
@@ -211,12 +212,16 @@ impl PipelineConfig {
         })?;
         let value: serde_yaml::Value = serde_yaml::from_str(text).map_err(parse_error)?;
         // A calibration file: its provenance holds the configuration of the run.
-        let value = match value
-            .get("rigcal_calibration")
-            .and(value.get("provenance"))
-            .and_then(|p| p.get("config"))
-        {
-            Some(config) => config.clone(),
+        let value = match value.get("rigcal_calibration") {
+            Some(_) => match value.get("provenance").and_then(|p| p.get("config")) {
+                Some(config) if config.get("method").is_none() => config.clone(),
+                _ => {
+                    return Err(ConfigError::Parse {
+                        path: path.to_string(),
+                        message: "this calibration file records no pipeline configuration (it was written by a single method or an older rigcal)".into(),
+                    });
+                }
+            },
             None => value,
         };
         // The path of the key at fault (`cameras.image_scale`) leads the message.

@@ -200,6 +200,8 @@ impl Plan {
         let cameras: Vec<String> = rig
             .cameras()
             .filter(|c| c.camera.is_some() && with_data(&c.name) && asked(&c.name))
+            // A root camera stays where it is: no stage moves it.
+            .filter(|c| request.root.as_deref() != Some(c.name.as_str()))
             .map(|c| c.name.clone())
             .collect();
         let motion = Motion::of(drive, &request.segments_nanos);
@@ -324,15 +326,18 @@ impl Plan {
         let mut iterations = config.iterations.unwrap_or(preset.iterations);
         let run_unical = !unical_cameras.is_empty() || lidars_move;
         if run_unical {
-            let camera_rays = (unical_cameras.len() * config.unical.rays_per_camera) as f64;
-            let lidar_rays = (lidars.len() * config.unical.rays_per_sensor) as f64;
+            let camera_rays = (unical_cameras.len() as f64) * config.unical.rays_per_camera as f64;
+            let lidar_rays = (lidars.len() as f64) * config.unical.rays_per_sensor as f64;
             let step_secs = camera_rays * SECS_PER_CAMERA_RAY + lidar_rays * SECS_PER_LIDAR_RAY;
             let prepare =
-                PREPARE_SECS + PREPARE_SECS_PER_IMAGE * (images * unical_cameras.len()) as f64;
+                PREPARE_SECS + PREPARE_SECS_PER_IMAGE * images as f64 * unical_cameras.len() as f64;
             if let (None, Some(budget)) = (config.iterations, resolved.budget_secs) {
                 let fits = ((budget - prepare) / step_secs.max(1e-6)).floor().max(0.0) as usize;
                 // Fewer steps than the poses' warm-up and ramp would leave them unmoved.
-                let least = config.unical.pose_warmup + config.unical.pose_ramp;
+                let least = config
+                    .unical
+                    .pose_warmup
+                    .saturating_add(config.unical.pose_ramp);
                 let cut = fits.max(least).min(iterations);
                 if cut < iterations {
                     decisions.push(format!(

@@ -176,6 +176,11 @@ impl Report {
                     segments,
                     &mut report,
                 );
+            } else if !plan.config.lidars.register {
+                // UniCal moved the LiDARs itself (`--method unical`): nothing else checked them.
+                report.verdict = Verdict::CheckIt;
+                report.why =
+                    "moved by UniCal with the scene; no independent check of its axes".into();
             } else if s.name == reference {
                 reference_report(lidars, &mut report);
             } else {
@@ -416,7 +421,7 @@ fn reference_report(lidars: &LidarEvidence, report: &mut SensorReport) {
         }
         None => {
             report.verdict = Verdict::CheckIt;
-            report.why = "the reference: not fitted to the trajectory (the drive turns too little): kept at the initial guess".into();
+            report.why = "the reference: not fitted to the trajectory (the plan says why): kept at the initial guess".into();
             report
                 .axes
                 .iter_mut()
