@@ -214,7 +214,7 @@ fn the_plain_command_calibrates_and_reports_every_sensor() {
     // A budget's shortening, as an earlier run recorded it, is replayed: at step 20 the
     // schedule is cut to 30 steps in all.
     let config = tmp.path().join("rigcal.yaml");
-    std::fs::write(&config, "budget_cuts: [[20, 30]]\n").unwrap();
+    std::fs::write(&config, "iterations: 40\nbudget_cuts: [[20, 30]]\n").unwrap();
     let (ok, _, err) = rigcal(&[
         "calibrate",
         log.to_str().unwrap(),
@@ -224,8 +224,6 @@ fn the_plain_command_calibrates_and_reports_every_sensor() {
         config.to_str().unwrap(),
         "--quality",
         "fast",
-        "--iterations",
-        "40",
         // A loaded machine must not stop this debug build at the fast quality's 4 minutes.
         "--budget",
         "1h",
