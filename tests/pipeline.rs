@@ -214,7 +214,11 @@ fn the_plain_command_calibrates_and_reports_every_sensor() {
     // A budget's shortening, as an earlier run recorded it, is replayed: at step 20 the
     // schedule is cut to 30 steps in all.
     let config = tmp.path().join("rigcal.yaml");
-    std::fs::write(&config, "iterations: 40\nbudget_cuts: [[20, 30]]\n").unwrap();
+    std::fs::write(
+        &config,
+        "quality: fast\nbudget_secs: 3600\niterations: 40\nbudget_cuts: [[20, 30]]\n",
+    )
+    .unwrap();
     let (ok, _, err) = rigcal(&[
         "calibrate",
         log.to_str().unwrap(),
@@ -222,11 +226,6 @@ fn the_plain_command_calibrates_and_reports_every_sensor() {
         out.to_str().unwrap(),
         "--config",
         config.to_str().unwrap(),
-        "--quality",
-        "fast",
-        // A loaded machine must not stop this debug build at the fast quality's 4 minutes.
-        "--budget",
-        "1h",
     ]);
     assert!(ok, "{err}");
     assert!(err.contains("calibrate: 30/30"), "{err}");
