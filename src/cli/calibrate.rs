@@ -464,7 +464,7 @@ pub fn moves_report(initial: &Rig, result: &Rig) -> String {
 }
 
 /// Whether any sensor of `now` differs from `start` (by more than rounding).
-fn rig_moved(start: &Rig, now: &Rig) -> bool {
+pub(crate) fn rig_moved(start: &Rig, now: &Rig) -> bool {
     start.sensors.iter().any(|s| {
         now.sensor(&s.name)
             .is_some_and(|n| moved_by(s.vehicle_from_sensor, n.vehicle_from_sensor).is_some())

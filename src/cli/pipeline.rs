@@ -13,7 +13,7 @@ use crate::pipeline::calibrator::PipelineCalibrator;
 use crate::pipeline::plan::format_secs;
 use crate::pipeline::{PipelineConfig, Plan, PlanRequest};
 
-use super::calibrate::{CalibrateArgs, moves_report, open_inputs};
+use super::calibrate::{CalibrateArgs, moves_report, open_inputs, rig_moved};
 
 /// Seconds between checkpoints of a running calibration.
 const CHECKPOINT_SECS: f64 = 30.0;
@@ -155,16 +155,6 @@ pub fn calibrate_auto(
         format_secs(started.elapsed().as_secs_f64())
     );
     Ok((doc, text))
-}
-
-/// Whether any sensor of `now` differs from `start`.
-fn rig_moved(start: &Rig, now: &Rig) -> bool {
-    start.sensors.iter().any(|s| {
-        now.sensor(&s.name).is_some_and(|n| {
-            let (r, t) = s.vehicle_from_sensor.difference(n.vehicle_from_sensor);
-            r + t > 1e-9
-        })
-    })
 }
 
 /// The native file of `rig` with the pipeline's provenance: the resolved configuration (which

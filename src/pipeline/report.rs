@@ -337,8 +337,7 @@ fn camera_report(
     // frames it called directions of side cameras unobserved that UniCal had right, and
     // putting them back at the initial guess cost degrees (BENCHMARKS.md, "The pipeline").
     let unobserved = fill_axes(report, check.sigmas(end).0);
-    let kept = end;
-    let (before, after) = (check.score(start), check.score(kept));
+    let (before, after) = (check.score(start), check.score(end));
     report.checks.push(Check {
         what: format!(
             "edge alignment against {reference} ({} frames)",
@@ -381,7 +380,7 @@ fn camera_report(
             format!("every axis observed; edges {before:.2} → {after:.2} px"),
         )
     };
-    kept
+    end
 }
 
 fn reference_report(lidars: &LidarEvidence, report: &mut SensorReport) {
