@@ -751,4 +751,37 @@ mod tests {
         let e = anyhow::anyhow!("disk full").context("cannot write out.yaml");
         assert_eq!(one_line(&e), "cannot write out.yaml: disk full");
     }
+
+    /// docs/cli.md lists, for every subcommand, exactly the options clap defines.
+    #[test]
+    fn the_command_line_reference_lists_every_option_of_every_subcommand() {
+        use clap::CommandFactory;
+        use std::collections::BTreeSet;
+        let doc = include_str!("../docs/cli.md");
+        let command = Cli::command();
+        for sub in command.get_subcommands() {
+            let name = sub.get_name();
+            if name == "help" {
+                continue;
+            }
+            let heading = format!("## `rigcal {name}`");
+            let section = doc
+                .split("\n## ")
+                .find(|s| format!("## {s}").starts_with(&heading))
+                .unwrap_or_else(|| panic!("docs/cli.md has no section {heading}"));
+            let documented: BTreeSet<String> = section
+                .lines()
+                .filter_map(|l| l.strip_prefix("| `--"))
+                .filter_map(|l| l.split([' ', '`', '=']).next())
+                .map(|f| format!("--{f}"))
+                .collect();
+            let defined: BTreeSet<String> = sub
+                .get_arguments()
+                .filter_map(|a| a.get_long())
+                .filter(|l| *l != "help" && *l != "version")
+                .map(|l| format!("--{l}"))
+                .collect();
+            assert_eq!(documented, defined, "docs/cli.md, rigcal {name}");
+        }
+    }
 }

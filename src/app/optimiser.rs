@@ -176,6 +176,10 @@ pub fn poll(studio: &mut Studio, ctx: &egui::Context) {
         if p.finished {
             studio.current = studio.respect_locks(&start, &p.best);
             finished = true;
+            if let Some(note) = &p.note {
+                studio.optimiser.message = Some(format!("error: {note}"));
+                studio.status.push(format!("error: optimiser: {note}"));
+            }
         }
     }
     if finished {

@@ -24,10 +24,10 @@ pub const DEFAULT_FRAMES: usize = 48;
 /// How far (degrees) UniCal may turn a camera from its hand-eye fit
 /// ([`crate::unical::depth_calib::DepthCalibConfig::camera_rotation_bounds_deg`]): the fit
 /// brings rotations from 10° to within 0.7° on the simulator's drives (47 of 54 fits within
-/// 0.2°; BENCHMARKS.md), so a camera the scene pulls further than this has slid into a wrong
+/// 0.2°; docs/experiments/hand-eye-start.md), so a camera the scene pulls further than this has slid into a wrong
 /// basin. At 1° drive 7's back camera reached such a basin (0.5° / 18 cm) and stayed; at 0.5°
 /// it holds within 0.07°, and the worst fit measured still leaves the truth within reach of
-/// 0.2° (BENCHMARKS.md, "A tighter rotation bound").
+/// 0.2° (docs/experiments/correspondence-term.md, "A tighter rotation bound").
 pub const ROTATION_BOUND_DEG: f64 = 0.5;
 
 /// One camera's image pairs with verified motion, and the vehicle pose of each of its frames

@@ -183,7 +183,7 @@ impl KdTree {
 /// range bias of an elongated footprint and, at long range, each beam's elevation error as a
 /// height error: on the real PandaSet drive they alone tilt the PandarGT by 0.3° against the
 /// Pandar64, while the returns above the ground agree with the reference within 0.03° of
-/// pitch (BENCHMARKS.md, "Grazing returns").
+/// pitch (docs/experiments/robustness-protocol.md, "Grazing returns").
 pub const MIN_INCIDENCE_COS: f64 = 0.26;
 
 /// The least share of the information, in every direction, the steep correspondences must

@@ -21,7 +21,7 @@
 //! the points do not observe (an eigenvalue of the normal equations below about 30 points'
 //! worth, rotations counted in metres at 5 m) stays where it started.
 //!
-//! What the pose fit is worth (BENCHMARKS.md): side cameras of the simulator's figure-8 drive
+//! What the pose fit is worth (docs/experiments/hand-eye-start.md): side cameras of the simulator's figure-8 drive
 //! come to the same pose from every start up to 2° / 20 cm, 0.14–0.25° and ≤ 3.6 cm from the
 //! truth; the front and back cameras, whose matches have little parallax, do not; on PandaSet's
 //! straight drive (16 images per camera) it is not accurate enough to start UniCal from.

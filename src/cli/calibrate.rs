@@ -23,6 +23,7 @@ use crate::classical::target::TargetConfig;
 use crate::classical::target_calibrator::TargetCalibrator;
 use crate::geometry::Rigid;
 use crate::log::Drive;
+use crate::optim::divergence::Guarded;
 use crate::optim::edge_refine::EdgeRefiner;
 use crate::optim::runner::Calibrator;
 
@@ -323,7 +324,7 @@ pub fn calibrate(
     // moved from it.
     let initial_guess = rig.clone();
     check_sensor_kinds(args, &rig)?;
-    let mut calibrator: Box<dyn Calibrator> = match args.method.as_str() {
+    let calibrator: Box<dyn Calibrator> = match args.method.as_str() {
         "edge" => {
             let lidar = reference_lidar(args, &rig)?;
             let cameras = selected_cameras(args, &rig);
@@ -389,6 +390,8 @@ pub fn calibrate(
         }
         m => return Err(unknown_method(m)),
     };
+    // A NaN or an infinity ends the run with the best result before it.
+    let mut calibrator = Guarded::new(calibrator);
     let max_steps = match (args.method.as_str(), args.iterations) {
         ("edge", Some(n)) => n.min(calibrator.max_steps()),
         _ => calibrator.max_steps(),
@@ -403,7 +406,7 @@ pub fn calibrate(
             .map_err(|e| e.to_string())
     };
     checkpoint(
-        calibrator.as_ref(),
+        &calibrator,
         &last,
         format!("running: step 0 of {max_steps}"),
     )?;
@@ -423,16 +426,26 @@ pub fn calibrate(
         }
         if saved_at.elapsed().as_secs_f64() >= CHECKPOINT_SECS {
             checkpoint(
-                calibrator.as_ref(),
+                &calibrator,
                 &last,
                 format!("running: step {step} of {max_steps}"),
             )?;
             saved_at = std::time::Instant::now();
         }
     }
-    let result = result_rig(args, &rig, calibrator.as_ref());
-    let doc = document_of(args, &result, calibrator.as_ref(), &last, "complete".into());
+    let result = result_rig(args, &rig, &calibrator);
+    let status = match calibrator.diverged() {
+        Some(why) => format!("diverged: {why}"),
+        None => "complete".into(),
+    };
+    let doc = document_of(args, &result, &calibrator, &last, status);
     doc.save(&args.out).map_err(|e| e.to_string())?;
+    if let Some(why) = calibrator.diverged() {
+        return Err(format!(
+            "{why}; that result is written to {}",
+            args.out.display()
+        ));
+    }
     Ok((doc, moves_report(&initial_guess, &result)))
 }
 

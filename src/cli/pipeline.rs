@@ -8,6 +8,7 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 use crate::calib::{CalibrationFile, Rig};
+use crate::optim::divergence::Guarded;
 use crate::optim::runner::Calibrator;
 use crate::pipeline::calibrator::PipelineCalibrator;
 use crate::pipeline::plan::format_secs;
@@ -88,25 +89,26 @@ pub fn calibrate_auto(
     }
     let report_progress = |phase: &str, done, total| bars.report(phase, done, total);
     let drive = std::sync::Arc::new(drive);
-    let mut run =
-        PipelineCalibrator::prepare(drive, initial.clone(), plan, started, &report_progress)?;
+    let run = PipelineCalibrator::prepare(drive, initial.clone(), plan, started, &report_progress)?;
     bars.finish();
     for line in run.notes() {
         eprintln!("{line}");
     }
-    let write = |run: &PipelineCalibrator, status: String, losses: &[(String, f64)]| {
+    // A NaN or an infinity ends the run with the best result before it.
+    let mut run = Guarded::new(run);
+    let write = |run: &Guarded<PipelineCalibrator>, status: String, losses: &[(String, f64)]| {
         let mut doc = document(
             args,
             &run.best(),
-            run.plan(),
-            &run.resolved_config(),
+            run.inner().plan(),
+            &run.inner().resolved_config(),
             status,
         );
         for (name, value) in losses {
             doc.metrics
                 .insert(name.clone(), serde_yaml::Value::from(*value));
         }
-        if let Some(r) = run.report() {
+        if let Some(r) = run.inner().report() {
             doc.metrics.insert("report".into(), r.to_yaml());
         }
         doc.save(&args.out).map_err(|e| e.to_string()).map(|()| doc)
@@ -143,12 +145,23 @@ pub fn calibrate_auto(
             saved_at = Instant::now();
         }
     }
-    if let Some(why) = run.stopped() {
+    if let Some(why) = run.inner().stopped() {
         eprintln!("\n{why}");
+    }
+    if let Some(why) = run.diverged() {
+        write(&run, format!("diverged: {why}"), &last)?;
+        return Err(format!(
+            "{why}; that result is written to {}",
+            args.out.display()
+        ));
     }
     let doc = write(&run, "complete".into(), &last)?;
     let result = run.best();
-    let report = run.report().map(|r| r.to_text()).unwrap_or_default();
+    let report = run
+        .inner()
+        .report()
+        .map(|r| r.to_text())
+        .unwrap_or_default();
     let text = format!(
         "{}{report}total {}\n",
         moves_report(&initial, &result),

@@ -11,6 +11,7 @@ use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
+use super::divergence::Guarded;
 use crate::calib::Rig;
 
 /// What one step of a calibrator reports.
@@ -46,6 +47,8 @@ pub struct Packet {
     pub finished: bool,
     /// Set when the run could not start (preparation failed); nothing else is meaningful then.
     pub error: Option<String>,
+    /// Why a finished run stopped early, for the user (it diverged: [`Guarded`]).
+    pub note: Option<String>,
 }
 
 const RUN: u8 = 0;
@@ -113,7 +116,7 @@ impl Run {
         let thread = std::thread::Builder::new()
             .name("rigcal-optimiser".into())
             .spawn(move || match prepare(&status) {
-                Ok(mut c) => worker(c.as_mut(), &ctl, &tx),
+                Ok(c) => worker(&mut Guarded::new(c), &ctl, &tx),
                 Err(e) => {
                     let _ = tx.send(Packet {
                         step: 0,
@@ -124,6 +127,7 @@ impl Run {
                         best: Rig::default(),
                         finished: true,
                         error: Some(e),
+                        note: None,
                     });
                 }
             })
@@ -176,7 +180,7 @@ impl Drop for Run {
     }
 }
 
-fn worker(c: &mut dyn Calibrator, control: &AtomicU8, tx: &Sender<Packet>) {
+fn worker(c: &mut Guarded<Box<dyn Calibrator>>, control: &AtomicU8, tx: &Sender<Packet>) {
     let started = Instant::now();
     let mut last_sent = Instant::now() - Duration::from_secs(1);
     let max_steps = c.max_steps();
@@ -207,6 +211,7 @@ fn worker(c: &mut dyn Calibrator, control: &AtomicU8, tx: &Sender<Packet>) {
                 best: c.best(),
                 finished: done,
                 error: None,
+                note: c.diverged().map(str::to_owned),
             };
             if tx.send(p).is_err() {
                 return; // nobody listens any more
@@ -228,7 +233,27 @@ fn worker(c: &mut dyn Calibrator, control: &AtomicU8, tx: &Sender<Packet>) {
         best: c.best(),
         finished: true,
         error: None,
+        note: None,
     });
+}
+
+/// A boxed calibrator steps as the one inside it (so a front end can wrap one in [`Guarded`]).
+impl<C: Calibrator + ?Sized> Calibrator for Box<C> {
+    fn name(&self) -> &str {
+        (**self).name()
+    }
+    fn max_steps(&self) -> usize {
+        (**self).max_steps()
+    }
+    fn step(&mut self) -> StepReport {
+        (**self).step()
+    }
+    fn current(&self) -> Rig {
+        (**self).current()
+    }
+    fn best(&self) -> Rig {
+        (**self).best()
+    }
 }
 
 #[cfg(test)]

@@ -501,4 +501,65 @@ mod tests {
             assert!(parse_duration_secs(bad).is_err(), "{bad}");
         }
     }
+
+    /// The leaf keys of a serialised configuration as dotted paths (a tagged enum's fields
+    /// under its own key).
+    fn leaf_keys(prefix: &str, value: &serde_yaml::Value, out: &mut Vec<String>) {
+        match value {
+            serde_yaml::Value::Mapping(m) if !m.is_empty() => {
+                for (k, v) in m {
+                    let k = k.as_str().unwrap_or_default();
+                    let path = if prefix.is_empty() {
+                        k.to_owned()
+                    } else {
+                        format!("{prefix}.{k}")
+                    };
+                    leaf_keys(&path, v, out);
+                }
+            }
+            serde_yaml::Value::Tagged(t) => leaf_keys(prefix, &t.value, out),
+            _ => out.push(prefix.to_owned()),
+        }
+    }
+
+    /// docs/configuration.md documents every key of the configuration, and no key that does
+    /// not exist (optional sections counted with their fields).
+    #[test]
+    fn the_configuration_reference_names_every_key_and_only_real_ones() {
+        let doc = include_str!("../../docs/configuration.md");
+        let documented: std::collections::BTreeSet<String> = doc
+            .lines()
+            .filter_map(|l| l.strip_prefix("| `"))
+            .filter_map(|l| l.split('`').next())
+            .map(str::to_owned)
+            .collect();
+        let mut keys = Vec::new();
+        leaf_keys(
+            "",
+            &serde_yaml::to_value(PipelineConfig::default()).unwrap(),
+            &mut keys,
+        );
+        for k in &keys {
+            assert!(
+                documented.contains(k),
+                "docs/configuration.md does not document `{k}`"
+            );
+        }
+        // Every key of the optional sections, when they are set.
+        let mut full = PipelineConfig::default();
+        full.unical.transient_returns = Some(Default::default());
+        full.unical.lidar_pose_update =
+            crate::unical::pose_newton::PoseUpdate::Newton(Default::default());
+        let mut all = Vec::new();
+        leaf_keys("", &serde_yaml::to_value(&full).unwrap(), &mut all);
+        all.extend(keys);
+        // A section that can be set to `null` (`unical.coarse_to_fine`) is a key too.
+        for d in &documented {
+            let section = format!("{d}.");
+            assert!(
+                all.iter().any(|k| k == d || k.starts_with(&section)),
+                "docs/configuration.md documents `{d}`, which the configuration does not have"
+            );
+        }
+    }
 }

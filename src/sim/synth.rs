@@ -113,7 +113,7 @@ pub fn check_perturbation(deg: f64, cm: f64) -> Result<(), String> {
 /// A sensor whose frame *is* the rig's vehicle frame is left alone: its extrinsic is the
 /// identity by definition (PandaSet's trajectory is the Pandar64's own pose), so moving it
 /// would not make a worse initial guess but a log whose trajectory and extrinsics disagree, by
-/// up to the perturbation's angle times the drive's length between sweeps (BENCHMARKS.md, "Real
+/// up to the perturbation's angle times the drive's length between sweeps (docs/experiments/unical-real-pandaset.md, "Real
 /// PandaSet end to end"). The other sensors' perturbations do not depend on whether it is
 /// skipped.
 pub fn perturb_rig(rig: &Rig, deg: f64, cm: f64, seed: u64) -> Rig {

@@ -6,7 +6,7 @@
 //! vertical field of view up to 30°) has no surface to be painted on: its colour can only go
 //! to the sky, a function of the view direction alone, which has no parallax. Rays there pull
 //! the cameras' rotations to suit that sky (on the real PandaSet drive every camera ends
-//! pitched up against the reference, BENCHMARKS.md). [`lidar_top_elevation_rad`] is the
+//! pitched up against the reference, docs/experiments/robustness-protocol.md). [`lidar_top_elevation_rad`] is the
 //! 99.9th percentile of the returns' elevations (`asin` of the vehicle-frame direction's z,
 //! the vehicle frame z up as in ROS's REP 103), the highest over the LiDARs, measured from each
 //! LiDAR's own centre: a camera mounted at or below the LiDARs that draws rays only up to that

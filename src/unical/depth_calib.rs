@@ -63,7 +63,7 @@ pub struct DepthCalibConfig {
     /// each pose parameter by about its rate per step, so the rate bounds how far a camera can
     /// travel in a run; with fewer rays the gradient is noisier and the rate is scaled by
     /// rays / [`CAMERA_RATE_RAYS`] (short runs with few rays otherwise random-walk the cameras
-    /// away: BENCHMARKS.md).
+    /// away: docs/experiments/unical-camera-poses.md).
     pub lr_camera_pose: f32,
     /// The cameras' translation rate as a multiple of their rotation's (translations are the
     /// weaker-observed and slower part of a camera's pose).
@@ -82,12 +82,12 @@ pub struct DepthCalibConfig {
     /// `camera_pose_final_fraction`). A translation that is still far off when the rotations
     /// have settled (the height a level drive leaves, a hand-eye start's sideways offset)
     /// needs its rate late in the run more than early, where a fast translation lets a camera
-    /// slide into a wrong basin before the scene holds detail (BENCHMARKS.md).
+    /// slide into a wrong basin before the scene holds detail (docs/experiments/hand-eye-start.md).
     pub camera_translation_final_fraction: Option<f32>,
     /// Cameras whose rotation stays within this many degrees of its start, by name: a start an
     /// independent measurement fixed (the hand-eye fit to the camera's own motion). Early in a
     /// run the colour field is still coarse, and a camera stepping at full rate can slide into
-    /// a wrong basin degrees away and not come back (BENCHMARKS.md, "Large initial errors");
+    /// a wrong basin degrees away and not come back (docs/experiments/hand-eye-start.md, "Large initial errors");
     /// the bound keeps it in the trust region its start earned. Empty: no bound.
     #[serde(skip)]
     pub camera_rotation_bounds_deg: Vec<(String, f64)>,
@@ -101,7 +101,7 @@ pub struct DepthCalibConfig {
     /// After the warm-up the pose rates rise linearly from 0 to their value over this many
     /// iterations (Adam's first steps are full-size whatever the gradient's noise, so a pose
     /// released at its full rate jumps by about its rate per parameter before Adam has
-    /// measured how noisy its gradient is; BENCHMARKS.md). At most a quarter of the iterations
+    /// measured how noisy its gradient is; docs/experiments/unical-camera-poses.md). At most a quarter of the iterations
     /// in which poses move, so that a short run still reaches its rate. 0: the full rate at once.
     pub pose_ramp: usize,
     /// Cameras may start to move before `pose_warmup`, at this iteration, following the
@@ -119,7 +119,7 @@ pub struct DepthCalibConfig {
     /// Whether the cameras' rotations move too after an [`Self::alignment_release`] (else only
     /// their translations do until the warm-up's end: after a hand-eye start the rotations are
     /// already close, and the correspondence term, with translations still off, turns them
-    /// to make up for the offset; BENCHMARKS.md, "The cameras' first move").
+    /// to make up for the offset; docs/experiments/correspondence-term.md, "The cameras' first move").
     pub alignment_release_rotates: bool,
     #[serde(skip)]
     pub iterations: usize,
@@ -136,7 +136,7 @@ pub struct DepthCalibConfig {
     /// LiDAR (the frozen root if it is a LiDAR, else the first) initialises and trains the
     /// scene, and the other LiDARs track it without shaping it; then every sensor trains the
     /// scene as in the paper. A scene trained by all LiDARs from a wrong start follows each
-    /// one's error wherever it sees most, and the relative signal fades (BENCHMARKS.md). 0: no
+    /// one's error wherever it sees most, and the relative signal fades (docs/experiments/unical-lidar-terms.md). 0: no
     /// such phase. Only with preconditioned LiDAR pose steps (with Adam a LiDAR that places no
     /// surface gets no pose gradient).
     pub registration_steps: usize,
@@ -216,7 +216,7 @@ pub struct DepthCalibConfig {
     /// Hold each camera's translation along its own optical axis at the initial guess: a step
     /// keeps only its part square to the axis. Along the axis a camera is observed least (a
     /// shift δ scales what it sees by about δ / depth), and there the colour term pulls a
-    /// camera away from what it sees (BENCHMARKS.md, "Blurred colour targets", "Where the real
+    /// camera away from what it sees (docs/experiments/colour-field-and-hash-grid.md, "Blurred colour targets", "Where the real
     /// drive's right camera comes to rest"). Off: every direction moves (the paper).
     pub camera_hold_axial: bool,
     /// How many of the hash grids' coarsest levels the colour term's camera-pose gradient
@@ -254,7 +254,7 @@ impl Default for DepthCalibConfig {
             // Off: end to end on the simulator it takes the cameras to the height the LiDAR
             // fit leaves (drive 7: 2.2-2.8 cm instead of 4.2 cm on average), but on the real
             // PandaSet drive the six cameras drift together, 14.5 cm instead of 8.3 cm
-            // (BENCHMARKS.md, "A translation the cameras share"); `--shared-camera-translation`.
+            // (docs/experiments/unical-camera-poses.md, "A translation the cameras share"); `--shared-camera-translation`.
             shared_camera_translation: false,
             camera_pose_final_fraction: 0.01,
             camera_translation_final_fraction: None,
@@ -264,14 +264,14 @@ impl Default for DepthCalibConfig {
             // Poses wait for 50 rendering steps, then their rates ramp up. Released at full
             // rate, cameras on the real PandaSet drive jumped 4-6° off their reference even
             // against a frozen scene; released after 25 initialisation steps (moving 3.7 s into
-            // a run), one of seed 2's cameras ran 4° off (BENCHMARKS.md, "Pose rates that ramp
+            // a run), one of seed 2's cameras ran 4° off (docs/experiments/unical-camera-poses.md, "Pose rates that ramp
             // up").
             pose_warmup: 200,
             pose_ramp: 150,
             // Not in the preset: released at the 30th initialisation step at a tenth of their
             // rate, cameras first move 2.2 s into a run instead of 28-34 s, but end to end the
             // three simulator seeds end with their rotations 0.02-0.05° worse and seed 7's right
-            // pair at 0.37° / 0.32° instead of 0.21° / 0.19° (BENCHMARKS.md, "The cameras'
+            // pair at 0.37° / 0.32° instead of 0.21° / 0.19° (docs/experiments/correspondence-term.md, "The cameras'
             // first move").
             alignment_release: None,
             alignment_release_rate: 0.1,
@@ -288,7 +288,7 @@ impl Default for DepthCalibConfig {
             // Four of the hash grid's levels open at the start, all by 60 % of the run (BARF):
             // the same accuracy on the simulator's drives as every level from the start, and
             // the early steps are cheaper, so a run takes a fifth less time and its cameras
-            // first move twice as soon (BENCHMARKS.md, "Issue 5 end to end").
+            // first move twice as soon (docs/experiments/unical-camera-poses.md, "Issue 5 end to end").
             coarse_to_fine: Some(CoarseToFine {
                 start_levels: 4.0,
                 end_fraction: 0.6,
@@ -306,16 +306,16 @@ impl Default for DepthCalibConfig {
             heatmap_sigma_px: (40.0, 5.0),
             heatmap_uniform_share: 0.2,
             // Without it a camera translation that all cameras share is barely observed on a
-            // drive that turns little (BENCHMARKS.md: 7.0 cm with the back camera off by 3.8°,
+            // drive that turns little (docs/experiments/unical-camera-poses.md: 7.0 cm with the back camera off by 3.8°,
             // against 2.35 cm with every camera within 0.24°, after 1400 iterations).
             silhouette_share: 0.5,
             opacity: OpacityModel::PerSample,
             // Lambertian surfaces: the paper's view-dependent decoder lets a colour that
-            // changes with the direction explain two cameras' disagreement (BENCHMARKS.md:
+            // changes with the direction explain two cameras' disagreement (docs/experiments/unical-camera-poses.md:
             // 0.27° against 0.46° after 600 iterations from 2°); `paper()` keeps it.
             view_dependent_colour: false,
             // Off: on the real PandaSet drive they find the passing cars and the vehicle's boot
-            // (5 % of the returns; BENCHMARKS.md, "Moving traffic"), but its cameras end no
+            // (5 % of the returns; docs/experiments/unical-real-pandaset.md, "Moving traffic"), but its cameras end no
             // closer to the reference, and on the simulator's static drive 7 a few masked
             // façade windows changed where the back camera ended (17.6 cm instead of 7.3).
             transient_returns: None,
@@ -323,19 +323,19 @@ impl Default for DepthCalibConfig {
             mask_own_vehicle: false,
             // Off: on the real PandaSet drive it takes the cameras' rotations from 0.60° to
             // 0.41–0.49° off the reference but their translations from 9.6 to 11.6–13.2 cm
-            // (BENCHMARKS.md, "… the cameras' pitch against the LiDARs' highest beam").
+            // (docs/experiments/robustness-protocol.md, "… the cameras' pitch against the LiDARs' highest beam").
             camera_rays_below_lidar_top: false,
             camera_hold_unobserved: None,
             camera_hold_axial: false,
             // Off: with 12 of 16 levels the real PandaSet drive's left pair no longer turned off
             // on seed 1, but the simulator's drive 7 lost its back camera (0.24° / 9.6 cm), and
-            // the limited gradient is not that of any loss (BENCHMARKS.md, "Camera poses moved
+            // the limited gradient is not that of any loss (docs/experiments/colour-field-and-hash-grid.md, "Camera poses moved
             // through the hash grid's coarse levels only").
             colour_pose_levels: None,
             // Averaged over the last 10 % of the run (140 of 1400 steps): on the simulator's
             // drives the reported poses hold issue 5's thresholds 100-200 s sooner (drive 7:
             // from 240 s), and the end result is the same within a few millimetres
-            // (BENCHMARKS.md, "Issue 5's three drives on this machine, and poses averaged").
+            // (docs/experiments/colour-field-and-hash-grid.md, "Issue 5's three drives on this machine, and poses averaged").
             pose_average_fraction: 0.1,
         }
     }
@@ -414,7 +414,7 @@ impl DepthCalibConfig {
     /// (height, mostly sideways), so they keep the preset's rate (twice the halved one) and
     /// decay only to 5 % of it, moving late in the run when the rotations have settled. On the
     /// simulator's three drives this meets every threshold of issue 5 where neither the preset
-    /// nor either change alone did (BENCHMARKS.md, "A hand-eye start"). Their translations
+    /// nor either change alone did (docs/experiments/hand-eye-start.md, "A hand-eye start"). Their translations
     /// start moving early, at [`HAND_EYE_RELEASE`], on the correspondence term alone (the
     /// rotations wait for the warm-up: [`Self::alignment_release_rotates`]), so the first
     /// extrinsic update comes 1–2 s into the run instead of 28–34 s. Every pose then waits
@@ -422,7 +422,7 @@ impl DepthCalibConfig {
     /// least the preset's ramp): 400 and 300 of 1400 steps. A camera that starts this close
     /// has little to gain from the young scene and much to lose to it: with the preset's 200
     /// and 150, drive 7's back camera, started 0.02° / 3.3 cm from the truth, was pulled to
-    /// 0.48° / 20 cm and ended 0.41° / 8.7 cm off; with these, 0.08° / 3.4 cm (BENCHMARKS.md,
+    /// 0.48° / 20 cm and ended 0.41° / 8.7 cm off; with these, 0.08° / 3.4 cm (docs/experiments/correspondence-term.md,
     /// "A tighter rotation bound"). Call it with [`Self::iterations`] set.
     pub fn after_hand_eye(self, fitted: &[String], rotation_bound_deg: f64) -> Self {
         if fitted.is_empty() {
@@ -1120,7 +1120,7 @@ impl DepthCalibration {
     /// A fresh scene (field, decoders, exposure maps, optimisers) with every sensor starting
     /// where it is now, the data and the matched correspondences kept: the next round of a
     /// calibration in rounds (a scene formed around the cameras' errors holds them back,
-    /// BENCHMARKS.md; a new one formed at their improved poses does less so).
+    /// docs/experiments/unical-camera-poses.md; a new one formed at their improved poses does less so).
     pub fn restart(&mut self) {
         let mut lidars = std::mem::take(&mut self.lidars);
         for (l, p) in lidars.iter_mut().zip(&self.poses) {

@@ -6,7 +6,7 @@
 //! sensor sees one side of the street more than the other. Adam scales each parameter by its
 //! own gradient noise, so the rotation settles at once into the valley that best explains the
 //! translation error and the translation then crawls along that valley; against a frozen scene
-//! learned at the true extrinsics it did not recover 9 cm in 250 steps (BENCHMARKS.md). A
+//! learned at the true extrinsics it did not recover 9 cm in 250 steps (docs/experiments/unical-lidar-terms.md). A
 //! Gauss–Newton step takes the valley in one move.
 //!
 //! Each LiDAR ray whose rendered accumulation A exceeds 0.5 gives one row: the rendered surface

@@ -3,7 +3,7 @@
 //!
 //! How it works: every pose step follows a fresh random draw of rays, so a pose that has found
 //! its place still jitters about it by the step noise (on the simulator's drives a camera moves
-//! 0.05–0.15° and 1–2 cm between checkpoints half a minute apart mid-run; BENCHMARKS.md). The mean of the last
+//! 0.05–0.15° and 1–2 cm between checkpoints half a minute apart mid-run; docs/experiments/colour-field-and-hash-grid.md). The mean of the last
 //! iterates is closer to where the objective holds the pose than any single one: noise averages
 //! out, a bias does not. Translations are averaged arithmetically; rotations by the normalised
 //! sum of their quaternions, each first turned to the hemisphere of the newest (the chordal L2

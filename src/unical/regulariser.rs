@@ -47,7 +47,7 @@ fn gradient_at_step(sdf: [f64; 4], step_m: f64) -> DVec3 {
 /// The SDF's gradient at `x` by the tetrahedral stencil at a wide `step_m`: a surface normal
 /// averaged over the stencil. The exact spatial gradient of a hash-grid field varies from one
 /// finest cell to the next; on a simulated street scene its direction is a median 49° off the
-/// true surface normal, against 9° for a 10 cm stencil and 6.5° for 20 cm (BENCHMARKS.md).
+/// true surface normal, against 9° for a 10 cm stencil and 6.5° for 20 cm (docs/experiments/unical-lidar-terms.md).
 pub fn smoothed_gradient(field: &SceneField, x: DVec3, step_m: f64) -> DVec3 {
     gradient_at_step(
         TETRAHEDRON.map(|v| field.query(x + v * step_m).sdf() as f64),
