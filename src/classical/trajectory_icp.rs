@@ -254,12 +254,19 @@ fn observed_step(h: [f64; 36], g: [f64; 6], sigma_m: f64, inliers: usize) -> ([f
     (std::array::from_fn(|k| scale[k] * y[k]), unobserved)
 }
 
-/// The least heading change (degrees) between the sweeps a drive must show before a LiDAR is
-/// fitted to its trajectory. On a straight drive only the LiDAR's pitch and yaw are observed
-/// at all, through the direction of travel, and there the trajectory's own error decides the
-/// answer: on 4 s of the real PandaSet drive (heading change < 1°) the fit moved the Pandar64
-/// 0.67° off its reference.
+/// The least heading change (degrees) between the sweeps at which a drive observes every
+/// direction of a LiDAR's pose but its height (on a level drive).
 pub const MIN_TURN_DEG: f64 = 30.0;
+
+/// The least distance (m) between the first and the last sweep at which a drive that turns
+/// less than [`MIN_TURN_DEG`] is still fitted, in the directions its travel observes (a
+/// straight drive: the LiDAR's pitch and yaw, through the direction of travel in its frame;
+/// its roll about that direction and its position keep their start). Those two matter: sweeps
+/// taken 50 m apart by a LiDAR pitched 1° wrong put one wall about 90 cm apart, a scene no
+/// later stage can learn. Shorter, the direction of travel is known too poorly: on 4 s of the
+/// real PandaSet drive the fit moved the Pandar64, which is that log's vehicle frame, 0.67° off
+/// the identity (a LiDAR that is the vehicle frame is not fitted at all: the pipeline's plan).
+pub const MIN_STRAIGHT_DISTANCE_M: f64 = 20.0;
 
 /// What [`register_to_trajectory`] found.
 #[derive(Clone, Debug, PartialEq)]
@@ -270,9 +277,10 @@ pub enum TrajectoryFit {
         vehicle_from_lidar: Rigid,
         unobserved: Vec<&'static str>,
     },
-    /// The drive turns too little between the sweeps (largest heading change, degrees): the
-    /// LiDAR is better left where it is.
-    TooStraight { turn_deg: f64 },
+    /// The drive turns too little between the sweeps (largest heading change, degrees) and
+    /// travels too little (m) for its direction of travel to place the LiDAR: it is better
+    /// left where it is.
+    TooStraight { turn_deg: f64, distance_m: f64 },
 }
 
 /// Register LiDAR `name` of `rig` to `drive`'s trajectory on `frames` sweeps spread over the
@@ -303,8 +311,12 @@ pub fn register_to_trajectory(
         })
         .collect::<Result<Vec<_>, String>>()?;
     let turn_deg = heading_change_rad(&sweeps).to_degrees();
-    if turn_deg < MIN_TURN_DEG {
-        return Ok(TrajectoryFit::TooStraight { turn_deg });
+    let distance_m = travel_m(&sweeps);
+    if turn_deg < MIN_TURN_DEG && distance_m < MIN_STRAIGHT_DISTANCE_M {
+        return Ok(TrajectoryFit::TooStraight {
+            turn_deg,
+            distance_m,
+        });
     }
     let mut icp = TrajectoryIcp::new(&sweeps, start, config).ok_or_else(|| {
         format!("'{name}': fewer than two sweeps inside the trajectory and the selected segments")
@@ -320,6 +332,18 @@ pub fn register_to_trajectory(
         vehicle_from_lidar: icp.vehicle_from_lidar,
         unobserved: icp.unobserved(),
     })
+}
+
+/// The distance between the vehicle's positions at the first and the last sweep (m).
+pub fn travel_m(sweeps: &[Vec<SourcePoint>]) -> f64 {
+    let at = |s: Option<&Vec<SourcePoint>>| {
+        s.and_then(|s| s.first())
+            .map(|p| p.world_from_vehicle.translation)
+    };
+    match (at(sweeps.first()), at(sweeps.last())) {
+        (Some(a), Some(b)) => a.distance(b),
+        _ => 0.0,
+    }
 }
 
 /// The largest rotation between the vehicle's poses at the sweeps' first points (rad).

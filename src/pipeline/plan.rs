@@ -7,7 +7,9 @@
 //!   against the reference LiDAR by checkerboards where boards are found, else by edge
 //!   alignment, and no neural scene is learned;
 //! - LiDARs: the reference (the root, else the first) is fitted to the trajectory where the
-//!   drive turns enough ([`MIN_TURN_DEG`]), otherwise left; every other LiDAR is registered to
+//!   drive turns enough ([`MIN_TURN_DEG`]), in pitch and yaw only where it drives straight far
+//!   enough ([`MIN_STRAIGHT_DISTANCE_M`]), otherwise left (and always left where its frame is
+//!   the vehicle frame); every other LiDAR is registered to
 //!   it by point-to-plane ICP; then UniCal holds them;
 //! - cameras: where the drive turns enough, each camera is fitted to its own motion (hand-eye)
 //!   and the fit kept where the camera's edges align with the reference LiDAR's at least as well
@@ -17,7 +19,7 @@
 //! The same [`Plan`] runs from the CLI, the studio and `bench` ([`super::run`]).
 
 use crate::calib::{Rig, SensorKind};
-use crate::classical::trajectory_icp::MIN_TURN_DEG;
+use crate::classical::trajectory_icp::{MIN_STRAIGHT_DISTANCE_M, MIN_TURN_DEG};
 use crate::geometry::so3;
 use crate::log::Drive;
 use crate::unical::depth_calib::DepthCalibConfig;
@@ -237,9 +239,25 @@ impl Plan {
                 decisions.push(format!(
                     "lidars: {reference} (the reference) stays: the vehicle does not move, so the trajectory cannot place it"
                 ));
-            } else if motion.turn_deg < MIN_TURN_DEG {
+            } else if rig
+                .sensor(&reference)
+                .is_some_and(|s| s.frame_id == rig.vehicle_frame)
+            {
                 decisions.push(format!(
-                    "lidars: {reference} (the reference) stays where the initial guess puts it: the drive turns {:.0}°, too little to fit it to the trajectory (at least {MIN_TURN_DEG:.0}°)",
+                    "lidars: {reference} (the reference) stays: its frame is the vehicle frame, so its pose is the identity by definition"
+                ));
+            } else if motion.turn_deg < MIN_TURN_DEG && motion.distance_m < MIN_STRAIGHT_DISTANCE_M
+            {
+                decisions.push(format!(
+                    "lidars: {reference} (the reference) stays where the initial guess puts it: the drive turns {:.0}° and travels {:.0} m, too little to fit it to the trajectory (at least {MIN_TURN_DEG:.0}°, or {MIN_STRAIGHT_DISTANCE_M:.0} m)",
+                    motion.turn_deg, motion.distance_m
+                ));
+            } else if motion.turn_deg < MIN_TURN_DEG {
+                stages.push(Stage::LidarToTrajectory {
+                    lidar: reference.clone(),
+                });
+                decisions.push(format!(
+                    "lidars: {reference} (the reference) fitted to the trajectory only where the drive observes it: it turns {:.0}° (under {MIN_TURN_DEG:.0}°), so its travel fixes the LiDAR's pitch and yaw; its roll about the drive and its position stay where the initial guess puts them",
                     motion.turn_deg
                 ));
             } else {

@@ -7,7 +7,9 @@ use crate::calib::Rig;
 use crate::classical::camera_motion::{self, CameraOutcome};
 use crate::classical::icp::IcpConfig;
 use crate::classical::icp_calibrator::IcpCalibrator;
-use crate::classical::trajectory_icp::{MIN_TURN_DEG, TrajectoryFit, register_to_trajectory};
+use crate::classical::trajectory_icp::{
+    MIN_STRAIGHT_DISTANCE_M, MIN_TURN_DEG, TrajectoryFit, register_to_trajectory,
+};
 use crate::log::Drive;
 use crate::optim::runner::Calibrator;
 use crate::unical::calibrator::UnicalLidarStage;
@@ -83,9 +85,15 @@ pub fn register_lidars(
                 s.vehicle_from_sensor = vehicle_from_lidar;
                 evidence.reference_fit = Some(Ok(unobserved));
             }
-            (TrajectoryFit::TooStraight { turn_deg }, _) => {
+            (
+                TrajectoryFit::TooStraight {
+                    turn_deg,
+                    distance_m,
+                },
+                _,
+            ) => {
                 let why = format!(
-                    "the drive turns {turn_deg:.1}° between its sweeps, too little to fit it to the trajectory (at least {MIN_TURN_DEG}°)"
+                    "the drive turns {turn_deg:.1}° and travels {distance_m:.0} m between its sweeps, too little to fit it to the trajectory (at least {MIN_TURN_DEG}°, or {MIN_STRAIGHT_DISTANCE_M} m)"
                 );
                 notes.push(format!("lidar icp: {reference} kept: {why}"));
                 evidence.reference_fit = Some(Err(why));
