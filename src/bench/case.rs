@@ -271,6 +271,8 @@ fn optimise(
     progress: &mut dyn FnMut(usize, usize),
     out: &mut CaseResult,
 ) -> Result<(), String> {
+    // A NaN or an infinity ends the case with the best result before it, and fails it.
+    let mut calibrator = crate::optim::divergence::Guarded::new(calibrator);
     let root = out.root.clone();
     let measure = |rig: &Rig| mean_errors(reference, rig, &root, optimised);
     out.initial = measure(initial)?;
@@ -298,7 +300,10 @@ fn optimise(
     let best = calibrator.best();
     out.result = measure(&best)?;
     out.sensors = sensor_results(reference, initial, &best, &root, optimised)?;
-    Ok(())
+    match calibrator.diverged() {
+        Some(why) => Err(why.to_owned()),
+        None => Ok(()),
+    }
 }
 
 fn unical_stage(

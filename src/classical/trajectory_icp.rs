@@ -328,9 +328,18 @@ pub fn register_to_trajectory(
         done += 1;
         report(done.min(total), total);
     }
+    // The steps turn the LiDAR about the vehicle's origin, which also moves its position; a
+    // position the drive does not observe keeps its start along that axis.
+    let unobserved = icp.unobserved();
+    let mut vehicle_from_lidar = icp.vehicle_from_lidar;
+    for (k, axis) in ["x", "y", "z"].iter().enumerate() {
+        if unobserved.contains(axis) {
+            vehicle_from_lidar.translation[k] = start.translation[k];
+        }
+    }
     Ok(TrajectoryFit::Fitted {
-        vehicle_from_lidar: icp.vehicle_from_lidar,
-        unobserved: icp.unobserved(),
+        vehicle_from_lidar,
+        unobserved,
     })
 }
 

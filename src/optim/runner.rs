@@ -237,6 +237,25 @@ fn worker(c: &mut Guarded<Box<dyn Calibrator>>, control: &AtomicU8, tx: &Sender<
     });
 }
 
+/// A borrowed calibrator steps as the one it borrows (so a caller can wrap one in [`Guarded`]).
+impl<C: Calibrator + ?Sized> Calibrator for &mut C {
+    fn name(&self) -> &str {
+        (**self).name()
+    }
+    fn max_steps(&self) -> usize {
+        (**self).max_steps()
+    }
+    fn step(&mut self) -> StepReport {
+        (**self).step()
+    }
+    fn current(&self) -> Rig {
+        (**self).current()
+    }
+    fn best(&self) -> Rig {
+        (**self).best()
+    }
+}
+
 /// A boxed calibrator steps as the one inside it (so a front end can wrap one in [`Guarded`]).
 impl<C: Calibrator + ?Sized> Calibrator for Box<C> {
     fn name(&self) -> &str {
