@@ -77,8 +77,11 @@ pub fn camera_pairs(
     let keypoints = picked
         .par_iter()
         .map(|&i| {
-            let img = drive.load_image(name, i).map_err(|e| e.to_string())?;
-            let found = training_keypoints(img.as_ref(), img.width());
+            // An image that does not decode has no keypoints (the drive reports it).
+            let found = match drive.image_or_skip(name, i) {
+                Some(img) => training_keypoints(img.as_ref(), img.width()),
+                None => Default::default(),
+            };
             let n = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
             report("camera keypoints", n, picked.len());
             Ok(found)

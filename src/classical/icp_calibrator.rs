@@ -64,7 +64,9 @@ pub fn reference_points_near(
     };
     let mut out = Vec::new();
     for &j in &frames[nearest.saturating_sub(1)..(nearest + 2).min(frames.len())] {
-        let t = drive.load_sweep(reference, j).map_err(|e| e.to_string())?;
+        let Some(t) = drive.sweep_or_skip(reference, j) else {
+            continue;
+        };
         out.extend(
             world_points(&t.view(), &drive.trajectory, vehicle_from_reference, 1)
                 .map_err(|e| format!("{reference}: {e}"))?,
@@ -102,9 +104,9 @@ impl IcpCalibrator {
             let mut target = Vec::new();
             let mut source = Vec::new();
             for i in spread_evenly(&drive.frames_within(&lidar.name, segments_nanos), frames) {
-                let sweep = drive
-                    .load_sweep(&lidar.name, i)
-                    .map_err(|e| e.to_string())?;
+                let Some(sweep) = drive.sweep_or_skip(&lidar.name, i) else {
+                    continue;
+                };
                 source.extend(source_points(&sweep, &drive.trajectory, 1));
                 target.extend(reference_points_near(
                     drive,

@@ -243,7 +243,9 @@ impl MiProblem {
         let mut prepared = Vec::new();
         let mut all_reflectivity = Vec::new();
         for pair in sweep_image_pairs(drive, camera, lidar, frames, segments_nanos)? {
-            let image = drive.load_image(camera, pair.image_index)?;
+            let Some(image) = drive.image_or_skip(camera, pair.image_index) else {
+                continue;
+            };
             let (w, h) = (image.width() as usize, image.height() as usize);
             let sigma = config.blur_sigma_px_at_1920 * w as f64 / 1920.0;
             let grey = equalize(&gaussian_blur(&grey(&image), w, h, sigma));

@@ -142,8 +142,11 @@ impl BoardCache {
         if let Some(found) = self.found.lock().ok().and_then(|m| m.get(&key).cloned()) {
             return Ok(found);
         }
-        let image = drive.load_image(camera, index)?;
-        let found = Arc::new(camera_boards(&image, intrinsics, spec));
+        // An image that does not decode shows no board (the drive reports it).
+        let found = Arc::new(match drive.image_or_skip(camera, index) {
+            Some(image) => camera_boards(&image, intrinsics, spec),
+            None => Vec::new(),
+        });
         if let Ok(mut m) = self.found.lock() {
             m.insert(key, found.clone());
         }

@@ -299,17 +299,12 @@ pub fn register_to_trajectory(
         .ok_or_else(|| format!("no LiDAR '{name}' in the rig"))?
         .vehicle_from_sensor;
     let picked = crate::log::spread_evenly(&drive.frames_within(name, segments_nanos), frames);
-    let sweeps = picked
+    // A sweep that does not decode is skipped (and reported by the drive).
+    let sweeps: Vec<_> = picked
         .into_iter()
-        .map(|i| {
-            let sweep = drive.load_sweep(name, i).map_err(|e| e.to_string())?;
-            Ok(super::icp_calibrator::source_points(
-                &sweep,
-                &drive.trajectory,
-                2,
-            ))
-        })
-        .collect::<Result<Vec<_>, String>>()?;
+        .filter_map(|i| drive.sweep_or_skip(name, i))
+        .map(|sweep| super::icp_calibrator::source_points(&sweep, &drive.trajectory, 2))
+        .collect();
     let turn_deg = heading_change_rad(&sweeps).to_degrees();
     let distance_m = travel_m(&sweeps);
     if turn_deg < MIN_TURN_DEG && distance_m < MIN_STRAIGHT_DISTANCE_M {

@@ -438,7 +438,8 @@ pub fn calibrate(
         Some(why) => format!("diverged: {why}"),
         None => "complete".into(),
     };
-    let doc = document_of(args, &result, &calibrator, &last, status);
+    let mut doc = document_of(args, &result, &calibrator, &last, status);
+    record_skipped(&drive, &mut doc);
     doc.save(&args.out).map_err(|e| e.to_string())?;
     if let Some(why) = calibrator.diverged() {
         return Err(format!(
@@ -447,6 +448,24 @@ pub fn calibrate(
         ));
     }
     Ok((doc, moves_report(&initial_guess, &result)))
+}
+
+/// Say how many frames the run skipped because they did not decode, and list them in `doc`'s
+/// metrics (`skipped_frames`: topic, log time and what was wrong, one entry per frame).
+pub(crate) fn record_skipped(drive: &Drive, doc: &mut CalibrationFile) {
+    let Some(line) = drive.skipped_summary() else {
+        return;
+    };
+    eprintln!("{line}");
+    let skipped = drive
+        .skipped()
+        .iter()
+        .map(|(_, p)| serde_yaml::Value::String(p.to_string()))
+        .collect();
+    doc.metrics.insert(
+        "skipped_frames".into(),
+        serde_yaml::Value::Sequence(skipped),
+    );
 }
 
 /// How far each sensor of `result` lies from the initial guess, one line each, the largest

@@ -205,6 +205,10 @@ pub fn evaluate(
             &mut report,
             progress,
         );
+        // Frames that did not decode were left out of the metrics.
+        if let Some(line) = drive.skipped_summary() {
+            eprintln!("{line}");
+        }
     }
     Ok(report)
 }

@@ -14,7 +14,7 @@ use crate::pipeline::calibrator::PipelineCalibrator;
 use crate::pipeline::plan::format_secs;
 use crate::pipeline::{PipelineConfig, Plan, PlanRequest};
 
-use super::calibrate::{CalibrateArgs, moves_report, open_inputs, rig_moved};
+use super::calibrate::{CalibrateArgs, moves_report, open_inputs, record_skipped, rig_moved};
 
 /// Seconds between checkpoints of a running calibration.
 const CHECKPOINT_SECS: f64 = 30.0;
@@ -89,7 +89,13 @@ pub fn calibrate_auto(
     }
     let report_progress = |phase: &str, done, total| bars.report(phase, done, total);
     let drive = std::sync::Arc::new(drive);
-    let run = PipelineCalibrator::prepare(drive, initial.clone(), plan, started, &report_progress)?;
+    let run = PipelineCalibrator::prepare(
+        drive.clone(),
+        initial.clone(),
+        plan,
+        started,
+        &report_progress,
+    )?;
     bars.finish();
     for line in run.notes() {
         eprintln!("{line}");
@@ -97,6 +103,8 @@ pub fn calibrate_auto(
     // A NaN or an infinity ends the run with the best result before it.
     let mut run = Guarded::new(run);
     let write = |run: &Guarded<PipelineCalibrator>, status: String, losses: &[(String, f64)]| {
+        // The skipped frames are said once, at the end.
+        let last_write = status == "complete" || status.starts_with("diverged");
         let mut doc = document(
             args,
             &run.best(),
@@ -110,6 +118,9 @@ pub fn calibrate_auto(
         }
         if let Some(r) = run.inner().report() {
             doc.metrics.insert("report".into(), r.to_yaml());
+        }
+        if last_write {
+            record_skipped(&drive, &mut doc);
         }
         doc.save(&args.out).map_err(|e| e.to_string()).map(|()| doc)
     };

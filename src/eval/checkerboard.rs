@@ -501,13 +501,17 @@ pub fn pair_corner_error(
         let Ok(world_from_vehicle) = drive.trajectory.world_from_vehicle(stamp) else {
             continue;
         };
-        let sweep = drive.load_sweep(lidar, j).map_err(|e| e.to_string())?;
+        let Some(sweep) = drive.sweep_or_skip(lidar, j) else {
+            continue;
+        };
         let view = sweep.view();
         let Ok(points) = world_points(&view, &drive.trajectory, vehicle_from_lidar, 1) else {
             continue;
         };
         let boards = boards_in_points(&points, spec);
-        let image = drive.load_image(camera, i).map_err(|e| e.to_string())?;
+        let Some(image) = drive.image_or_skip(camera, i) else {
+            continue;
+        };
         let camera_from_world = (world_from_vehicle * cam.vehicle_from_sensor).inverse();
         if let Some(e) = corner_error(&image, intr, camera_from_world, &boards, spec) {
             parts.push(e);

@@ -219,8 +219,12 @@ pub fn pair_registration_errors(
         else {
             continue;
         };
-        let load = |name: &str, k: usize| drive.load_sweep(name, k).map_err(|e| e.to_string());
-        let (src_sweep, tgt_sweep) = (load(source, i)?, load(target, j)?);
+        let (Some(src_sweep), Some(tgt_sweep)) = (
+            drive.sweep_or_skip(source, i),
+            drive.sweep_or_skip(target, j),
+        ) else {
+            continue;
+        };
         for (r, sum) in sums.iter_mut().enumerate() {
             let world = |sweep: &crate::log::LidarSweep, extrinsic, stride, name: &str| {
                 world_points(&sweep.view(), &drive.trajectory, extrinsic, stride)

@@ -166,6 +166,8 @@ pub struct Drive {
     pub problems: Vec<Problem>,
     image_cache: Mutex<VecDeque<((usize, usize), Arc<RgbImage>)>>,
     image_cache_len: usize,
+    /// The frames runs skipped because they did not decode ([`super::frames`]).
+    pub(super) skipped_frames: super::frames::SkippedFrames,
     /// When each image row of the cameras was exposed relative to the image's stamp (a
     /// rolling shutter; [`RowTimes::GLOBAL`] unless the user gave a readout).
     pub camera_readout: RowTimes,
@@ -491,6 +493,7 @@ impl Drive {
             streams,
             problems,
             image_cache: Mutex::new(VecDeque::new()),
+            skipped_frames: Default::default(),
             image_cache_len: options.image_cache_len.max(1),
             camera_readout: options.camera_readout,
         })

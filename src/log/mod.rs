@@ -13,6 +13,7 @@ pub mod decode;
 pub mod drive;
 pub mod error;
 pub mod foxglove;
+pub mod frames;
 pub mod image;
 pub mod pointcloud;
 pub mod protobuf;

@@ -98,7 +98,9 @@ pub fn sweep_image_pairs(
     }
     let mut out = Vec::with_capacity(frames);
     for sweep_index in crate::log::spread_evenly(&usable, frames) {
-        let sweep = drive.load_sweep(lidar, sweep_index)?;
+        let Some(sweep) = drive.sweep_or_skip(lidar, sweep_index) else {
+            continue;
+        };
         let Some(image_index) = (0..cam_stream.frames.len())
             .min_by_key(|&j| (cam_stream.frames[j].stamp_nanos - sweep.stamp_nanos).abs())
         else {
@@ -313,7 +315,9 @@ impl EdgeAlignment {
             .vehicle_from_sensor;
         let mut out = Vec::with_capacity(frames);
         for pair in sweep_image_pairs(drive, camera, lidar, frames, segments_nanos)? {
-            let image = drive.load_image(camera, pair.image_index)?;
+            let Some(image) = drive.image_or_skip(camera, pair.image_index) else {
+                continue;
+            };
             let points = silhouettes_in_vehicle(
                 &pair.sweep,
                 &drive.trajectory,

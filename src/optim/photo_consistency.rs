@@ -274,7 +274,9 @@ pub fn lidar_map(drive: &Drive, rig: &Rig, config: &PhotoConfig) -> Result<Vec<D
     for lidar in rig.lidars() {
         let usable = drive.frames_within(&lidar.name, &[]);
         for index in crate::log::spread_evenly(&usable, config.sweeps_per_lidar) {
-            let sweep = drive.load_sweep(&lidar.name, index)?;
+            let Some(sweep) = drive.sweep_or_skip(&lidar.name, index) else {
+                continue;
+            };
             let view = SweepView {
                 points_in_lidar: &sweep.points_in_sensor,
                 intensity: &sweep.intensity,
@@ -327,7 +329,9 @@ impl PhotoProblem {
         let mut images = Vec::new();
         for index in crate::log::spread_evenly(&usable, config.images.clamp(2, MAX_IMAGES)) {
             let stamp_nanos = stream.frames[index].stamp_nanos;
-            let image = drive.load_image(camera, index)?;
+            let Some(image) = drive.image_or_skip(camera, index) else {
+                continue;
+            };
             let (width, height, mut grey) = grey_at_width(&image, config.working_width_px.max(2));
             if config.vignetting_k != 0.0 {
                 devignette(&mut grey, width, height, config.vignetting_k);

@@ -63,10 +63,14 @@ impl UnicalLidarStage {
             if usable.is_empty() {
                 continue;
             }
-            let sweeps = spread_evenly(&usable, sweeps_per_lidar)
+            // A sweep that does not decode is skipped (and reported by the drive).
+            let sweeps: Vec<_> = spread_evenly(&usable, sweeps_per_lidar)
                 .into_iter()
-                .map(|i| drive.load_sweep(&lidar.name, i).map_err(|e| e.to_string()))
-                .collect::<Result<Vec<_>, _>>()?;
+                .filter_map(|i| drive.sweep_or_skip(&lidar.name, i))
+                .collect();
+            if sweeps.is_empty() {
+                continue;
+            }
             lidars.push(LidarData {
                 name: lidar.name.clone(),
                 initial: lidar.vehicle_from_sensor,
@@ -151,7 +155,9 @@ impl UnicalLidarStage {
                 continue;
             }
             if let std::collections::hash_map::Entry::Vacant(slot) = sweeps.entry((k, i)) {
-                let sweep = drive.load_sweep(name, i).map_err(|e| e.to_string())?;
+                let Some(sweep) = drive.sweep_or_skip(name, i) else {
+                    continue;
+                };
                 slot.insert(witnesses.transient_points(
                     &sweep,
                     k,
@@ -234,7 +240,9 @@ impl UnicalLidarStage {
             let small = intrinsics.scaled(scale);
             let mut frames = Vec::new();
             for i in picked {
-                let img = drive.load_image(&cam.name, i).map_err(|e| e.to_string())?;
+                let Some(img) = drive.image_or_skip(&cam.name, i) else {
+                    continue;
+                };
                 let resized = working_image(img.as_ref(), &small);
                 let stamp_nanos = stream.frames[i].stamp_nanos;
                 // Masks are grown around what they cover: the middle row's time will do.

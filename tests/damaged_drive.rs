@@ -1,0 +1,163 @@
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+//! Bad frames never sink a run. A simulated drive is damaged by [`damage`] (every fifth point
+//! cloud of each LiDAR, from the first, cut to half its length, every fifth JPEG's start-of-image marker
+//! overwritten; the container itself intact). The open leaves the cut-short clouds out of its
+//! index; the JPEGs fail when a run decodes them and are skipped. `icp` and `edge` then
+//! calibrate it to within a tolerance of what they reach on the clean drive, and each run's
+//! output names what it skipped.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use rigcal::calib::{CalibrationFile, Rig};
+use rigcal::sim::rigs::{RigPreset, SimRig};
+use rigcal::sim::synth::{SynthConfig, synthesize};
+use rigcal::sim::trajectories::TrajectoryKind;
+use rigcal::sim::world::SceneKind;
+use tempfile::TempDir;
+
+/// Both LiDARs and the front camera of the pandaset rig on a figure-8, 2° / 20 cm off.
+fn clean_drive(dir: &Path) -> PathBuf {
+    let mut rig = SimRig::preset(RigPreset::Pandaset);
+    rig.cameras.retain(|c| c.name == "front_camera");
+    let mut cfg = SynthConfig::new(SceneKind::Urban, rig, TrajectoryKind::Figure8, 6.0, 71);
+    cfg.scale = 0.25;
+    cfg.camera_rate_hz = 2.0;
+    cfg.perturb_deg = 2.0;
+    cfg.perturb_cm = 20.0;
+    let (log, gt) = (dir.join("clean.mcap"), dir.join("gt.yaml"));
+    synthesize(&cfg, &log, &gt, &mut |_, _| {}).unwrap();
+    log
+}
+
+/// Rewrite `from` into `to` with every fifth PointCloud2 of each topic (from the first) cut to half its bytes
+/// and every fifth CompressedImage's JPEG start-of-image marker zeroed. Returns how many
+/// messages it damaged.
+fn damage(from: &Path, to: &Path) -> usize {
+    let bytes = std::fs::read(from).unwrap();
+    let file = std::io::BufWriter::new(std::fs::File::create(to).unwrap());
+    let mut writer = mcap::WriteOptions::new()
+        .profile("ros2")
+        .create(file)
+        .unwrap();
+    let mut seen = std::collections::HashMap::<String, usize>::new();
+    let mut damaged = 0;
+    for message in mcap::MessageStream::new(&bytes).unwrap() {
+        let mut message = message.unwrap();
+        let schema = message
+            .channel
+            .schema
+            .as_ref()
+            .map(|s| s.name.clone())
+            .unwrap_or_default();
+        // The first of each topic, then every fifth.
+        let n = seen.entry(message.channel.topic.clone()).or_default();
+        *n += 1;
+        if *n % 5 == 1 {
+            let mut data = message.data.into_owned();
+            if schema == "sensor_msgs/msg/PointCloud2" {
+                data.truncate(data.len() / 2);
+                damaged += 1;
+            } else if schema == "sensor_msgs/msg/CompressedImage"
+                && let Some(at) = data.windows(3).position(|w| w == [0xFF, 0xD8, 0xFF])
+            {
+                data[at..at + 3].fill(0);
+                damaged += 1;
+            }
+            message.data = data.into();
+        }
+        writer.write(&message).unwrap();
+    }
+    writer.finish().unwrap();
+    damaged
+}
+
+/// `rigcal calibrate LOG ARGS… --out OUT`: the result and stderr.
+fn calibrate(log: &Path, args: &[&str], out: &Path) -> (CalibrationFile, String) {
+    let o = Command::new(env!("CARGO_BIN_EXE_rigcal"))
+        .arg("calibrate")
+        .arg(log)
+        .args(args)
+        .arg("--out")
+        .arg(out)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr).into_owned();
+    assert!(o.status.success(), "{args:?}: {err}");
+    (CalibrationFile::load(out).unwrap(), err)
+}
+
+/// The largest rotation (°) and translation (cm) between two rigs over `sensors`.
+fn apart(a: &Rig, b: &Rig, sensors: &[&str]) -> (f64, f64) {
+    sensors.iter().fold((0.0, 0.0), |(r, t), name| {
+        let pose = |rig: &Rig| rig.sensor(name).unwrap().vehicle_from_sensor;
+        let (dr, dt) = pose(a).difference(pose(b));
+        (r.max(dr.to_degrees()), t.max(dt * 100.0))
+    })
+}
+
+#[test]
+fn every_method_calibrates_a_damaged_drive_like_the_clean_one_and_says_what_it_skipped() {
+    let tmp: TempDir = tempfile::Builder::new()
+        .prefix("rigcal-damaged-")
+        .tempdir()
+        .unwrap();
+    let clean = clean_drive(tmp.path());
+    let damaged = tmp.path().join("damaged.mcap");
+    let count = damage(&clean, &damaged);
+    assert!(count >= 10, "{count} messages damaged");
+    // The damaged log opens: the damage is in the payloads only.
+    let opened = rigcal::log::Drive::open(&damaged).unwrap();
+    // The cut-short clouds are found by the open and left out of its index; the garbled
+    // JPEGs pass it and fail when a run decodes them.
+    let clouds = opened.stream("pandar_gt").unwrap().frames.len();
+    assert!(clouds < 60, "{clouds} of 60 clouds indexed");
+
+    // (method, its arguments, the sensors it moves, tolerance in ° and cm). UniCal and the
+    // pipeline load frames through the same calls (`Drive::sweep_or_skip`,
+    // `Drive::image_or_skip`); their runs are too long for this suite.
+    let runs: [(&str, Vec<&str>, Vec<&str>, f64, f64); 2] = [
+        ("icp", vec!["--method", "icp"], vec!["pandar_gt"], 0.1, 1.0),
+        (
+            "edge",
+            vec!["--method", "edge", "--sensors", "front_camera"],
+            vec!["front_camera"],
+            0.3,
+            0.1,
+        ),
+    ];
+    let start = rigcal::log::Drive::open(&clean).unwrap().rig;
+    for (name, args, moved, tol_deg, tol_cm) in runs {
+        let (a, _) = calibrate(
+            &clean,
+            &args,
+            &tmp.path().join(format!("{name}-clean.yaml")),
+        );
+        let out = tmp.path().join(format!("{name}-damaged.yaml"));
+        let (b, err) = calibrate(&damaged, &args, &out);
+        // The run says what it skipped, and its output lists it.
+        assert!(
+            err.contains("skipped ") && err.contains("did not decode"),
+            "{name}: {err}"
+        );
+        let listed = b
+            .metrics
+            .get("skipped_frames")
+            .and_then(|v| v.as_sequence())
+            .map_or(0, |s| s.len());
+        assert!(listed > 0, "{name}: no skipped_frames in the output");
+        let (ra, rb) = (a.to_rig(&out).unwrap(), b.to_rig(&out).unwrap());
+        let (deg, cm) = apart(&ra, &rb, &moved);
+        // Both runs moved their sensors, so the comparison says something.
+        let (from_start, _) = apart(&start, &ra, &moved);
+        assert!(
+            from_start > 0.05,
+            "{name}: the clean run moved {from_start:.3}°"
+        );
+        eprintln!("{name}: {listed} frames skipped; damaged vs clean {deg:.3}° / {cm:.2} cm");
+        assert!(
+            deg <= tol_deg && cm <= tol_cm,
+            "{name}: {deg:.3}° / {cm:.2} cm from the clean run"
+        );
+    }
+}
