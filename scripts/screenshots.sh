@@ -86,5 +86,5 @@ fi
 cache="${XDG_CACHE_HOME:-$HOME/.cache}/rigcal"
 ls "$cache"/demo-*.mcap >/dev/null 2>&1 && wait_demo=8 || wait_demo=80
 start; shot demo-initial "$wait_demo"
-click 1230 226  # Optimise ▸ Start
+click 1218 321  # Optimise ▸ Start (below the method, the reference and the cameras)
 shot demo-after-optimiser 90; stop
