@@ -83,6 +83,19 @@ fn plans_for_a_turning_and_a_straight_drive_differ_and_say_why() {
         text(&flat)
     );
     assert!(text(&flat).contains("no hand-eye start"), "{}", text(&flat));
+    // Straight: each camera's translation along the travel (the vehicle's x) is held; with
+    // turns nothing is.
+    let along = flat
+        .unical
+        .camera_hold_translation_along
+        .unwrap_or_else(|| panic!("{}", text(&flat)));
+    assert!(along[0] > 0.99, "{along:?}");
+    assert!(
+        text(&flat).contains("translation along the travel"),
+        "{}",
+        text(&flat)
+    );
+    assert_eq!(turns.unical.camera_hold_translation_along, None);
     for p in [&turns, &flat] {
         assert!(p.stages.contains(&Stage::LidarIcp {
             reference: "pandar64".into(),

@@ -31,7 +31,7 @@ pub enum CalibFileError {
     #[error("{path}: not a valid rigcal calibration file: {source}")]
     Parse {
         path: PathBuf,
-        source: serde_yaml::Error,
+        source: super::yaml::YamlError,
     },
     #[error("{path}: {what}")]
     Invalid { path: PathBuf, what: String },
@@ -214,19 +214,7 @@ impl CalibrationFile {
     }
 
     pub fn parse(text: &str, path: &Path) -> Result<Self, CalibFileError> {
-        // Editors on Windows may start a UTF-8 file with a byte-order mark.
-        let text = text.strip_prefix('\u{feff}').unwrap_or(text);
-        let depth = flow_nesting_depth(text);
-        if depth > MAX_FLOW_NESTING {
-            // The YAML parser takes time cubic in this depth: refuse before parsing.
-            return Err(CalibFileError::Invalid {
-                path: path.to_path_buf(),
-                what: format!(
-                    "brackets nested {depth} deep (a calibration file nests a few; at most {MAX_FLOW_NESTING})"
-                ),
-            });
-        }
-        serde_yaml::from_str(text).map_err(|source| CalibFileError::Parse {
+        super::yaml::from_str(text).map_err(|source| CalibFileError::Parse {
             path: path.to_path_buf(),
             source,
         })
@@ -289,45 +277,6 @@ pub fn exportable_name(name: &str) -> String {
 /// The farthest a sensor may sit from the vehicle frame (m): a larger translation is a unit
 /// slip (millimetres read as metres) or a corrupt value.
 pub const MAX_SENSOR_OFFSET_M: f64 = 1000.0;
-
-/// The deepest `[ … ]` / `{ … }` nesting a calibration file may have.
-const MAX_FLOW_NESTING: usize = 64;
-
-/// Refuse YAML whose flow collections nest deeper than [`MAX_FLOW_NESTING`] before it is
-/// parsed (the parser's time grows steeply with the depth).
-pub(crate) fn check_nesting(text: &str) -> Result<(), String> {
-    let depth = flow_nesting_depth(text);
-    if depth > MAX_FLOW_NESTING {
-        return Err(format!(
-            "brackets nested {depth} deep (at most {MAX_FLOW_NESTING})"
-        ));
-    }
-    Ok(())
-}
-
-/// How deep YAML flow collections (`[`, `{`) nest in `text`, outside quoted strings and
-/// comments.
-fn flow_nesting_depth(text: &str) -> usize {
-    let (mut depth, mut deepest) = (0usize, 0usize);
-    for line in text.lines() {
-        let mut quote: Option<char> = None;
-        for c in line.chars() {
-            match (quote, c) {
-                (Some(q), c) if c == q => quote = None,
-                (Some(_), _) => {}
-                (None, '"' | '\'') => quote = Some(c),
-                (None, '#') => break,
-                (None, '[' | '{') => {
-                    depth += 1;
-                    deepest = deepest.max(depth);
-                }
-                (None, ']' | '}') => depth = depth.saturating_sub(1),
-                _ => {}
-            }
-        }
-    }
-    deepest
-}
 
 #[cfg(test)]
 mod tests {
@@ -506,7 +455,6 @@ mod tests {
         );
         let text = text.replace("vehicle_frame:", "# [[[[ a comment\nvehicle_frame:");
         assert!(CalibrationFile::parse(&text, p).unwrap().to_rig(p).is_ok());
-        assert_eq!(flow_nesting_depth("a: '[[[' # {{{\nb: [1, [2, {c: 3}]]"), 3);
     }
 
     #[test]

@@ -8,6 +8,7 @@ pub mod dataset_json;
 pub mod file;
 pub mod rig;
 pub mod transform_text;
+pub mod yaml;
 
 pub use file::{CalibFileError, CalibrationFile};
 pub use rig::{Rig, Sensor, SensorKind};

@@ -28,7 +28,7 @@ pub fn parse_transform(text: &str) -> Result<Rigid, String> {
     }
     if text.contains("translation_m") {
         let value: serde_yaml::Value =
-            serde_yaml::from_str(text).map_err(|e| format!("not valid YAML: {e}"))?;
+            super::yaml::from_str(text).map_err(|e| format!("not valid YAML: {e}"))?;
         let inner = value.get("vehicle_from_sensor").cloned().unwrap_or(value);
         let e: ExtrinsicYaml = serde_yaml::from_value(inner)
             .map_err(|e| format!("needs translation_m and rotation_xyzw: {e}"))?;

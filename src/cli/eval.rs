@@ -89,6 +89,10 @@ pub struct EvalReport {
     pub calibration: PathBuf,
     pub root: String,
     pub poses: Vec<RigError>,
+    /// With a log: the same errors for the log's own extrinsics (the initial guess a
+    /// calibration starts from), so each axis can be compared with where it began.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub initial: Vec<RigError>,
     /// Reference sensors the calibration does not have.
     pub missing: Vec<String>,
     /// LiDAR–LiDAR point-to-plane error (cm).
@@ -155,6 +159,7 @@ pub fn evaluate(
         calibration: args.calibration.clone(),
         root,
         poses,
+        initial: Vec::new(),
         missing,
         registration_cm: Vec::new(),
         edge_px: Vec::new(),
@@ -197,6 +202,13 @@ pub fn evaluate(
                 }
             ));
         }
+        // The log's extrinsics against the reference, with the same root (when the log has it).
+        report.initial = rig_errors(
+            &reference.extrinsics(),
+            &drive.rig.extrinsics(),
+            &report.root,
+        )
+        .unwrap_or_default();
         measure_on_data(
             args,
             &drive,
@@ -409,6 +421,32 @@ fn metric(
 }
 
 impl EvalReport {
+    /// The errors per axis of each sensor's own frame, with the log's initial guess beside
+    /// them when a log was given.
+    fn axes_markdown(&self) -> String {
+        let mut out = String::from(
+            "\nPer axis: rotation (°) about the sensor's own x, y, z; translation (cm) along its own x, y, z and along the vehicle's:\n\n\
+             | sensor | of | rot x | rot y | rot z | x | y | z | vehicle x | vehicle y | vehicle z |\n\
+             |---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n",
+        );
+        let row = |e: &RigError, of: &str| {
+            let r = e.rotation_axes_deg;
+            let t = e.translation_axes_m.map(|v| v * 100.0);
+            let v = e.translation_vehicle_m.map(|v| v * 100.0);
+            format!(
+                "| {} | {of} | {:.3} | {:.3} | {:.3} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} |\n",
+                e.sensor, r[0], r[1], r[2], t[0], t[1], t[2], v[0], v[1], v[2]
+            )
+        };
+        for e in self.poses.iter().filter(|e| e.sensor != self.root) {
+            out += &row(e, "calibration");
+            if let Some(i) = self.initial.iter().find(|i| i.sensor == e.sensor) {
+                out += &row(i, "the log's initial guess");
+            }
+        }
+        out
+    }
+
     /// The report as Markdown tables.
     pub fn to_markdown(&self) -> String {
         let mut out = format!(
@@ -440,6 +478,7 @@ impl EvalReport {
                 t / n as f64 * 100.0
             );
         }
+        out += &self.axes_markdown();
         if !self.missing.is_empty() {
             out += &format!("\nNot in the calibration: {}\n", self.missing.join(", "));
         }

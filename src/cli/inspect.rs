@@ -188,12 +188,12 @@ pub fn report(drive: &Drive) -> String {
         }
     );
     if !drive.problems.is_empty() {
-        let _ = writeln!(o, "\nproblems ({}):", drive.problems.len());
+        let _ = writeln!(o, "\nproblems ({}):", drive.problems.total());
         for p in drive.problems.iter().take(50) {
             let _ = writeln!(o, "  - {p}");
         }
-        if drive.problems.len() > 50 {
-            let _ = writeln!(o, "  … and {} more", drive.problems.len() - 50);
+        if drive.problems.total() > 50 {
+            let _ = writeln!(o, "  … and {} more", drive.problems.total() - 50);
         }
     }
     o

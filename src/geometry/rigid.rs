@@ -141,12 +141,23 @@ pub struct RigError {
     pub sensor: String,
     pub rotation_deg: f64,
     pub translation_m: f64,
+    /// The error's rotation vector (°) in the reference sensor's own frame: how far the
+    /// estimate is turned about each of the sensor's axes.
+    #[serde(default)]
+    pub rotation_axes_deg: [f64; 3],
+    /// The error's translation (m) in the reference sensor's own frame.
+    #[serde(default)]
+    pub translation_axes_m: [f64; 3],
+    /// The error's translation (m) in the vehicle frame: t'_s − t_ref.
+    #[serde(default)]
+    pub translation_vehicle_m: [f64; 3],
 }
 
 /// Rotation (deg) and translation (m) error of every sensor of `estimate` against `reference`,
 /// after aligning the `root` sensor: G = T_ref,root · T_est,root⁻¹; T'_s = G · T_est,s;
-/// e_R = angle(R_refᵀ R'_s), e_t = ‖t_ref − t'_s‖ (method.md §13). Sensors missing from either
-/// side are skipped; returns `None` when the root is missing.
+/// e_R = angle(R_refᵀ R'_s), e_t = ‖t_ref − t'_s‖ (method.md §13), and per axis of the reference
+/// sensor's frame: log(R_refᵀ R'_s) and R_refᵀ (t'_s − t_ref). Sensors missing from either side
+/// are skipped; returns `None` when the root is missing.
 pub fn rig_errors(
     reference: &[(String, Rigid)],
     estimate: &[(String, Rigid)],
@@ -161,10 +172,18 @@ pub fn rig_errors(
             .filter_map(|(name, vehicle_from_sensor_ref)| {
                 let aligned = alignment * find(estimate, name)?;
                 let (rot, trans) = vehicle_from_sensor_ref.difference(aligned);
+                let reference_from_estimate = vehicle_from_sensor_ref.inverse() * aligned;
                 Some(RigError {
                     sensor: name.clone(),
                     rotation_deg: rot.to_degrees(),
                     translation_m: trans,
+                    rotation_axes_deg: (so3::log(reference_from_estimate.rotation) * 180.0
+                        / std::f64::consts::PI)
+                        .to_array(),
+                    translation_axes_m: reference_from_estimate.translation.to_array(),
+                    translation_vehicle_m: (aligned.translation
+                        - vehicle_from_sensor_ref.translation)
+                        .to_array(),
                 })
             })
             .collect(),
@@ -188,6 +207,38 @@ mod tests {
         let i = t * t.inverse();
         assert!(i.translation.length() < 1e-12);
         assert!(so3::angle_rad(i.rotation) < 1e-12);
+    }
+
+    #[test]
+    fn rig_errors_name_the_axis_in_the_sensor_frame() {
+        let root = Rigid::IDENTITY;
+        let truth = sample();
+        // 1° about the sensor's own x axis and 2 cm along its own y axis.
+        let off = truth
+            * Rigid::new(
+                so3::exp(DVec3::new(1f64.to_radians(), 0.0, 0.0)),
+                DVec3::new(0.0, 0.02, 0.0),
+            );
+        let reference = vec![("root".to_string(), root), ("s".to_string(), truth)];
+        let estimate = vec![("root".to_string(), root), ("s".to_string(), off)];
+        let errors = rig_errors(&reference, &estimate, "root").unwrap();
+        let e = &errors[1];
+        assert!((e.rotation_deg - 1.0).abs() < 1e-9);
+        assert!((e.translation_m - 0.02).abs() < 1e-9);
+        let expect = [1.0, 0.0, 0.0, 0.0, 0.02, 0.0];
+        let got = [
+            e.rotation_axes_deg[0],
+            e.rotation_axes_deg[1],
+            e.rotation_axes_deg[2],
+            e.translation_axes_m[0],
+            e.translation_axes_m[1],
+            e.translation_axes_m[2],
+        ];
+        for (g, x) in got.iter().zip(expect) {
+            assert!((g - x).abs() < 1e-9, "{got:?}");
+        }
+        let in_vehicle = truth.rotation * DVec3::new(0.0, 0.02, 0.0);
+        assert!((DVec3::from_array(e.translation_vehicle_m) - in_vehicle).length() < 1e-12);
     }
 
     #[test]

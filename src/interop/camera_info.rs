@@ -100,7 +100,7 @@ struct CameraInfoYaml {
 /// A parsed file: the camera it names (if any) and its intrinsics.
 pub fn parse(text: &str, path: &Path) -> Result<(Option<String>, CameraIntrinsics), String> {
     let file = path.display();
-    let y: CameraInfoYaml = serde_yaml::from_str(text)
+    let y: CameraInfoYaml = crate::calib::yaml::from_str(text)
         .map_err(|e| format!("{file}: not a ROS camera_info YAML: {e}"))?;
     let k = &y.camera_matrix.data;
     if k.len() != 9 || k.iter().any(|v| !v.is_finite()) {

@@ -67,7 +67,7 @@ pub fn load_initial_guess(path: &Path, base: &Rig) -> Result<Imported, ImportErr
         (r, m, "URDF")
     } else {
         let text = read(path)?;
-        let value: serde_yaml::Value = serde_yaml::from_str(&text).map_err(|e| {
+        let value: serde_yaml::Value = crate::calib::yaml::from_str(&text).map_err(|e| {
             ImportError::Invalid(format!(
                 "{}: neither MCAP, URDF nor YAML ({e})",
                 path.display()

@@ -20,7 +20,7 @@ use std::sync::{Arc, Mutex};
 use mcap::records::{Record, op};
 use rayon::prelude::*;
 
-use super::error::{LogError, Problem};
+use super::error::{LogError, Problem, Problems};
 
 const MAGIC: &[u8; 8] = b"\x89MCAP0\r\n";
 /// Refuse single records larger than this (a corrupt length would otherwise allocate wildly).
@@ -91,7 +91,7 @@ pub struct McapContainer {
     pub used_summary: bool,
     pub library: Option<String>,
     pub profile: Option<String>,
-    pub problems: Vec<Problem>,
+    pub problems: Problems,
     cache: Mutex<ChunkCache>,
 }
 
@@ -163,7 +163,7 @@ impl McapContainer {
             used_summary: false,
             library: None,
             profile: None,
-            problems: Vec::new(),
+            problems: Problems::new(),
             cache: Mutex::new(ChunkCache::new(256 << 20)),
         };
         c.read_header();
@@ -530,16 +530,16 @@ impl McapContainer {
 
     /// Visit every message once, chunks in parallel; `visit` returns what to keep. Results come
     /// back in file order. Damaged chunks become problems.
-    pub fn scan<T, F>(&self, visit: F) -> (Vec<(MessageRef, T)>, Vec<Problem>)
+    pub fn scan<T, F>(&self, visit: F) -> (Vec<(MessageRef, T)>, Problems)
     where
         T: Send,
         F: Fn(&MessageRef, &ChannelInfo, &[u8]) -> Option<T> + Sync,
     {
-        let per_chunk: Vec<(Vec<(MessageRef, T)>, Vec<Problem>)> = (0..self.chunks.len() as u32)
+        let per_chunk: Vec<(Vec<(MessageRef, T)>, Problems)> = (0..self.chunks.len() as u32)
             .into_par_iter()
             .map(|index| {
                 let mut kept = Vec::new();
-                let mut problems = Vec::new();
+                let mut problems = Problems::new();
                 let data = match self.load_chunk(index) {
                     Ok(d) => d,
                     Err(what) => {
@@ -582,10 +582,10 @@ impl McapContainer {
             })
             .collect();
         let mut kept = Vec::new();
-        let mut problems = Vec::new();
+        let mut problems = Problems::new();
         for (k, p) in per_chunk {
             kept.extend(k);
-            problems.extend(p);
+            problems.append(p);
         }
         for &(channel_id, log_time, publish_time, location) in &self.loose {
             let r = MessageRef {

@@ -14,7 +14,7 @@ use image::RgbImage;
 
 use super::container::{McapContainer, MessageRef};
 use super::decode::Codec;
-use super::error::{LogError, Problem};
+use super::error::{LogError, Problem, Problems};
 use super::pointcloud::{self, LidarSweep};
 use super::tf::{TfTree, normalize_frame};
 use super::types::{CameraInfoMsg, Decoded, PoseMsg, TransformMsg};
@@ -163,7 +163,7 @@ pub struct Drive {
     /// images of that frame are in it.
     pub camera_infos: BTreeMap<String, CameraIntrinsics>,
     pub streams: Vec<SensorStream>,
-    pub problems: Vec<Problem>,
+    pub problems: Problems,
     image_cache: Mutex<VecDeque<((usize, usize), Arc<RgbImage>)>>,
     image_cache_len: usize,
     /// The frames runs skipped because they did not decode ([`super::frames`]).
@@ -217,7 +217,7 @@ impl Drive {
             })
         });
         let mut problems = container.problems.clone();
-        problems.extend(scan_problems);
+        problems.append(scan_problems);
 
         // Topic statistics.
         let mut topics: BTreeMap<u16, TopicStats> = container

@@ -60,6 +60,64 @@ impl Problem {
     }
 }
 
+/// The most problems a log keeps; past it they are counted, not kept (a log of a million
+/// damaged messages must not hold a million messages about them).
+pub const MAX_PROBLEMS: usize = 10_000;
+
+/// A log's problems, capped at [`MAX_PROBLEMS`] with a count of those dropped; reads as a
+/// slice of the kept ones.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Problems {
+    kept: Vec<Problem>,
+    dropped: usize,
+}
+
+impl Problems {
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    pub fn push(&mut self, problem: Problem) {
+        if self.kept.len() < MAX_PROBLEMS {
+            self.kept.push(problem);
+        } else {
+            self.dropped += 1;
+        }
+    }
+
+    pub fn append(&mut self, other: Problems) {
+        self.dropped += other.dropped;
+        for p in other.kept {
+            self.push(p);
+        }
+    }
+
+    /// How many problems were counted past the cap and not kept.
+    pub fn dropped(&self) -> usize {
+        self.dropped
+    }
+
+    /// Every problem found: those kept and those dropped.
+    pub fn total(&self) -> usize {
+        self.kept.len() + self.dropped
+    }
+}
+
+impl std::ops::Deref for Problems {
+    type Target = [Problem];
+    fn deref(&self) -> &[Problem] {
+        &self.kept
+    }
+}
+
+impl Extend<Problem> for Problems {
+    fn extend<I: IntoIterator<Item = Problem>>(&mut self, iter: I) {
+        for p in iter {
+            self.push(p);
+        }
+    }
+}
+
 impl fmt::Display for Problem {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match (&self.topic, self.log_time_nanos) {
@@ -86,3 +144,23 @@ impl DecodeError {
 }
 
 pub type DecodeResult<T> = Result<T, DecodeError>;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn problems_past_the_cap_are_counted_not_kept() {
+        let mut a = Problems::new();
+        a.extend((0..MAX_PROBLEMS + 5).map(|i| Problem::file(format!("p{i}"))));
+        assert_eq!(
+            (a.len(), a.dropped(), a.total()),
+            (MAX_PROBLEMS, 5, MAX_PROBLEMS + 5)
+        );
+        let mut b = Problems::new();
+        b.push(Problem::file("first"));
+        b.append(a);
+        assert_eq!((b.len(), b.dropped()), (MAX_PROBLEMS, 6));
+        assert_eq!(b[0].what, "first");
+    }
+}

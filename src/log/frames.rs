@@ -90,11 +90,19 @@ impl Drive {
             *per_sensor.entry(sensor).or_default() += 1;
         }
         let counts: Vec<String> = per_sensor.iter().map(|(s, n)| format!("{s} {n}")).collect();
-        Some(format!(
-            "skipped {} frame(s) of {} that did not decode ({}); the first: {first}",
-            skipped.len(),
-            self.path().display(),
-            counts.join(", "),
-        ))
+        Some(
+            format!(
+                "skipped {} frame(s) of {} that did not decode ({}); the first: {first}",
+                skipped.len(),
+                self.path().display(),
+                counts.join(", "),
+            ) + &match self.problems.dropped() {
+                0 => String::new(),
+                n => format!(
+                    " ({n} more problems of the log were counted but not kept, past the first {})",
+                    super::MAX_PROBLEMS
+                ),
+            },
+        )
     }
 }

@@ -25,5 +25,5 @@ pub mod types;
 pub use drive::{
     Drive, DriveOptions, SensorStream, StampSource, TopicStats, in_segments, spread_evenly,
 };
-pub use error::{LogError, Problem};
+pub use error::{LogError, MAX_PROBLEMS, Problem, Problems};
 pub use pointcloud::LidarSweep;

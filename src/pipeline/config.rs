@@ -202,15 +202,11 @@ impl PipelineConfig {
     /// of a calibration file rigcal wrote (so an output repeats its run). `path` names the
     /// source in errors.
     pub fn from_yaml(text: &str, path: &str) -> Result<Self, ConfigError> {
-        let parse_error = |e: serde_yaml::Error| ConfigError::Parse {
-            path: path.to_string(),
-            message: one_line(&e.to_string()),
-        };
-        crate::calib::file::check_nesting(text).map_err(|message| ConfigError::Parse {
-            path: path.to_string(),
-            message,
-        })?;
-        let value: serde_yaml::Value = serde_yaml::from_str(text).map_err(parse_error)?;
+        let value: serde_yaml::Value =
+            crate::calib::yaml::from_str(text).map_err(|e| ConfigError::Parse {
+                path: path.to_string(),
+                message: one_line(&e.to_string()),
+            })?;
         // A calibration file: its provenance holds the configuration of the run.
         let value = match value.get("rigcal_calibration") {
             Some(_) => match value.get("provenance").and_then(|p| p.get("config")) {

@@ -13,8 +13,9 @@
 //!   it by point-to-plane ICP; then UniCal holds them;
 //! - cameras: where the drive turns enough, each camera is fitted to its own motion (hand-eye)
 //!   and the fit kept where the camera's edges align with the reference LiDAR's at least as well
-//!   as at the start; then UniCal with every camera, on the quality's images at its scale, for
-//!   as many steps as the budget allows.
+//!   as at the start; where it does not, each camera's translation along the travel stays at
+//!   the initial guess (a straight drive does not pin it); then UniCal with every camera, on the
+//!   quality's images at its scale, for as many steps as the budget allows.
 //!
 //! The same [`Plan`] runs from the CLI, the studio and `bench` ([`super::run`]).
 
@@ -23,6 +24,7 @@ use crate::classical::trajectory_icp::{MIN_STRAIGHT_DISTANCE_M, MIN_TURN_DEG};
 use crate::geometry::so3;
 use crate::log::Drive;
 use crate::unical::depth_calib::DepthCalibConfig;
+use glam::DVec3;
 
 use super::config::{HandEye, PipelineConfig};
 
@@ -112,6 +114,9 @@ pub struct Motion {
     pub distance_m: f64,
     /// The largest heading change from the first pose (degrees).
     pub turn_deg: f64,
+    /// The mean direction of travel in the vehicle frame (unit; zero when it does not move):
+    /// the vehicle's x for a car driving forward.
+    pub travel_vehicle: DVec3,
 }
 
 impl Motion {
@@ -121,6 +126,7 @@ impl Motion {
             return Motion {
                 distance_m: 0.0,
                 turn_deg: 0.0,
+                travel_vehicle: DVec3::ZERO,
             };
         };
         let ranges = if segments_nanos.is_empty() {
@@ -129,6 +135,7 @@ impl Motion {
             segments_nanos.to_vec()
         };
         let (mut distance_m, mut turn_deg) = (0.0, 0.0f64);
+        let mut travel = DVec3::ZERO;
         let mut first = None;
         for (a, b) in ranges {
             let stamps =
@@ -138,7 +145,9 @@ impl Motion {
                 .filter_map(|&t| drive.trajectory.world_from_vehicle(t).ok())
                 .collect();
             for w in poses.windows(2) {
-                distance_m += (w[1].translation - w[0].translation).length();
+                let step = w[1].translation - w[0].translation;
+                distance_m += step.length();
+                travel += w[0].rotation.inverse() * step;
             }
             for p in &poses {
                 let f = *first.get_or_insert(p.rotation);
@@ -156,6 +165,7 @@ impl Motion {
         Motion {
             distance_m,
             turn_deg,
+            travel_vehicle: travel.normalize_or_zero(),
         }
     }
 }
@@ -291,6 +301,7 @@ impl Plan {
         }
         // Cameras.
         let mut hand_eye = Vec::new();
+        let mut hold_along = None;
         if cameras.is_empty() {
             decisions.push("cameras: none with intrinsics and images to calibrate".into());
         } else if stationary {
@@ -321,6 +332,14 @@ impl Plan {
                         motion.turn_deg
                     ));
                 }
+            }
+            if motion.turn_deg < MIN_TURN_DEG && motion.travel_vehicle != DVec3::ZERO {
+                let d = motion.travel_vehicle;
+                decisions.push(format!(
+                    "cameras: the drive turns {:.0}° (under {MIN_TURN_DEG:.0}°): a drive this straight does not pin a camera's position along it (the paper's trajectory study, Table A8), so each camera's translation along the travel (vehicle ({:.2}, {:.2}, {:.2})) stays where the initial guess puts it",
+                    motion.turn_deg, d.x, d.y, d.z
+                ));
+                hold_along = Some(d.to_array());
             }
             if !hand_eye.is_empty() {
                 stages.push(Stage::CameraHandEye {
@@ -399,6 +418,7 @@ impl Plan {
             seed: config.seed,
             frozen_sensor: request.root.clone(),
             held_sensors: held,
+            camera_hold_translation_along: hold_along,
             ..config.unical.clone()
         };
         Ok(Plan {

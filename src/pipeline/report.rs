@@ -166,13 +166,17 @@ impl Report {
                     "not among --sensors: held where the initial guess puts it".into()
                 };
             } else if s.kind == SensorKind::Camera {
+                let hold = plan
+                    .unical
+                    .camera_hold_translation_along
+                    .map(DVec3::from_array);
                 end = camera_report(
                     drive,
                     result,
                     &s.name,
                     &reference,
-                    start,
-                    end,
+                    (start, end),
+                    hold,
                     segments,
                     &mut report,
                 );
@@ -314,17 +318,40 @@ fn axis_names(keep: &[usize]) -> String {
     keep.iter().map(|&k| AXES[k]).collect::<Vec<_>>().join(", ")
 }
 
+/// The sensor-frame translation axes a vehicle-frame direction `d` lies along (each at least
+/// half of it).
+fn axes_along(vehicle_from_sensor: Rigid, d: DVec3) -> Vec<usize> {
+    let in_sensor = vehicle_from_sensor.rotation.inverse() * d.normalize_or_zero();
+    (0..3)
+        .filter(|&k| in_sensor[k].abs() >= 0.5)
+        .map(|k| k + 3)
+        .collect()
+}
+
+/// `end` with its translation along the vehicle-frame direction `d` put back at `start`'s.
+fn keep_along(start: Rigid, end: Rigid, d: DVec3) -> Rigid {
+    let d = d.normalize_or_zero();
+    let step = end.translation - start.translation;
+    Rigid::new(end.rotation, end.translation - d * step.dot(d))
+}
+
 #[allow(clippy::too_many_arguments)]
 fn camera_report(
     drive: &Drive,
     result: &Rig,
     camera: &str,
     reference: &str,
-    start: Rigid,
-    end: Rigid,
+    (start, end): (Rigid, Rigid),
+    hold_along: Option<DVec3>,
     segments: &[(i64, i64)],
     report: &mut SensorReport,
 ) -> Rigid {
+    // A straight drive: the plan held the camera's position along the travel (UniCal stepped
+    // square to it); whatever else moved it there, it stays at the initial guess.
+    let end = match hold_along {
+        Some(d) => keep_along(start, end, d),
+        None => end,
+    };
     let check = match EdgeCheck::new(drive, result, camera, reference, CHECK_FRAMES, segments) {
         Ok(c) => c,
         Err(e) => {
@@ -336,7 +363,12 @@ fn camera_report(
     // The edge check's σ rates the result; it does not move it: on a figure-8 with eight
     // frames it called directions of side cameras unobserved that UniCal had right, and
     // putting them back at the initial guess cost degrees (BENCHMARKS.md, "The pipeline").
-    let unobserved = fill_axes(report, check.sigmas(end).0);
+    let mut unobserved = fill_axes(report, check.sigmas(end).0);
+    let along = hold_along.map_or(Vec::new(), |d| axes_along(end, d));
+    for &k in &along {
+        report.axes[k].observed = Observed::NotObserved;
+    }
+    unobserved.retain(|k| !along.contains(k));
     let (before, after) = (check.score(start), check.score(end));
     report.checks.push(Check {
         what: format!(
@@ -358,7 +390,33 @@ fn camera_report(
     let weak: Vec<usize> = (0..6)
         .filter(|&k| report.axes[k].observed == Observed::Weak)
         .collect();
-    (report.verdict, report.why) = if !unobserved.is_empty() {
+    let straight = if along.is_empty() {
+        String::new()
+    } else {
+        format!(
+            "the drive is too straight to pin its position along the travel ({}): kept at the initial guess; ",
+            axis_names(&along)
+        )
+    };
+    (report.verdict, report.why) = if !straight.is_empty() {
+        let rest: Vec<usize> = unobserved
+            .iter()
+            .chain(weak.iter())
+            .copied()
+            .filter(|k| !along.contains(k))
+            .collect();
+        (
+            Verdict::CheckIt,
+            format!(
+                "{straight}{}edges {before:.2} → {after:.2} px",
+                if rest.is_empty() {
+                    String::new()
+                } else {
+                    format!("its edges also leave {} loose; ", axis_names(&rest))
+                }
+            ),
+        )
+    } else if !unobserved.is_empty() {
         (
             Verdict::CheckIt,
             format!(

@@ -219,6 +219,12 @@ pub struct DepthCalibConfig {
     /// camera away from what it sees (docs/experiments/colour-field-and-hash-grid.md, "Blurred colour targets", "Where the real
     /// drive's right camera comes to rest"). Off: every direction moves (the paper).
     pub camera_hold_axial: bool,
+    /// Hold each camera's translation along this vehicle-frame unit direction at the initial
+    /// guess (a step keeps only its part square to it): the plan sets it to the direction of
+    /// travel where the drive is too straight to pin a camera's position along it (Table A8).
+    /// Decided from the drive, not a setting; `None`: every direction moves.
+    #[serde(skip)]
+    pub camera_hold_translation_along: Option<[f64; 3]>,
     /// How many of the hash grids' coarsest levels the colour term's camera-pose gradient
     /// flows through (`None`: every open level, the paper). The scene still learns its detail
     /// from every open level; only ∂L/∂x, which moves the cameras, is limited: the finest
@@ -327,6 +333,7 @@ impl Default for DepthCalibConfig {
             camera_rays_below_lidar_top: false,
             camera_hold_unobserved: None,
             camera_hold_axial: false,
+            camera_hold_translation_along: None,
             // Off: with 12 of 16 levels the real PandaSet drive's left pair no longer turned off
             // on seed 1, but the simulator's drive 7 lost its back camera (0.24° / 9.6 cm), and
             // the limited gradient is not that of any loss (docs/experiments/colour-field-and-hash-grid.md, "Camera poses moved
@@ -865,6 +872,14 @@ fn hold_axial(pose: &mut PoseParams, before: &PoseParams) {
     pose.translation_m -= axis * step.dot(axis);
 }
 
+/// Undo the part of the translation step from `before` to `pose` along the vehicle-frame
+/// direction `along` ([`DepthCalibConfig::camera_hold_translation_along`]).
+fn hold_along(pose: &mut PoseParams, before: &PoseParams, along: glam::DVec3) {
+    let d = along.normalize_or_zero();
+    let step = pose.translation_m - before.translation_m;
+    pose.translation_m -= d * step.dot(d);
+}
+
 /// Keep `pose`'s rotation within `bound_rad` of `start`: a rotation further off is turned back
 /// along the geodesic to the bound (its translation is left as it is).
 fn bound_rotation(pose: &mut PoseParams, start: glam::DQuat, bound_rad: f64) {
@@ -906,6 +921,9 @@ impl CameraStage {
             if config.camera_hold_axial {
                 hold_axial(&mut self.poses[k], &before);
             }
+            if let Some(d) = config.camera_hold_translation_along {
+                hold_along(&mut self.poses[k], &before, glam::DVec3::from_array(d));
+            }
             if let (Some(ratio), Some(info)) =
                 (config.camera_hold_unobserved, self.information.get(k))
             {
@@ -927,7 +945,11 @@ impl CameraStage {
         if !config.shared_camera_translation || free.len() < 2 || lr == 0.0 {
             return;
         }
-        let shift = shared_translation_step(&mut self.shared_translation_opt, grads, &free, lr);
+        let mut shift = shared_translation_step(&mut self.shared_translation_opt, grads, &free, lr);
+        if let Some(d) = config.camera_hold_translation_along {
+            let d = glam::DVec3::from_array(d).normalize_or_zero();
+            shift -= d * shift.dot(d);
+        }
         for &k in &free {
             self.poses[k].translation_m += shift * translation_scale;
         }
@@ -2458,6 +2480,24 @@ mod tests {
         let mut p = PoseParams::from_rigid(moved);
         hold_unobserved(&mut p, &before, &PoseInformation::default(), 0.05);
         assert!((p.to_rigid().translation - moved.translation).length() < 1e-12);
+    }
+
+    #[test]
+    fn the_travel_hold_keeps_only_the_step_square_to_the_travel() {
+        // A camera looking left, the vehicle driving along (0.6, 0.8, 0): a step of 5 cm
+        // along the travel and 2 cm up keeps only the 2 cm up, whatever way the camera looks.
+        let looking_left =
+            glam::DMat3::from_cols(glam::DVec3::X, glam::DVec3::NEG_Z, glam::DVec3::Y);
+        let before = PoseParams {
+            r6: crate::geometry::rot6d::from_matrix(looking_left),
+            translation_m: glam::DVec3::new(0.5, 0.8, 1.5),
+        };
+        let travel = glam::DVec3::new(0.6, 0.8, 0.0);
+        let mut p = before;
+        p.translation_m += travel * 0.05 + glam::DVec3::new(0.0, 0.0, 0.02);
+        hold_along(&mut p, &before, travel);
+        assert!((p.translation_m - glam::DVec3::new(0.5, 0.8, 1.52)).length() < 1e-12);
+        assert_eq!(p.r6, before.r6);
     }
 
     #[test]
