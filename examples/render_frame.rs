@@ -106,7 +106,7 @@ fn main() -> anyhow::Result<()> {
         started.elapsed().as_secs_f64()
     );
     let corners = rigcal::eval::fast::fast9(
-        &rigcal::eval::fast::luma(&img),
+        &rigcal::features::grey::grey_u8(&img),
         img.width() as usize,
         img.height() as usize,
         20,

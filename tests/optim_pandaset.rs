@@ -26,8 +26,15 @@ fn refines_a_rotated_camera_on_the_real_drive() {
         let gt = truth.sensor(camera).unwrap().vehicle_from_sensor;
         rig.sensor_mut(camera).unwrap().vehicle_from_sensor =
             gt.perturbed_right(omega_deg * 1f64.to_radians(), DVec3::ZERO);
-        let mut refiner =
-            EdgeRefiner::new(&drive, &rig, "pandar64", &[camera.to_string()], 4, &[]).unwrap();
+        let mut refiner = EdgeRefiner::new(
+            &drive,
+            &rig,
+            ("pandar64", &[camera.to_string()]),
+            4,
+            &[],
+            drive.camera_readout,
+        )
+        .unwrap();
         let mut losses = Vec::new();
         for _ in 0..refiner.max_steps() {
             let r = refiner.step();
@@ -55,15 +62,30 @@ fn the_pair_score_is_worse_for_a_rotated_camera_in_both_directions() {
     let drive = Drive::open(&pandaset()).unwrap();
     let truth = drive.rig.clone();
     let camera = "front_camera";
-    let (good, distances) =
-        EdgeAlignment::score_rig(&drive, &truth, camera, "pandar64", 3, &[]).unwrap();
+    let (good, distances) = EdgeAlignment::score_rig(
+        &drive,
+        &truth,
+        (camera, "pandar64"),
+        3,
+        &[],
+        drive.camera_readout,
+    )
+    .unwrap();
     assert!(!distances.is_empty() && distances.iter().all(|d| (0.0..=20.0).contains(d)));
     for sign in [-1.0, 1.0] {
         let mut rig = truth.clone();
         let gt = truth.sensor(camera).unwrap().vehicle_from_sensor;
         rig.sensor_mut(camera).unwrap().vehicle_from_sensor =
             gt.perturbed_right(DVec3::new(0.0, sign * 1f64.to_radians(), 0.0), DVec3::ZERO);
-        let (bad, _) = EdgeAlignment::score_rig(&drive, &rig, camera, "pandar64", 3, &[]).unwrap();
+        let (bad, _) = EdgeAlignment::score_rig(
+            &drive,
+            &rig,
+            (camera, "pandar64"),
+            3,
+            &[],
+            drive.camera_readout,
+        )
+        .unwrap();
         eprintln!("{camera}: {good:.2} px at the reference, {bad:.2} px at {sign}° yaw");
         assert!(bad > good + 0.3, "{bad} vs {good}");
     }
@@ -76,8 +98,15 @@ fn selected_segments_limit_the_frames_used() {
     let (t0, t1) = drive.trajectory.time_range_nanos().unwrap();
     let third = (t1 - t0) / 3;
     let segments = [(t0, t0 + third), (t1 - third / 2, t1)];
-    let p = EdgeAlignment::from_drive(&drive, &drive.rig, "front_camera", "pandar64", 6, &segments)
-        .unwrap();
+    let p = EdgeAlignment::from_drive(
+        &drive,
+        &drive.rig,
+        ("front_camera", "pandar64"),
+        6,
+        &segments,
+        drive.camera_readout,
+    )
+    .unwrap();
     assert!(p.frames.len() >= 2);
     for f in &p.frames {
         assert!(
@@ -99,10 +128,10 @@ fn selected_segments_limit_the_frames_used() {
     let e = EdgeAlignment::from_drive(
         &drive,
         &drive.rig,
-        "front_camera",
-        "pandar64",
+        ("front_camera", "pandar64"),
         3,
         &[(t1 + 1_000_000_000, t1 + 2_000_000_000)],
+        drive.camera_readout,
     )
     .unwrap_err()
     .to_string();

@@ -143,7 +143,7 @@ fn urban_images_have_enough_corners() {
                 seed: 1,
             },
         );
-        let corners = fast::fast9(&fast::luma(&img), 1920, 1080, 20);
+        let corners = fast::fast9(&rigcal::features::grey::grey_u8(&img), 1920, 1080, 20);
         eprintln!("{name}: {} FAST corners", corners.len());
         assert!(
             corners.len() >= 1000,

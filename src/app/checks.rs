@@ -98,7 +98,7 @@ pub fn start(studio: &mut Studio) {
             let _ = tx.send(Msg::Progress(k, total));
             let score = |rig| {
                 let pair = (cam.as_str(), lidar.as_str());
-                EdgeAlignment::score_rig_with_readout(&drive, rig, pair, 3, &segments, readout)
+                EdgeAlignment::score_rig(&drive, rig, pair, 3, &segments, readout)
             };
             let (before, after) = (score(&initial), score(&current));
             let msg = match (before, after) {

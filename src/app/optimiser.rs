@@ -538,7 +538,7 @@ pub fn start(studio: &mut Studio) {
     }
     let readout = studio.readout();
     studio.optimiser.run = Some(Run::spawn_with(move || {
-        EdgeRefiner::new_with_readout(
+        EdgeRefiner::new(
             &drive,
             &prepare_rig,
             (&lidar, &cameras),

@@ -252,9 +252,16 @@ fn run_into(
                 .filter(|c| c.camera.is_some())
                 .map(|c| c.name.clone())
                 .collect();
-            let mut refiner = EdgeRefiner::new(&drive, &initial, &out.root, &cameras, *frames, &[])
-                .map_err(|e| e.to_string())?
-                .with_max_steps(*max_steps);
+            let mut refiner = EdgeRefiner::new(
+                &drive,
+                &initial,
+                (&out.root, &cameras),
+                *frames,
+                &[],
+                drive.camera_readout,
+            )
+            .map_err(|e| e.to_string())?
+            .with_max_steps(*max_steps);
             out.prepare_secs = started.elapsed().as_secs_f64();
             optimise(&mut refiner, &reference, &initial, &cameras, progress, out)?;
         }

@@ -75,13 +75,7 @@ pub struct MiProblem {
     pub bins: usize,
 }
 
-/// Grey (Rec. 601 luma) of an RGB image in [0, 1].
-pub(crate) fn grey(image: &image::RgbImage) -> Vec<f32> {
-    image
-        .pixels()
-        .map(|p| (0.299 * p[0] as f32 + 0.587 * p[1] as f32 + 0.114 * p[2] as f32) / 255.0)
-        .collect()
-}
+use crate::features::grey::grey_unit as grey;
 
 /// Separable Gaussian blur (clamped borders), rows in parallel.
 pub fn gaussian_blur(values: &[f32], width: usize, height: usize, sigma: f64) -> Vec<f32> {

@@ -329,8 +329,15 @@ pub fn calibrate(
             let lidar = reference_lidar(args, &rig)?;
             let cameras = selected_cameras(args, &rig);
             Box::new(
-                EdgeRefiner::new(&drive, &rig, &lidar, &cameras, 4, &segments)
-                    .map_err(|e| e.to_string())?,
+                EdgeRefiner::new(
+                    &drive,
+                    &rig,
+                    (&lidar, &cameras),
+                    4,
+                    &segments,
+                    drive.camera_readout,
+                )
+                .map_err(|e| e.to_string())?,
             )
         }
         "icp" => {

@@ -280,7 +280,7 @@ fn measure_on_data(
     }
     for (cam, lidar) in &camera_pairs {
         let run = |rig: &Rig| {
-            EdgeAlignment::score_rig(drive, rig, cam, lidar, frames, &[])
+            EdgeAlignment::score_rig(drive, rig, (cam, lidar), frames, &[], drive.camera_readout)
                 .map(|(px, _)| Some(px))
                 .map_err(|e| e.to_string())
         };

@@ -14,10 +14,7 @@ use image::RgbImage;
 /// Edge map (true = edge) of an RGB image.
 pub fn image_edges(img: &RgbImage) -> Vec<bool> {
     let (w, h) = (img.width() as usize, img.height() as usize);
-    let gray: Vec<f32> = img
-        .pixels()
-        .map(|p| 0.299 * p[0] as f32 + 0.587 * p[1] as f32 + 0.114 * p[2] as f32)
-        .collect();
+    let gray = crate::features::grey::grey_levels(img);
     let mut mag = vec![0.0f32; w * h];
     let mut dir_horizontal = vec![false; w * h];
     for y in 1..h.saturating_sub(1) {

@@ -2,8 +2,6 @@
 //! pixels of the 16 on a radius-3 circle are all brighter than it by `threshold`, or all darker.
 //! Corners are kept when they are the strongest in their 3×3 neighbourhood.
 
-use image::RgbImage;
-
 const CIRCLE: [(i32, i32); 16] = [
     (0, -3),
     (1, -3),
@@ -22,13 +20,6 @@ const CIRCLE: [(i32, i32); 16] = [
     (-2, -2),
     (-1, -3),
 ];
-
-/// Grayscale (Rec. 601 luma) of an RGB image.
-pub fn luma(img: &RgbImage) -> Vec<u8> {
-    img.pixels()
-        .map(|p| ((299 * p[0] as u32 + 587 * p[1] as u32 + 114 * p[2] as u32) / 1000) as u8)
-        .collect()
-}
 
 /// Corner pixels (x, y) with their score.
 pub fn fast9(gray: &[u8], w: usize, h: usize, threshold: u8) -> Vec<(u32, u32, u32)> {

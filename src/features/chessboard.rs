@@ -21,14 +21,8 @@
 use std::collections::{HashMap, VecDeque};
 
 use glam::DVec2;
-use image::RgbImage;
 
-/// Grey levels of an RGB image as f32.
-pub fn grey_levels(img: &RgbImage) -> Vec<f32> {
-    img.pixels()
-        .map(|p| 0.299 * p[0] as f32 + 0.587 * p[1] as f32 + 0.114 * p[2] as f32)
-        .collect()
-}
+pub use super::grey::grey_levels;
 
 /// Checkerboard X-junctions inside `roi` = (x0, y0, x1, y1) of a `w × h` grey image, with
 /// sub-pixel positions.
@@ -422,6 +416,7 @@ pub fn refine_corner(grey: &[f32], w: usize, h: usize, start: DVec2, radius: f64
 #[cfg(test)]
 mod tests {
     use super::*;
+    use image::RgbImage;
 
     /// A `w × h` image of boards: each is (homography from board squares to pixels, squares u,
     /// squares v), rendered with 4 × 4 supersampling on a mid-grey background, pixel centres at

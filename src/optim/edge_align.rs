@@ -271,30 +271,10 @@ impl EdgeFrame {
 
 impl EdgeAlignment {
     /// Prepare `frames` evenly spaced frames of `camera` against `lidar` from a drive, using the
-    /// extrinsics of `rig` for the LiDAR. `segments_nanos` limits the frames to time ranges (empty: all).
-    /// The cameras' readout is the drive's ([`Drive::camera_readout`]).
+    /// extrinsics of `rig` for the LiDAR, with the cameras read out as `readout` (usually the
+    /// drive's, [`Drive::camera_readout`]; the studio keeps its own). `segments_nanos` limits
+    /// the frames to time ranges (empty: all).
     pub fn from_drive(
-        drive: &Drive,
-        rig: &Rig,
-        camera: &str,
-        lidar: &str,
-        frames: usize,
-        segments_nanos: &[(i64, i64)],
-    ) -> Result<Self, AlignError> {
-        let pair = (camera, lidar);
-        Self::from_drive_with_readout(
-            drive,
-            rig,
-            pair,
-            frames,
-            segments_nanos,
-            drive.camera_readout,
-        )
-    }
-
-    /// [`Self::from_drive`] for `(camera, lidar)` with the cameras read out as `readout` (the
-    /// studio keeps its readout apart from its drive).
-    pub fn from_drive_with_readout(
         drive: &Drive,
         rig: &Rig,
         (camera, lidar): (&str, &str),
@@ -354,28 +334,10 @@ impl EdgeAlignment {
         Ok(problem)
     }
 
-    /// The alignment score of one camera–LiDAR pair under `rig`: mean truncated edge distance
-    /// (px) and every point's distance, on `frames` frames within `segments_nanos`.
+    /// The alignment score of one camera–LiDAR pair under `rig` with the cameras read out as
+    /// `readout`: mean truncated edge distance (px) and every point's distance, on `frames`
+    /// frames within `segments_nanos`.
     pub fn score_rig(
-        drive: &Drive,
-        rig: &Rig,
-        camera: &str,
-        lidar: &str,
-        frames: usize,
-        segments_nanos: &[(i64, i64)],
-    ) -> Result<(f64, Vec<f32>), AlignError> {
-        Self::score_rig_with_readout(
-            drive,
-            rig,
-            (camera, lidar),
-            frames,
-            segments_nanos,
-            drive.camera_readout,
-        )
-    }
-
-    /// [`Self::score_rig`] for `(camera, lidar)` with the cameras read out as `readout`.
-    pub fn score_rig_with_readout(
         drive: &Drive,
         rig: &Rig,
         (camera, lidar): (&str, &str),
@@ -383,14 +345,8 @@ impl EdgeAlignment {
         segments_nanos: &[(i64, i64)],
         readout: RowTimes,
     ) -> Result<(f64, Vec<f32>), AlignError> {
-        let problem = Self::from_drive_with_readout(
-            drive,
-            rig,
-            (camera, lidar),
-            frames,
-            segments_nanos,
-            readout,
-        )?;
+        let problem =
+            Self::from_drive(drive, rig, (camera, lidar), frames, segments_nanos, readout)?;
         let t = rig
             .sensor(camera)
             .ok_or_else(|| AlignError::Setup(format!("no sensor '{camera}' in the rig")))?

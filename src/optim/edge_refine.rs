@@ -14,28 +14,9 @@ pub struct EdgeRefiner {
 }
 
 impl EdgeRefiner {
-    /// Prepare `cameras` against `lidar` on `frames` frames of the drive (within `segments_nanos`; empty = the whole drive).
+    /// Refine `cameras` against `lidar` on `frames` frames each, with the cameras read out as
+    /// `readout` (usually the drive's, [`crate::log::Drive::camera_readout`]).
     pub fn new(
-        drive: &Drive,
-        rig: &Rig,
-        lidar: &str,
-        cameras: &[String],
-        frames: usize,
-        segments_nanos: &[(i64, i64)],
-    ) -> Result<Self, AlignError> {
-        let sensors = (lidar, cameras);
-        Self::new_with_readout(
-            drive,
-            rig,
-            sensors,
-            frames,
-            segments_nanos,
-            drive.camera_readout,
-        )
-    }
-
-    /// [`Self::new`] for `(lidar, cameras)` with the cameras read out as `readout`.
-    pub fn new_with_readout(
         drive: &Drive,
         rig: &Rig,
         (lidar, cameras): (&str, &[String]),
@@ -45,7 +26,7 @@ impl EdgeRefiner {
     ) -> Result<Self, AlignError> {
         let mut problems = Vec::new();
         for cam in cameras {
-            let p = EdgeAlignment::from_drive_with_readout(
+            let p = EdgeAlignment::from_drive(
                 drive,
                 rig,
                 (cam, lidar),

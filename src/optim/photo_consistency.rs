@@ -30,7 +30,8 @@ use rayon::prelude::*;
 
 use crate::calib::Rig;
 use crate::classical::icp::voxel_thin;
-use crate::classical::mutual_info::{gaussian_blur, grey};
+use crate::classical::mutual_info::gaussian_blur;
+use crate::features::grey::grey_unit as grey;
 use crate::geometry::camera::CameraIntrinsics;
 use crate::geometry::projection::{SweepView, world_points};
 use crate::geometry::{Rigid, RowTimes, SAMPLED_ROWS};

@@ -50,9 +50,15 @@ impl EdgeCheck {
         frames: usize,
         segments_nanos: &[(i64, i64)],
     ) -> Result<Self, String> {
-        let mut problem =
-            EdgeAlignment::from_drive(drive, rig, camera, lidar, frames, segments_nanos)
-                .map_err(|e| format!("{camera} × {lidar}: {e}"))?;
+        let mut problem = EdgeAlignment::from_drive(
+            drive,
+            rig,
+            (camera, lidar),
+            frames,
+            segments_nanos,
+            drive.camera_readout,
+        )
+        .map_err(|e| format!("{camera} × {lidar}: {e}"))?;
         let all = std::mem::take(&mut problem.frames);
         let frames = all
             .into_iter()

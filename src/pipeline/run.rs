@@ -229,10 +229,10 @@ pub fn stationary_cameras(
             match crate::optim::edge_refine::EdgeRefiner::new(
                 drive,
                 rig,
-                reference,
-                cameras,
+                (reference, cameras),
                 4,
                 segments_nanos,
+                drive.camera_readout,
             ) {
                 Ok(mut edge) => (run(&mut edge, "edge alignment"), "edge alignment"),
                 Err(e) => {

@@ -51,7 +51,7 @@ pub fn training_keypoints(img: &image::RgbImage, training_width: u32) -> Vec<Key
     } else {
         img.clone()
     };
-    let gray = crate::eval::fast::luma(&detect_on);
+    let gray = crate::features::grey::grey_u8(&detect_on);
     let to_training = training_width as f64 / dw as f64;
     crate::features::orb::detect(&gray, dw as usize, dh as usize, 2048)
         .into_iter()

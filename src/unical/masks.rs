@@ -32,7 +32,7 @@ pub fn ego_mask(frames: &[CameraFrame], width: usize, height: usize) -> Vec<bool
     let (mut sum, mut sum_sq) = (vec![0.0f64; n], vec![0.0f64; n]);
     for f in frames {
         for (i, px) in f.rgb.chunks_exact(3).enumerate() {
-            let y = 0.299 * px[0] as f64 + 0.587 * px[1] as f64 + 0.114 * px[2] as f64;
+            let y = crate::features::grey::luma(px[0], px[1], px[2]) as f64;
             sum[i] += y;
             sum_sq[i] += y * y;
         }

@@ -19,7 +19,10 @@
 //!   encoding, per-camera exposure) with scene, decoder, exposure and pose gradients.
 //! - [`background`]: the inverted-sphere background field beyond the scene box (16 samples per
 //!   camera ray, uniform in disparity).
-//! - [`depth_calib`]: the LiDAR stage: scene + every LiDAR extrinsic from depth (a full step).
+//! - [`depth_calib`]: one UniCal step: scene + every sensor's extrinsic (its tests in
+//!   `depth_calib/tests.rs`).
+//! - [`depth_config`]: its configuration, one serde type with every default stated once.
+//! - [`pose_steps`]: how a pose steps (Adam as a delta) and the holds and bounds on a camera's step.
 //! - [`calibrator`]: that stage prepared from a drive as an `optim::runner::Calibrator`.
 //! - [`pose_newton`]: preconditioned LiDAR pose steps (the objective's gradient, the rendered
 //!   depth's point-to-plane curvature).
@@ -36,6 +39,7 @@ pub mod composite;
 pub mod correspondences;
 pub mod coverage;
 pub mod depth_calib;
+pub mod depth_config;
 pub mod field;
 pub mod hash_grid;
 pub mod hash_load;
@@ -47,6 +51,7 @@ pub mod observability;
 pub mod occupancy;
 pub mod pose;
 pub mod pose_newton;
+pub mod pose_steps;
 pub mod pose_window;
 pub mod regulariser;
 pub mod scene_bounds;
