@@ -1,5 +1,5 @@
 #![allow(clippy::unwrap_used, clippy::expect_used)]
-//! Bad frames never sink a run. A simulated drive is damaged by [`damage`] (every fifth point
+//! Bad frames never sink a run. A simulated drive is damaged by `rigcal::sim::damage::damaged_copy` (every fifth point
 //! cloud of each LiDAR, from the first, cut to half its length, every fifth JPEG's start-of-image marker
 //! overwritten; the container itself intact). The open leaves the cut-short clouds out of its
 //! index; the JPEGs fail when a run decodes them and are skipped. `icp` and `edge` then
@@ -30,46 +30,8 @@ fn clean_drive(dir: &Path) -> PathBuf {
     log
 }
 
-/// Rewrite `from` into `to` with every fifth PointCloud2 of each topic (from the first) cut to half its bytes
-/// and every fifth CompressedImage's JPEG start-of-image marker zeroed. Returns how many
-/// messages it damaged.
 fn damage(from: &Path, to: &Path) -> usize {
-    let bytes = std::fs::read(from).unwrap();
-    let file = std::io::BufWriter::new(std::fs::File::create(to).unwrap());
-    let mut writer = mcap::WriteOptions::new()
-        .profile("ros2")
-        .create(file)
-        .unwrap();
-    let mut seen = std::collections::HashMap::<String, usize>::new();
-    let mut damaged = 0;
-    for message in mcap::MessageStream::new(&bytes).unwrap() {
-        let mut message = message.unwrap();
-        let schema = message
-            .channel
-            .schema
-            .as_ref()
-            .map(|s| s.name.clone())
-            .unwrap_or_default();
-        // The first of each topic, then every fifth.
-        let n = seen.entry(message.channel.topic.clone()).or_default();
-        *n += 1;
-        if *n % 5 == 1 {
-            let mut data = message.data.into_owned();
-            if schema == "sensor_msgs/msg/PointCloud2" {
-                data.truncate(data.len() / 2);
-                damaged += 1;
-            } else if schema == "sensor_msgs/msg/CompressedImage"
-                && let Some(at) = data.windows(3).position(|w| w == [0xFF, 0xD8, 0xFF])
-            {
-                data[at..at + 3].fill(0);
-                damaged += 1;
-            }
-            message.data = data.into();
-        }
-        writer.write(&message).unwrap();
-    }
-    writer.finish().unwrap();
-    damaged
+    rigcal::sim::damage::damaged_copy(from, to).unwrap()
 }
 
 /// `rigcal calibrate LOG ARGS… --out OUT`: the result and stderr.

@@ -3,7 +3,9 @@
 
 pub mod bvh;
 pub mod camera_sim;
+pub mod damage;
 pub mod demo;
+mod layout;
 pub mod lidar_sim;
 pub mod noise;
 pub mod raster;
