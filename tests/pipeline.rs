@@ -83,19 +83,18 @@ fn plans_for_a_turning_and_a_straight_drive_differ_and_say_why() {
         text(&flat)
     );
     assert!(text(&flat).contains("no hand-eye start"), "{}", text(&flat));
-    // Straight: each camera's translation along the travel (the vehicle's x) is held; with
-    // turns nothing is.
+    // Straight: the plan names the direction of travel (the vehicle's x), along which the
+    // report marks each camera; with turns there is none.
     let along = flat
-        .unical
-        .camera_hold_translation_along
+        .straight_travel
         .unwrap_or_else(|| panic!("{}", text(&flat)));
-    assert!(along[0] > 0.99, "{along:?}");
+    assert!(along.x > 0.99, "{along:?}");
     assert!(
-        text(&flat).contains("translation along the travel"),
+        text(&flat).contains("position along the travel"),
         "{}",
         text(&flat)
     );
-    assert_eq!(turns.unical.camera_hold_translation_along, None);
+    assert_eq!(turns.straight_travel, None);
     for p in [&turns, &flat] {
         assert!(p.stages.contains(&Stage::LidarIcp {
             reference: "pandar64".into(),

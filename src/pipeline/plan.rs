@@ -13,8 +13,8 @@
 //!   it by point-to-plane ICP; then UniCal holds them;
 //! - cameras: where the drive turns enough, each camera is fitted to its own motion (hand-eye)
 //!   and the fit kept where the camera's edges align with the reference LiDAR's at least as well
-//!   as at the start; where it does not, each camera's translation along the travel stays at
-//!   the initial guess (a straight drive does not pin it); then UniCal with every camera, on the
+//!   as at the start (where it does not, the report marks each camera's position along the
+//!   travel, which a straight drive hardly pins); then UniCal with every camera, on the
 //!   quality's images at its scale, for as many steps as the budget allows.
 //!
 //! The same [`Plan`] runs from the CLI, the studio and `bench` ([`super::run`]).
@@ -93,6 +93,9 @@ pub struct Plan {
     /// the cameras the hand-eye fitted its schedule ([`DepthCalibConfig::after_hand_eye`]).
     pub unical: DepthCalibConfig,
     pub request: PlanRequest,
+    /// Where the drive is too straight to pin a camera's position along it: the direction of
+    /// travel in the vehicle frame (the report marks the camera axes along it).
+    pub straight_travel: Option<DVec3>,
 }
 
 /// A drive the pipeline cannot plan for.
@@ -301,7 +304,7 @@ impl Plan {
         }
         // Cameras.
         let mut hand_eye = Vec::new();
-        let mut hold_along = None;
+        let mut straight_travel = None;
         if cameras.is_empty() {
             decisions.push("cameras: none with intrinsics and images to calibrate".into());
         } else if stationary {
@@ -336,10 +339,10 @@ impl Plan {
             if motion.turn_deg < MIN_TURN_DEG && motion.travel_vehicle != DVec3::ZERO {
                 let d = motion.travel_vehicle;
                 decisions.push(format!(
-                    "cameras: the drive turns {:.0}° (under {MIN_TURN_DEG:.0}°): a drive this straight does not pin a camera's position along it (the paper's trajectory study, Table A8), so each camera's translation along the travel (vehicle ({:.2}, {:.2}, {:.2})) stays where the initial guess puts it",
+                    "cameras: the drive turns {:.0}° (under {MIN_TURN_DEG:.0}°): on a drive this straight a camera's position along the travel (vehicle ({:.2}, {:.2}, {:.2})) is weakly observed and confounded with an image delay (the paper's trajectory study, Table A8); UniCal moves it, and the report marks it",
                     motion.turn_deg, d.x, d.y, d.z
                 ));
-                hold_along = Some(d.to_array());
+                straight_travel = Some(d);
             }
             if !hand_eye.is_empty() {
                 stages.push(Stage::CameraHandEye {
@@ -418,7 +421,6 @@ impl Plan {
             seed: config.seed,
             frozen_sensor: request.root.clone(),
             held_sensors: held,
-            camera_hold_translation_along: hold_along,
             ..config.unical.clone()
         };
         Ok(Plan {
@@ -428,6 +430,7 @@ impl Plan {
             config: resolved,
             unical,
             request: request.clone(),
+            straight_travel,
         })
     }
 

@@ -166,17 +166,13 @@ impl Report {
                     "not among --sensors: held where the initial guess puts it".into()
                 };
             } else if s.kind == SensorKind::Camera {
-                let hold = plan
-                    .unical
-                    .camera_hold_translation_along
-                    .map(DVec3::from_array);
                 end = camera_report(
                     drive,
                     result,
                     &s.name,
                     &reference,
                     (start, end),
-                    hold,
+                    plan.straight_travel,
                     segments,
                     &mut report,
                 );
@@ -328,13 +324,6 @@ fn axes_along(vehicle_from_sensor: Rigid, d: DVec3) -> Vec<usize> {
         .collect()
 }
 
-/// `end` with its translation along the vehicle-frame direction `d` put back at `start`'s.
-fn keep_along(start: Rigid, end: Rigid, d: DVec3) -> Rigid {
-    let d = d.normalize_or_zero();
-    let step = end.translation - start.translation;
-    Rigid::new(end.rotation, end.translation - d * step.dot(d))
-}
-
 #[allow(clippy::too_many_arguments)]
 fn camera_report(
     drive: &Drive,
@@ -342,16 +331,10 @@ fn camera_report(
     camera: &str,
     reference: &str,
     (start, end): (Rigid, Rigid),
-    hold_along: Option<DVec3>,
+    straight_travel: Option<DVec3>,
     segments: &[(i64, i64)],
     report: &mut SensorReport,
 ) -> Rigid {
-    // A straight drive: the plan held the camera's position along the travel (UniCal stepped
-    // square to it); whatever else moved it there, it stays at the initial guess.
-    let end = match hold_along {
-        Some(d) => keep_along(start, end, d),
-        None => end,
-    };
     let check = match EdgeCheck::new(drive, result, camera, reference, CHECK_FRAMES, segments) {
         Ok(c) => c,
         Err(e) => {
@@ -364,9 +347,13 @@ fn camera_report(
     // frames it called directions of side cameras unobserved that UniCal had right, and
     // putting them back at the initial guess cost degrees (BENCHMARKS.md, "The pipeline").
     let mut unobserved = fill_axes(report, check.sigmas(end).0);
-    let along = hold_along.map_or(Vec::new(), |d| axes_along(end, d));
+    // A straight drive: the camera's position along the travel is at best weakly observed,
+    // whatever the edges say (a shift along it looks like an image delay).
+    let along = straight_travel.map_or(Vec::new(), |d| axes_along(end, d));
     for &k in &along {
-        report.axes[k].observed = Observed::NotObserved;
+        if report.axes[k].observed == Observed::Observed {
+            report.axes[k].observed = Observed::Weak;
+        }
     }
     unobserved.retain(|k| !along.contains(k));
     let (before, after) = (check.score(start), check.score(end));
@@ -394,7 +381,7 @@ fn camera_report(
         String::new()
     } else {
         format!(
-            "the drive is too straight to pin its position along the travel ({}): kept at the initial guess; ",
+            "the drive is too straight to pin its position along the travel ({}, confounded with an image delay); ",
             axis_names(&along)
         )
     };

@@ -34,7 +34,7 @@ use super::occupancy::OccupancyGrid;
 use super::pose::PoseParams;
 use super::pose_newton::{NewtonConfig, NewtonState, PoseUpdate, TangentSystem, robust_system};
 use super::pose_steps::{
-    INFORMATION_FORGETTING, bound_rotation, hold_along, hold_axial, hold_unobserved,
+    INFORMATION_FORGETTING, bound_rotation, hold_axial, hold_unobserved,
     pose_grad_flat, pose_step, shared_translation_step,
 };
 use super::sdf_init::{PointIndex, SdfRay, sdf_fit_step};
@@ -372,9 +372,6 @@ impl CameraStage {
             if config.camera_hold_axial {
                 hold_axial(&mut self.poses[k], &before);
             }
-            if let Some(d) = config.camera_hold_translation_along {
-                hold_along(&mut self.poses[k], &before, glam::DVec3::from_array(d));
-            }
             if let (Some(ratio), Some(info)) =
                 (config.camera_hold_unobserved, self.information.get(k))
             {
@@ -396,11 +393,7 @@ impl CameraStage {
         if !config.shared_camera_translation || free.len() < 2 || lr == 0.0 {
             return;
         }
-        let mut shift = shared_translation_step(&mut self.shared_translation_opt, grads, &free, lr);
-        if let Some(d) = config.camera_hold_translation_along {
-            let d = glam::DVec3::from_array(d).normalize_or_zero();
-            shift -= d * shift.dot(d);
-        }
+        let shift = shared_translation_step(&mut self.shared_translation_opt, grads, &free, lr);
         for &k in &free {
             self.poses[k].translation_m += shift * translation_scale;
         }

@@ -187,12 +187,6 @@ pub struct DepthCalibConfig {
     /// camera away from what it sees (docs/experiments/colour-field-and-hash-grid.md, "Blurred colour targets", "Where the real
     /// drive's right camera comes to rest"). Off: every direction moves (the paper).
     pub camera_hold_axial: bool,
-    /// Hold each camera's translation along this vehicle-frame unit direction at the initial
-    /// guess (a step keeps only its part square to it): the plan sets it to the direction of
-    /// travel where the drive is too straight to pin a camera's position along it (Table A8).
-    /// Decided from the drive, not a setting; `None`: every direction moves.
-    #[serde(skip)]
-    pub camera_hold_translation_along: Option<[f64; 3]>,
     /// How many of the hash grids' coarsest levels the colour term's camera-pose gradient
     /// flows through (`None`: every open level, the paper). The scene still learns its detail
     /// from every open level; only ∂L/∂x, which moves the cameras, is limited: the finest
@@ -301,7 +295,6 @@ impl Default for DepthCalibConfig {
             camera_rays_below_lidar_top: false,
             camera_hold_unobserved: None,
             camera_hold_axial: false,
-            camera_hold_translation_along: None,
             // Off: with 12 of 16 levels the real PandaSet drive's left pair no longer turned off
             // on seed 1, but the simulator's drive 7 lost its back camera (0.24° / 9.6 cm), and
             // the limited gradient is not that of any loss (docs/experiments/colour-field-and-hash-grid.md, "Camera poses moved

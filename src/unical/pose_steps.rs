@@ -1,7 +1,7 @@
 //! How a pose steps in a UniCal run: one Adam step applied as a delta (so the f64 pose keeps
 //! its precision), and the constraints on a camera's step, each undoing part of it: the
-//! directions its information does not observe, its optical axis, the direction of travel on a
-//! straight drive, a bound on its rotation; and the translation the free cameras share.
+//! directions its information does not observe, its optical axis, a bound on its rotation; and
+//! the translation the free cameras share.
 
 use glam::DVec3;
 
@@ -68,14 +68,6 @@ pub(super) fn hold_axial(pose: &mut PoseParams, before: &PoseParams) {
     let axis = pose.rotation().col(2).normalize_or_zero();
     let step = pose.translation_m - before.translation_m;
     pose.translation_m -= axis * step.dot(axis);
-}
-
-/// Undo the part of the translation step from `before` to `pose` along the vehicle-frame
-/// direction `along` ([`DepthCalibConfig::camera_hold_translation_along`]).
-pub(super) fn hold_along(pose: &mut PoseParams, before: &PoseParams, along: glam::DVec3) {
-    let d = along.normalize_or_zero();
-    let step = pose.translation_m - before.translation_m;
-    pose.translation_m -= d * step.dot(d);
 }
 
 /// Keep `pose`'s rotation within `bound_rad` of `start`: a rotation further off is turned back
@@ -183,24 +175,6 @@ mod tests {
         let mut p = PoseParams::from_rigid(moved);
         hold_unobserved(&mut p, &before, &PoseInformation::default(), 0.05);
         assert!((p.to_rigid().translation - moved.translation).length() < 1e-12);
-    }
-
-    #[test]
-    fn the_travel_hold_keeps_only_the_step_square_to_the_travel() {
-        // A camera looking left, the vehicle driving along (0.6, 0.8, 0): a step of 5 cm
-        // along the travel and 2 cm up keeps only the 2 cm up, whatever way the camera looks.
-        let looking_left =
-            glam::DMat3::from_cols(glam::DVec3::X, glam::DVec3::NEG_Z, glam::DVec3::Y);
-        let before = PoseParams {
-            r6: crate::geometry::rot6d::from_matrix(looking_left),
-            translation_m: glam::DVec3::new(0.5, 0.8, 1.5),
-        };
-        let travel = glam::DVec3::new(0.6, 0.8, 0.0);
-        let mut p = before;
-        p.translation_m += travel * 0.05 + glam::DVec3::new(0.0, 0.0, 0.02);
-        hold_along(&mut p, &before, travel);
-        assert!((p.translation_m - glam::DVec3::new(0.5, 0.8, 1.52)).length() < 1e-12);
-        assert_eq!(p.r6, before.r6);
     }
 
     #[test]
