@@ -81,7 +81,11 @@ fn every_method_calibrates_a_damaged_drive_like_the_clean_one_and_says_what_it_s
     // runs differ from the clean ones by more than the deterministic methods', so each is held
     // to ending as near the truth as the clean run did (below), within its tolerance.
     let config = tmp.path().join("short.yaml");
-    std::fs::write(&config, "quality: fast\nbudget_secs: 3600\niterations: 60\n").unwrap();
+    std::fs::write(
+        &config,
+        "quality: fast\nbudget_secs: 3600\niterations: 60\n",
+    )
+    .unwrap();
     let config = config.to_str().unwrap();
     let runs: [(&str, Vec<&str>, Vec<&str>, f64, f64); 4] = [
         ("icp", vec!["--method", "icp"], vec!["pandar_gt"], 0.1, 1.0),
@@ -110,6 +114,7 @@ fn every_method_calibrates_a_damaged_drive_like_the_clean_one_and_says_what_it_s
     let truth = CalibrationFile::load_rig(&tmp.path().join("gt.yaml")).unwrap();
     let start = rigcal::log::Drive::open(&clean).unwrap().rig;
     for (name, args, moved, tol_deg, tol_cm) in runs {
+        let started = std::time::Instant::now();
         let (a, _) = calibrate(
             &clean,
             &args,
@@ -136,7 +141,10 @@ fn every_method_calibrates_a_damaged_drive_like_the_clean_one_and_says_what_it_s
             from_start > 0.05,
             "{name}: the clean run moved {from_start:.3}°"
         );
-        eprintln!("{name}: {listed} frames skipped; damaged vs clean {deg:.3}° / {cm:.2} cm");
+        eprintln!(
+            "{name}: {listed} frames skipped; damaged vs clean {deg:.3}° / {cm:.2} cm ({:.0} s for both)",
+            started.elapsed().as_secs_f64()
+        );
         if ["icp", "edge"].contains(&name) {
             assert!(
                 deg <= tol_deg && cm <= tol_cm,

@@ -14,8 +14,8 @@ fuzz_target!(|data: &[u8]| {
     if let Ok(drive) = Drive::open(&path) {
         for stream in &drive.streams {
             for index in 0..stream.frames.len().min(4) {
-                let _ = drive.sweep_or_skip(&stream.name, index);
-                let _ = drive.image_or_skip(&stream.name, index);
+                let _ = drive.sweep_or_skip(&stream.sensor, index);
+                let _ = drive.image_or_skip(&stream.sensor, index);
             }
         }
         let _ = drive.skipped_summary();

@@ -67,7 +67,7 @@ fn main() {
         let bytes = std::fs::read(&path).expect("fixture");
         write(&corpus.join("mcap"), name, &bytes);
         let container = McapContainer::open(&path).expect("fixture opens");
-        let (messages, _) = container.scan(|r, channel, _| Some((*r, channel.clone())));
+        let (messages, _) = container.scan(|_, channel, _| Some(channel.clone()));
         for (r, channel) in messages {
             let selector = match channel.message_encoding.as_str() {
                 "cdr" => Ros2Type::from_schema(&channel.schema_name)
@@ -98,7 +98,11 @@ fn main() {
     let inline: [(u8, &str, &str); 6] = [
         (0, "native.yaml", NATIVE),
         (2, "camera_info.yaml", CAMERA_INFO),
-        (1, "config.yaml", "quality: fast\nbudget_secs: 60\ncameras:\n  image_scale: 0.25\n"),
+        (
+            1,
+            "config.yaml",
+            "quality: fast\nbudget_secs: 60\ncameras:\n  image_scale: 0.25\n",
+        ),
         (
             3,
             "joints.urdf",
@@ -109,7 +113,11 @@ fn main() {
             "reference.json",
             "{\"vehicle_frame\": \"base\", \"sensors\": {\"cam\": {\"kind\": \"camera\", \"vehicle_from_sensor\": [[1, 0, 0, 1], [0, 1, 0, 0], [0, 0, 1, 2], [0, 0, 0, 1]], \"width\": 64, \"height\": 48, \"fx\": 50, \"fy\": 50, \"cx\": 32, \"cy\": 24}}}",
         ),
-        (5, "transform.txt", "translation_m: [1, 2, 3]\nrotation_xyzw: [0, 0, 0, 1]\n"),
+        (
+            5,
+            "transform.txt",
+            "translation_m: [1, 2, 3]\nrotation_xyzw: [0, 0, 0, 1]\n",
+        ),
     ];
     for (selector, name, body) in inline {
         let mut seed = vec![selector];

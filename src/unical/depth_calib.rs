@@ -34,8 +34,8 @@ use super::occupancy::OccupancyGrid;
 use super::pose::PoseParams;
 use super::pose_newton::{NewtonConfig, NewtonState, PoseUpdate, TangentSystem, robust_system};
 use super::pose_steps::{
-    INFORMATION_FORGETTING, bound_rotation, hold_axial, hold_unobserved,
-    pose_grad_flat, pose_step, shared_translation_step,
+    INFORMATION_FORGETTING, bound_rotation, hold_axial, hold_unobserved, pose_grad_flat, pose_step,
+    shared_translation_step,
 };
 use super::sdf_init::{PointIndex, SdfRay, sdf_fit_step};
 use super::surface_align::{
