@@ -6,7 +6,7 @@
 //! path, distance along it) so markings follow any trajectory; everything else is triangles in a
 //! [`Bvh`]. Objects are placed along the path on both sides with a seeded RNG and an occupancy
 //! grid, never within the road of any part of the path (figure-8 crossings stay clear;
-//! [`super::layout`]). Every
+//! `sim::layout`). Every
 //! material has an albedo texture (procedural, band-limited to the pixel footprint) and a LiDAR
 //! reflectivity.
 

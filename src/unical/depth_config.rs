@@ -147,7 +147,7 @@ pub struct DepthCalibConfig {
     pub heatmap_uniform_share: f64,
     /// Share of the camera pixel draws, once heat maps are on, centred on LiDAR silhouettes:
     /// depth discontinuities of the sweep nearest each frame, projected into it under the
-    /// current poses (refreshed every [`SILHOUETTE_REFRESH`] iterations). The rest are drawn
+    /// current poses (refreshed every [`super::depth_calib::SILHOUETTE_REFRESH`] iterations). The rest are drawn
     /// as without it ([`Self::heatmap_uniform_share`] of them uniformly, the others around
     /// keypoints); a frame without silhouettes draws as with 0. Where colour texture may
     /// slide along a surface with a camera's translation, a silhouette cannot: it ties the
@@ -158,7 +158,7 @@ pub struct DepthCalibConfig {
     /// unbiased per-section form; [`OpacityModel`]).
     pub opacity: OpacityModel,
     /// Whether surface colour depends on the view direction (the paper's decoder;
-    /// [`Appearance::view_dependent`]).
+    /// [`super::camera_rgb::Appearance::view_dependent`]).
     pub view_dependent_colour: bool,
     /// Drop LiDAR returns that other sweeps saw through (moving traffic) before the scene is
     /// built ([`super::transient`]), and mask camera pixels near them; `None` keeps every

@@ -146,6 +146,8 @@ mod tests {
         assert_eq!(got.translation, DVec3::X);
     }
 
+    /// A camera looking at a far wall: a step along the turn-and-shift it cannot tell apart is
+    /// undone, the step's observed part is applied, and a pose with nothing held moves freely.
     #[test]
     fn holding_unobserved_directions_undoes_only_their_part_of_a_step() {
         use crate::geometry::so3;

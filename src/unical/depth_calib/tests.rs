@@ -135,13 +135,6 @@ fn pose_rates_wait_ramp_up_then_decay() {
     assert!((short.pose_rate(1.0, 0.01, 14) - 0.5 * 0.01f32.powf(4.0 / 40.0)).abs() < 1e-6);
 }
 
-/// Cameras released early by the correspondence term ramp up from their release and start
-/// the usual schedule again at the warm-up's end; LiDARs still wait for it; a release after
-/// the warm-up changes nothing.
-
-/// A camera looking at a far wall: a step along the turn-and-shift it cannot tell apart is
-/// undone, the step's observed part is applied, and a pose with nothing held moves freely.
-
 #[test]
 fn a_translation_with_its_own_decay_keeps_more_of_its_rate_late() {
     let config = DepthCalibConfig {
@@ -220,6 +213,9 @@ fn a_translation_with_its_own_decay_keeps_more_of_its_rate_late() {
     assert!((ratio - 5.0).abs() < 0.1, "{ratio}");
 }
 
+/// Cameras released early by the correspondence term ramp up from their release and start
+/// the usual schedule again at the warm-up's end; LiDARs still wait for it; a release after
+/// the warm-up changes nothing.
 #[test]
 fn an_alignment_release_starts_only_the_cameras_early() {
     let config = DepthCalibConfig {
