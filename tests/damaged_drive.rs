@@ -3,9 +3,8 @@
 //! cloud of each LiDAR, from the first, cut to half its length, every fifth JPEG's start-of-image marker
 //! overwritten; the container itself intact). The open leaves the cut-short clouds out of its
 //! index; the JPEGs fail when a run decodes them and are skipped. `icp` and `edge` then
-//! calibrate it to within a tolerance of what they reach on the clean drive, `unical` and the
-//! pipeline (short runs) end as near the truth as on the clean drive within a tolerance, and
-//! each run's output names what it skipped.
+//! calibrate it to within a tolerance of what they reach on the clean drive, and each run's
+//! output names what it skipped.
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -77,17 +76,10 @@ fn every_method_calibrates_a_damaged_drive_like_the_clean_one_and_says_what_it_s
     assert!(clouds < 60, "{clouds} of 60 clouds indexed");
 
     // (method, its arguments, the sensors it moves, tolerance in ° and cm). UniCal and the
-    // pipeline draw rays at random from the frames they have: with a fifth of them gone their
-    // runs differ from the clean ones by more than the deterministic methods', so each is held
-    // to ending as near the truth as the clean run did (below), within its tolerance.
-    let config = tmp.path().join("short.yaml");
-    std::fs::write(
-        &config,
-        "quality: fast\nbudget_secs: 3600\niterations: 60\n",
-    )
-    .unwrap();
-    let config = config.to_str().unwrap();
-    let runs: [(&str, Vec<&str>, Vec<&str>, f64, f64); 4] = [
+    // pipeline load frames through the same calls (`Drive::sweep_or_skip`,
+    // `Drive::image_or_skip`); their runs are too long for this suite: with 60 steps and few
+    // rays, a debug build takes about two minutes a run (RELIABILITY.md, "Damaged drives").
+    let runs: [(&str, Vec<&str>, Vec<&str>, f64, f64); 2] = [
         ("icp", vec!["--method", "icp"], vec!["pandar_gt"], 0.1, 1.0),
         (
             "edge",
@@ -96,22 +88,7 @@ fn every_method_calibrates_a_damaged_drive_like_the_clean_one_and_says_what_it_s
             0.3,
             0.1,
         ),
-        (
-            "unical",
-            vec!["--method", "unical", "--iterations", "60"],
-            vec!["pandar_gt", "front_camera"],
-            0.3,
-            3.0,
-        ),
-        (
-            "pipeline",
-            vec!["--config", config],
-            vec!["pandar_gt", "front_camera"],
-            0.3,
-            3.0,
-        ),
     ];
-    let truth = CalibrationFile::load_rig(&tmp.path().join("gt.yaml")).unwrap();
     let start = rigcal::log::Drive::open(&clean).unwrap().rig;
     for (name, args, moved, tol_deg, tol_cm) in runs {
         let started = std::time::Instant::now();
@@ -145,33 +122,9 @@ fn every_method_calibrates_a_damaged_drive_like_the_clean_one_and_says_what_it_s
             "{name}: {listed} frames skipped; damaged vs clean {deg:.3}° / {cm:.2} cm ({:.0} s for both)",
             started.elapsed().as_secs_f64()
         );
-        if ["icp", "edge"].contains(&name) {
-            assert!(
-                deg <= tol_deg && cm <= tol_cm,
-                "{name}: {deg:.3}° / {cm:.2} cm from the clean run"
-            );
-        } else {
-            // Each sensor ends as near the truth as on the clean drive, within the tolerance
-            // (after aligning the root LiDAR, as `rigcal eval` measures).
-            let errors = |rig: &Rig| {
-                rigcal::geometry::rig_errors(&truth.extrinsics(), &rig.extrinsics(), "pandar64")
-                    .unwrap()
-            };
-            let (on_clean, on_damaged) = (errors(&ra), errors(&rb));
-            for sensor in &moved {
-                let e = |v: &[rigcal::geometry::RigError]| {
-                    let e = v.iter().find(|e| e.sensor == *sensor).unwrap();
-                    (e.rotation_deg, e.translation_m * 100.0)
-                };
-                let ((rc, tc), (rd, td)) = (e(&on_clean), e(&on_damaged));
-                eprintln!(
-                    "{name}: {sensor} {rc:.3}° / {tc:.2} cm on the clean drive, {rd:.3}° / {td:.2} cm on the damaged one"
-                );
-                assert!(
-                    rd <= rc + tol_deg && td <= tc + tol_cm,
-                    "{name}: {sensor} ends {rd:.3}° / {td:.2} cm from the truth on the damaged drive, {rc:.3}° / {tc:.2} cm on the clean one"
-                );
-            }
-        }
+        assert!(
+            deg <= tol_deg && cm <= tol_cm,
+            "{name}: {deg:.3}° / {cm:.2} cm from the clean run"
+        );
     }
 }

@@ -139,15 +139,31 @@ pub fn to_sweep(cloud: &RawPointCloud<'_>) -> DecodeResult<LidarSweep> {
             "row_step {row_step} is smaller than width {width} × point_step {step}"
         )));
     }
-    let needed = (height - 1) * row_step + width * step;
-    if width > 0 && cloud.data.len() < needed {
-        return Err(DecodeError::new(format!(
-            "point data has {} bytes, the layout ({height}×{width}, point_step {step}, row_step {row_step}) needs {needed}",
-            cloud.data.len()
-        )));
-    }
     let n = width * height;
     let mut sweep = LidarSweep {
+        stamp_nanos: cloud.stamp_nanos,
+        frame_id: cloud.frame_id.clone(),
+        points_in_sensor: Vec::new(),
+        intensity: Vec::new(),
+        time_offset_secs: time.map(|_| Vec::new()),
+    };
+    // No point: nothing to walk (rows of zero width would still be walked one by one, four
+    // billion of them at most).
+    if n == 0 {
+        return Ok(sweep);
+    }
+    // Checked: a layout from the file may claim more bytes than a usize holds.
+    let needed = (height - 1)
+        .checked_mul(row_step)
+        .and_then(|rows| rows.checked_add(width * step));
+    if needed.is_none_or(|needed| cloud.data.len() < needed) {
+        return Err(DecodeError::new(format!(
+            "point data has {} bytes, the layout ({height}×{width}, point_step {step}, row_step {row_step}) needs {}",
+            cloud.data.len(),
+            needed.map_or("more than can be addressed".to_string(), |n| n.to_string())
+        )));
+    }
+    sweep = LidarSweep {
         stamp_nanos: cloud.stamp_nanos,
         frame_id: cloud.frame_id.clone(),
         points_in_sensor: Vec::with_capacity(n),
