@@ -56,8 +56,8 @@ fn every_ros2_finding_decodes_or_fails_cleanly() {
     let found = inputs("ros2");
     assert!(!found.is_empty());
     for (name, data) in found {
-        // A cloud of zero-width rows, four billion of them, was walked row by row (a 10 s
-        // timeout): it now has no point.
+        // A cloud and an image of zero-width rows, hundreds of millions of them, were walked
+        // row by row (10 s timeouts): the cloud now has no point, the image is refused.
         let got = ros2_target(&data);
         eprintln!("{name}: {got:?}");
         assert!(matches!(got, Ok(0) | Err(_)), "{name}: {got:?}");

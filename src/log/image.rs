@@ -21,6 +21,13 @@ pub fn decode_raw(img: &RawImage<'_>) -> DecodeResult<RgbImage> {
         }
     };
     let (w, h) = (img.width as usize, img.height as usize);
+    // An image of no pixel is of no use to a run (and its four billion empty rows would
+    // still be walked one by one).
+    if w == 0 || h == 0 {
+        return Err(DecodeError::new(format!(
+            "image of {w}×{h} pixels has none"
+        )));
+    }
     let step = if img.step == 0 {
         w * bpp
     } else {
@@ -31,7 +38,7 @@ pub fn decode_raw(img: &RawImage<'_>) -> DecodeResult<RgbImage> {
             "step {step} is smaller than width {w} × {bpp} bytes"
         )));
     }
-    let needed = if h == 0 { 0 } else { (h - 1) * step + w * bpp };
+    let needed = (h - 1) * step + w * bpp;
     if img.data.len() < needed {
         return Err(DecodeError::new(format!(
             "image data has {} bytes, {w}×{h} {enc} needs {needed}",
