@@ -8,15 +8,7 @@ use rigcal::log::ros2::{self, Ros2Type};
 use rigcal::log::types::Decoded;
 use rigcal::log::{image, pointcloud};
 
-const TYPES: [Ros2Type; 7] = [
-    Ros2Type::PointCloud2,
-    Ros2Type::Image,
-    Ros2Type::CompressedImage,
-    Ros2Type::CameraInfo,
-    Ros2Type::TfMessage,
-    Ros2Type::Odometry,
-    Ros2Type::PoseStamped,
-];
+const TYPES: [Ros2Type; 7] = Ros2Type::ALL;
 
 fuzz_target!(|data: &[u8]| {
     let Some((&selector, payload)) = data.split_first() else {

@@ -25,6 +25,17 @@ pub enum Ros2Type {
 }
 
 impl Ros2Type {
+    /// Every type rigcal reads.
+    pub const ALL: [Ros2Type; 7] = [
+        Ros2Type::PointCloud2,
+        Ros2Type::Image,
+        Ros2Type::CompressedImage,
+        Ros2Type::CameraInfo,
+        Ros2Type::TfMessage,
+        Ros2Type::Odometry,
+        Ros2Type::PoseStamped,
+    ];
+
     pub fn from_schema(name: &str) -> Option<Self> {
         Some(match name.replace("/msg/", "/").as_str() {
             "sensor_msgs/PointCloud2" => Self::PointCloud2,
