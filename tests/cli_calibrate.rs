@@ -128,10 +128,14 @@ fn bad_arguments_fail_with_one_line() {
         "{err}"
     );
     let (ok, err) = run(&["--budget", "soon"]);
-    assert!(!ok && err.contains("--budget 'soon'"), "{err}");
+    assert!(
+        !ok && err.contains("'soon' for '--budget <DURATION>'")
+            && err.contains("expected a duration"),
+        "{err}"
+    );
     let (ok, err) = run(&["--quality", "best"]);
     assert!(
-        !ok && err.contains("--quality unknown quality 'best'"),
+        !ok && err.contains("'--quality <QUALITY>': unknown quality 'best'"),
         "{err}"
     );
     // UniCal's settings are the configuration's: a bad one is named by its key.

@@ -11,8 +11,6 @@
 //! pair by ICP and every camera–LiDAR pair by checkerboards, or mutual information where there
 //! are none, unified by a pose graph with the reference LiDAR fixed).
 
-use std::path::PathBuf;
-
 use crate::calib::{CalibrationFile, Rig};
 use crate::classical::icp::IcpConfig;
 use crate::classical::icp_calibrator::IcpCalibrator;
@@ -27,74 +25,7 @@ use crate::optim::divergence::Guarded;
 use crate::optim::edge_refine::EdgeRefiner;
 use crate::optim::runner::Calibrator;
 
-/// What `rigcal calibrate` was asked to do.
-#[derive(Clone, Debug, Default)]
-pub struct CalibrateArgs {
-    pub log: PathBuf,
-    /// `auto` (the pipeline), `unical` or a classical method.
-    pub method: String,
-    pub init: Option<PathBuf>,
-    /// Seconds from the start of the log, `START..END`.
-    pub segment: Option<String>,
-    /// Sensors to optimise (default all the method handles).
-    pub sensors: Vec<String>,
-    pub iterations: Option<usize>,
-    pub seed: u64,
-    /// Whether `--seed` was typed (over a `--config` file's seed).
-    pub seed_given: bool,
-    /// The sensor whose extrinsic stays fixed: the reference LiDAR of the classical methods
-    /// and of the pipeline's LiDAR stage; UniCal keeps it where it is.
-    pub root: Option<String>,
-    /// Degrees and centimetres every sensor of the initial guess is moved by (random axis and
-    /// direction drawn from `seed`; (0, 0) leaves it), to measure recovery from a known start.
-    pub perturb: (f64, f64),
-    pub out: PathBuf,
-    /// The pipeline and UniCal: the quality preset (`None`: the configuration's).
-    pub quality: Option<crate::pipeline::Quality>,
-    /// The pipeline and UniCal: the wall-time budget in seconds (`None`: the quality's).
-    pub budget_secs: Option<f64>,
-    /// The pipeline and UniCal: a configuration file (a `--print-config` output or an earlier
-    /// output).
-    pub config_file: Option<PathBuf>,
-}
-
-impl CalibrateArgs {
-    /// What a classical run was asked to do, for the file's provenance: the method as
-    /// `--method` names it, the seed, and every option given, keyed by the option's name with
-    /// underscores, so the run can be repeated from its output.
-    pub fn config(&self) -> serde_yaml::Mapping {
-        use serde_yaml::Value;
-        let mut m = serde_yaml::Mapping::new();
-        let mut put = |key: &str, value: Value| {
-            m.insert(Value::String(key.into()), value);
-        };
-        put("method", Value::String(self.method.clone()));
-        put("seed", Value::from(self.seed));
-        if let Some(n) = self.iterations {
-            put("iterations", Value::from(n as u64));
-        }
-        if !self.sensors.is_empty() {
-            put("sensors", Value::String(self.sensors.join(",")));
-        }
-        if let Some(root) = &self.root {
-            put("root", Value::String(root.clone()));
-        }
-        m
-    }
-
-    /// The perturbation of the initial guess when there is a valid one.
-    pub(crate) fn perturb_given(&self) -> Option<(f64, f64)> {
-        self.perturbation().ok().flatten()
-    }
-
-    /// The perturbation of the initial guess, `None` when there is none; an error for
-    /// negative, non-finite or too large values.
-    fn perturbation(&self) -> Result<Option<(f64, f64)>, String> {
-        let (deg, cm) = self.perturb;
-        crate::sim::synth::check_perturbation(deg, cm)?;
-        Ok((deg > 0.0 || cm > 0.0).then_some((deg, cm)))
-    }
-}
+pub use super::calibrate_args::CalibrateArgs;
 
 /// The reference LiDAR: `--root`, else the rig's first LiDAR.
 fn reference_lidar(args: &CalibrateArgs, rig: &Rig) -> Result<String, String> {
@@ -102,7 +33,7 @@ fn reference_lidar(args: &CalibrateArgs, rig: &Rig) -> Result<String, String> {
         Some(r) if rig.lidars().any(|l| &l.name == r) => Ok(r.clone()),
         Some(r) => Err(format!(
             "--root: '{r}' is not a LiDAR of {}; --method {} registers against a LiDAR",
-            args.log.display(),
+            args.log().display(),
             args.method
         )),
         None => rig
@@ -215,7 +146,7 @@ pub(crate) fn open_inputs(
     options: &crate::log::DriveOptions,
     perturbation: Option<(f64, f64)>,
 ) -> Result<(Drive, Rig, Vec<(i64, i64)>), String> {
-    let drive = Drive::open_with(&args.log, options).map_err(|e| e.to_string())?;
+    let drive = Drive::open_with(args.log(), options).map_err(|e| e.to_string())?;
     let mut rig = drive.rig.clone();
     if let Some(init) = &args.init {
         let imported = crate::interop::import::load_initial_guess(init, &rig)
@@ -240,14 +171,14 @@ pub(crate) fn open_inputs(
         rig = imported.rig;
     }
     if let Some((deg, cm)) = perturbation {
-        rig = crate::sim::synth::perturb_rig(&rig, deg, cm, args.seed);
+        rig = crate::sim::synth::perturb_rig(&rig, deg, cm, args.seed());
     }
     let asked = args.sensors.iter().map(|s| ("--sensors", s));
     for (option, s) in asked.chain(args.root.iter().map(|s| ("--root", s))) {
         if rig.sensor(s).is_none() {
             return Err(format!(
                 "{option}: '{s}' is not a sensor of {}",
-                args.log.display()
+                args.log().display()
             ));
         }
     }
@@ -257,7 +188,7 @@ pub(crate) fn open_inputs(
         Some(s) => {
             let segment = parse_segment(s, t0)?;
             if let Some(range) = range {
-                check_segment_in_log(s, segment, range, &args.log)?;
+                check_segment_in_log(s, segment, range, args.log())?;
             }
             vec![segment]
         }
@@ -300,16 +231,16 @@ pub fn calibrate(
             if pipeline_only.len() == 1 { "ies" } else { "y" }
         ));
     }
-    if let Ok(crate::util::OutputTarget::Direct(_)) = crate::util::output_target(&args.out) {
+    if let Ok(crate::util::OutputTarget::Direct(_)) = crate::util::output_target(args.out()) {
         return Err(format!(
             "--out {} is not a regular file (a device or pipe); calibrate writes its file at the start and replaces it every 30 s",
-            args.out.display()
+            args.out().display()
         ));
     }
-    if crate::util::same_file(&args.out, &args.log) {
+    if crate::util::same_file(args.out(), args.log()) {
         return Err(format!(
             "--out {} is the log itself; the calibration would overwrite it",
-            args.out.display()
+            args.out().display()
         ));
     }
     if !classical {
@@ -409,7 +340,7 @@ pub fn calibrate(
     let mut last = Vec::new();
     let checkpoint = |calibrator: &dyn Calibrator, last: &[(String, f64)], status: String| {
         document(args, &rig, calibrator, last, status)
-            .save(&args.out)
+            .save(args.out())
             .map_err(|e| e.to_string())
     };
     checkpoint(
@@ -440,21 +371,40 @@ pub fn calibrate(
             saved_at = std::time::Instant::now();
         }
     }
-    let result = result_rig(args, &rig, &calibrator);
+    let mut result = result_rig(args, &rig, &calibrator);
+    // Never worse: a camera method's result is checked by edge alignment on frames it did not
+    // fit, and a camera that aligns worse than at the initial guess is put back there.
+    let mut report = None;
+    if matches!(args.method.as_str(), "edge" | "mi" | "target") && calibrator.diverged().is_none() {
+        let reference = reference_lidar(args, &rig)?;
+        let cameras = selected_cameras(args, &rig);
+        let (checked, rig_to_write) = crate::pipeline::report::Report::for_cameras(
+            &drive, &rig, &result, &reference, &cameras, &segments,
+        );
+        result = rig_to_write;
+        report = Some(checked);
+    }
     let status = match calibrator.diverged() {
         Some(why) => format!("diverged: {why}"),
         None => "complete".into(),
     };
     let mut doc = document_of(args, &result, &calibrator, &last, status);
+    if let Some(r) = &report {
+        doc.metrics.insert("report".into(), r.to_yaml());
+    }
     record_skipped(&drive, &mut doc);
-    doc.save(&args.out).map_err(|e| e.to_string())?;
+    doc.save(args.out()).map_err(|e| e.to_string())?;
     if let Some(why) = calibrator.diverged() {
         return Err(format!(
             "{why}; that result is written to {}",
-            args.out.display()
+            args.out().display()
         ));
     }
-    Ok((doc, moves_report(&initial_guess, &result)))
+    let mut closing = moves_report(&initial_guess, &result);
+    if let Some(r) = &report {
+        closing.push_str(&r.to_text());
+    }
+    Ok((doc, closing))
 }
 
 /// Say how many frames the run skipped because they did not decode, and list them in `doc`'s
@@ -529,6 +479,31 @@ fn report_first_update(step: usize, seconds: f64) {
     eprintln!("{lead}first extrinsic update: step {step}, {seconds:.1} s into the optimisation");
 }
 
+/// `rigcal calibrate`: print the configuration (`--print-config`), or run the calibration
+/// with a progress bar and write the file; how far each sensor moved, the report and the time
+/// go to standard error.
+pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
+    use anyhow::Context;
+    if args.print_config {
+        let config = super::pipeline::resolve_config(args).map_err(anyhow::Error::msg)?;
+        return super::print_stdout(&config.to_yaml());
+    }
+    let started = std::time::Instant::now();
+    let mut bar = super::progress::Progress::new("calibrate", 1);
+    let (_, moves) = calibrate(args, &mut |done, total| bar.report(done, total))
+        .map_err(anyhow::Error::msg)
+        .with_context(|| format!("cannot calibrate {}", args.log().display()))?;
+    bar.finish();
+    // After the bar: on a terminal it would be drawn over the report.
+    eprint!("{moves}");
+    eprintln!(
+        "wrote {} in {:.1} s",
+        args.out().display(),
+        started.elapsed().as_secs_f64()
+    );
+    Ok(())
+}
+
 /// Seconds between checkpoints of a running calibration.
 const CHECKPOINT_SECS: f64 = 30.0;
 
@@ -571,7 +546,7 @@ fn document_of(
 ) -> CalibrationFile {
     let mut doc = CalibrationFile::from_rig(result);
     let v = |s: String| serde_yaml::Value::String(s);
-    let input = std::path::absolute(&args.log).unwrap_or_else(|_| args.log.clone());
+    let input = std::path::absolute(args.log()).unwrap_or_else(|_| args.log().to_path_buf());
     doc.provenance
         .insert("input".into(), v(input.display().to_string()));
     doc.provenance
@@ -591,7 +566,10 @@ fn document_of(
     if let Ok(Some((deg, cm))) = args.perturbation() {
         doc.provenance.insert(
             "init_perturbed".into(),
-            v(format!("{deg}° and {cm} cm per sensor, seed {}", args.seed)),
+            v(format!(
+                "{deg}° and {cm} cm per sensor, seed {}",
+                args.seed()
+            )),
         );
     }
     doc.provenance.insert(

@@ -36,23 +36,39 @@ use crate::optim::photo_consistency::{PhotoConfig, PhotoProblem, lidar_map};
 /// or an image's edge search, so more is hours of work, and a larger number is a slip.
 pub const MAX_FRAMES: usize = 1000;
 
-/// What `rigcal eval` was asked to do.
-#[derive(Clone, Debug)]
+// What `rigcal eval` was asked to do: its options, defined once (clap derives the flags; a
+// plain comment, as clap would take a doc comment for the subcommand's description).
+#[derive(Clone, Debug, clap::Args)]
 pub struct EvalArgs {
+    /// The reference: a native calibration file or a dataset's ground_truth.json.
+    #[arg(long)]
     pub ground_truth: PathBuf,
+    /// The calibration to measure (native file).
+    #[arg(long)]
     pub calibration: PathBuf,
+    /// A log to measure the alignment on.
     pub log: Option<PathBuf>,
-    /// Root sensor (default: the reference's first LiDAR present in both).
+    /// Root sensor for the alignment (default: the reference's first LiDAR).
+    #[arg(long)]
     pub root: Option<String>,
-    /// Frames per pair for the data metrics.
+    /// Frames per sensor pair for the data metrics (1–1000).
+    #[arg(long, default_value_t = 3)]
     pub frames: usize,
+    /// Also measure the checkerboard corner re-projection error (logs with boards).
+    #[arg(long)]
     pub checkerboard: bool,
-    /// Also the photometric consistency of every camera over the LiDAR map, and its best delay.
+    /// Also measure every camera's photometric consistency over the LiDAR map (texture-free)
+    /// and the image delay at which it is best
+    #[arg(long)]
     pub photometric: bool,
-    /// With a log: the cameras' rolling-shutter readout as `FIRST..LAST` milliseconds from each
-    /// image's stamp ([`crate::geometry::RowTimes::parse_millis`]) for the edge-alignment and
-    /// photometric metrics; `None`: a global shutter.
+    /// With a log: the cameras have a rolling shutter whose readout began FIRST and ended
+    /// LAST milliseconds after each image's stamp (as calibrate's option of that name), for
+    /// the edge-alignment and photometric metrics
+    #[arg(long, value_name = "FIRST..LAST", allow_hyphen_values = true)]
     pub camera_readout_ms: Option<String>,
+    /// Also write the report as JSON.
+    #[arg(long)]
+    pub json: Option<PathBuf>,
 }
 
 impl Default for EvalArgs {
@@ -67,8 +83,28 @@ impl Default for EvalArgs {
             checkerboard: false,
             photometric: false,
             camera_readout_ms: None,
+            json: None,
         }
     }
+}
+
+/// `rigcal eval`: the report as Markdown on standard output (a progress bar while the data
+/// metrics run), and as JSON where `--json` asks.
+pub fn run(args: &EvalArgs) -> anyhow::Result<()> {
+    use anyhow::Context;
+    let mut bar = super::progress::Progress::new("eval", 1);
+    let report = evaluate(args, &mut |done, total| bar.report(done, total))
+        .map_err(anyhow::Error::msg)
+        .context("cannot evaluate")?;
+    bar.finish();
+    super::print_stdout(&report.to_markdown())?;
+    if let Some(path) = &args.json {
+        let text = serde_json::to_string_pretty(&report)?;
+        crate::util::write_atomic(path, text.as_bytes())
+            .with_context(|| format!("cannot write {}", path.display()))?;
+        eprintln!("wrote {}", path.display());
+    }
+    Ok(())
 }
 
 /// One metric of one sensor pair, for the calibration and for the reference.

@@ -2,9 +2,37 @@
 //! what is missing for calibration, as plain text.
 
 use std::fmt::Write;
+use std::path::PathBuf;
 
 use crate::calib::SensorKind;
 use crate::log::{Drive, StampSource};
+
+// What `rigcal inspect` takes (a plain comment: clap would take a doc comment for the
+// subcommand's description).
+#[derive(Clone, Debug, clap::Args)]
+pub struct InspectArgs {
+    /// The log (MCAP, ROS 2 or Foxglove schemas).
+    pub log: PathBuf,
+    /// Fixed frame of the trajectory (default: the parent of the densest /tf edge).
+    #[arg(long)]
+    pub fixed_frame: Option<String>,
+    /// The vehicle frame (default: the child of that edge).
+    #[arg(long)]
+    pub vehicle_frame: Option<String>,
+}
+
+/// `rigcal inspect`: open the log with the frames asked for and print its report.
+pub fn run(args: &InspectArgs) -> anyhow::Result<()> {
+    use anyhow::Context;
+    let options = crate::log::DriveOptions {
+        fixed_frame: args.fixed_frame.clone(),
+        vehicle_frame: args.vehicle_frame.clone(),
+        ..Default::default()
+    };
+    let drive = Drive::open_with(&args.log, &options)
+        .with_context(|| format!("cannot inspect {}", args.log.display()))?;
+    super::print_stdout(&report(&drive))
+}
 
 fn secs(nanos: i64) -> f64 {
     nanos as f64 * 1e-9

@@ -44,8 +44,8 @@ pub fn resolve_config(args: &CalibrateArgs) -> Result<PipelineConfig, String> {
         config.budget_secs = Some(b);
         config.iterations = None;
     }
-    if args.seed_given || args.config_file.is_none() {
-        config.seed = args.seed;
+    if args.seed.is_some() || args.config_file.is_none() {
+        config.seed = args.seed();
     }
     if let Some(n) = args.iterations {
         config.iterations = Some(n);
@@ -122,7 +122,9 @@ pub fn calibrate_auto(
         if last_write {
             record_skipped(&drive, &mut doc);
         }
-        doc.save(&args.out).map_err(|e| e.to_string()).map(|()| doc)
+        doc.save(args.out())
+            .map_err(|e| e.to_string())
+            .map(|()| doc)
     };
     let steps = run.max_steps();
     write(&run, format!("running: step 0 of {steps}"), &[])?;
@@ -163,7 +165,7 @@ pub fn calibrate_auto(
         write(&run, format!("diverged: {why}"), &last)?;
         return Err(format!(
             "{why}; that result is written to {}",
-            args.out.display()
+            args.out().display()
         ));
     }
     let doc = write(&run, "complete".into(), &last)?;
@@ -192,7 +194,8 @@ fn document(
 ) -> CalibrationFile {
     let mut doc = CalibrationFile::from_rig(rig);
     let v = |s: String| serde_yaml::Value::String(s);
-    let input: PathBuf = std::path::absolute(&args.log).unwrap_or_else(|_| args.log.clone());
+    let input: PathBuf =
+        std::path::absolute(args.log()).unwrap_or_else(|_| args.log().to_path_buf());
     let p = &mut doc.provenance;
     p.insert("input".into(), v(input.display().to_string()));
     p.insert(
@@ -221,7 +224,10 @@ fn document(
     if let Some((deg, cm)) = args.perturb_given() {
         p.insert(
             "init_perturbed".into(),
-            v(format!("{deg}° and {cm} cm per sensor, seed {}", args.seed)),
+            v(format!(
+                "{deg}° and {cm} cm per sensor, seed {}",
+                args.seed()
+            )),
         );
     }
     p.insert(

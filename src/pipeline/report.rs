@@ -102,6 +102,36 @@ pub struct SensorReport {
     pub why: String,
 }
 
+impl SensorReport {
+    /// A sensor's report before any check: every axis fixed (`fixed`) or not yet known.
+    fn unchecked(sensor: &crate::calib::Sensor, fixed: bool) -> Self {
+        SensorReport {
+            name: sensor.name.clone(),
+            kind: match sensor.kind {
+                SensorKind::Camera => "camera",
+                SensorKind::Lidar => "lidar",
+            },
+            moved_deg: 0.0,
+            moved_cm: 0.0,
+            axes: AXES
+                .iter()
+                .map(|&axis| AxisReport {
+                    axis,
+                    observed: if fixed {
+                        Observed::Fixed
+                    } else {
+                        Observed::Unknown
+                    },
+                    sigma: None,
+                })
+                .collect(),
+            checks: Vec::new(),
+            verdict: Verdict::CheckIt,
+            why: String::new(),
+        }
+    }
+}
+
 /// The whole report.
 #[derive(Clone, Debug, Default, PartialEq, Serialize)]
 pub struct Report {
@@ -133,30 +163,7 @@ impl Report {
             };
             let start = s.vehicle_from_sensor;
             let fixed = !asked(&s.name) || plan.request.root.as_deref() == Some(s.name.as_str());
-            let mut report = SensorReport {
-                name: s.name.clone(),
-                kind: match s.kind {
-                    SensorKind::Camera => "camera",
-                    SensorKind::Lidar => "lidar",
-                },
-                moved_deg: 0.0,
-                moved_cm: 0.0,
-                axes: AXES
-                    .iter()
-                    .map(|&axis| AxisReport {
-                        axis,
-                        observed: if fixed {
-                            Observed::Fixed
-                        } else {
-                            Observed::Unknown
-                        },
-                        sigma: None,
-                    })
-                    .collect(),
-                checks: Vec::new(),
-                verdict: Verdict::CheckIt,
-                why: String::new(),
-            };
+            let mut report = SensorReport::unchecked(s, fixed);
             let mut end = r.vehicle_from_sensor;
             if fixed {
                 report.verdict = Verdict::Good;
@@ -206,6 +213,53 @@ impl Report {
         let report = Report {
             sensors,
             method: "cameras: sandwich covariance of the edge-alignment cost against the reference LiDAR over independent frames; LiDARs: inverse point-to-plane ICP information (neighbouring points counted as one); σ in each sensor's own frame".into(),
+        };
+        (report, out)
+    }
+
+    /// A camera method's check (`edge`, `mi`, `target`): every camera of `cameras` that
+    /// `result` moved from `initial`, checked against `reference` by edge alignment on frames
+    /// spread over `segments_nanos` (eight, not the method's own: those are three or four
+    /// frames spread the same way, so on a log of more than a few dozen sweeps the check's are
+    /// others). A camera whose edges align worse than at the initial guess goes back to it,
+    /// with the verdict "failed" and why. Returns the report and the rig to write.
+    pub fn for_cameras(
+        drive: &Drive,
+        initial: &Rig,
+        result: &Rig,
+        reference: &str,
+        cameras: &[String],
+        segments_nanos: &[(i64, i64)],
+    ) -> (Report, Rig) {
+        let mut out = result.clone();
+        let mut sensors = Vec::new();
+        for s in initial.sensors.iter().filter(|s| cameras.contains(&s.name)) {
+            let Some(r) = result.sensor(&s.name) else {
+                continue;
+            };
+            let start = s.vehicle_from_sensor;
+            let mut report = SensorReport::unchecked(s, false);
+            let end = camera_report(
+                drive,
+                result,
+                &s.name,
+                reference,
+                (start, r.vehicle_from_sensor),
+                None,
+                segments_nanos,
+                &mut report,
+            );
+            let (rot, trans) = start.difference(end);
+            report.moved_deg = rot.to_degrees();
+            report.moved_cm = trans * 100.0;
+            if let Some(o) = out.sensor_mut(&s.name) {
+                o.vehicle_from_sensor = end;
+            }
+            sensors.push(report);
+        }
+        let report = Report {
+            sensors,
+            method: "cameras: sandwich covariance of the edge-alignment cost against the reference LiDAR over independent frames; σ in each camera's own frame".into(),
         };
         (report, out)
     }
