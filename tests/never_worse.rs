@@ -8,7 +8,9 @@
 
 use glam::DVec3;
 use rigcal::calib::Rig;
-use rigcal::pipeline::report::{Report, Verdict};
+use rigcal::log::{Drive, spread_evenly};
+use rigcal::optim::edge_align::{held_out_pairs, images_nearest};
+use rigcal::pipeline::report::{MethodFit, Report, Verdict};
 use rigcal::sim::rigs::{RigPreset, SimRig};
 use rigcal::sim::synth::{SynthConfig, synthesize};
 use rigcal::sim::trajectories::TrajectoryKind;
@@ -24,27 +26,43 @@ fn turned(rig: &Rig, camera: &str, deg: f64) -> Rig {
     out
 }
 
-#[test]
-fn a_camera_result_worse_than_the_start_is_put_back_and_failed_and_a_better_one_kept() {
-    let tmp = tempfile::tempdir().unwrap();
+/// A small figure-8 drive of the PandaSet rig with its front camera only, `(seconds, camera
+/// rate in Hz)`, and its truth.
+fn front_camera_drive(
+    dir: &std::path::Path,
+    seed: u64,
+    (secs, rate_hz): (f64, f64),
+) -> (Drive, Rig) {
     let mut rig = SimRig::preset(RigPreset::Pandaset);
     rig.cameras.retain(|c| c.name == "front_camera");
-    let mut cfg = SynthConfig::new(SceneKind::Urban, rig, TrajectoryKind::Figure8, 4.0, 83);
+    let mut cfg = SynthConfig::new(SceneKind::Urban, rig, TrajectoryKind::Figure8, secs, seed);
     cfg.scale = 0.25;
-    cfg.camera_rate_hz = 2.0;
-    let (log, gt) = (tmp.path().join("d.mcap"), tmp.path().join("gt.yaml"));
+    cfg.camera_rate_hz = rate_hz;
+    let (log, gt) = (dir.join("d.mcap"), dir.join("gt.yaml"));
     synthesize(&cfg, &log, &gt, &mut |_, _| {}).unwrap();
-    let drive = rigcal::log::Drive::open(&log).unwrap();
     let truth = rigcal::calib::CalibrationFile::load(&gt)
         .unwrap()
         .to_rig(&gt)
         .unwrap();
+    (Drive::open(&log).unwrap(), truth)
+}
+
+#[test]
+fn a_camera_result_worse_than_the_start_is_put_back_and_failed_and_a_better_one_kept() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (drive, truth) = front_camera_drive(tmp.path(), 83, (4.0, 2.0));
     let cameras = vec!["front_camera".to_string()];
     let pose = |rig: &Rig| rig.sensor("front_camera").unwrap().vehicle_from_sensor;
+    let fit = MethodFit {
+        reference: "pandar64",
+        cameras: &cameras,
+        fitted_sweeps: 4,
+        ..MethodFit::default()
+    };
 
     // A method that ran off: the start is right, the result 2° away.
     let worse = turned(&truth, "front_camera", 2.0);
-    let (report, written) = Report::for_cameras(&drive, &truth, &worse, "pandar64", &cameras, &[]);
+    let (report, written) = Report::for_cameras(&drive, &truth, &worse, &fit, &[]);
     let camera = &report.sensors[0];
     assert_eq!(camera.verdict, Verdict::Failed, "{}", report.to_text());
     assert!(
@@ -55,10 +73,11 @@ fn a_camera_result_worse_than_the_start_is_put_back_and_failed_and_a_better_one_
     assert_eq!(pose(&written), pose(&truth));
     let check = &camera.checks[0];
     assert!(check.after <= check.before, "{check:?}");
+    assert!(check.what.contains("none of them fitted"), "{}", check.what);
 
     // A method that did its job: the start 2° off, the result the truth.
     let start = turned(&truth, "front_camera", 2.0);
-    let (report, written) = Report::for_cameras(&drive, &start, &truth, "pandar64", &cameras, &[]);
+    let (report, written) = Report::for_cameras(&drive, &start, &truth, &fit, &[]);
     assert_ne!(
         report.sensors[0].verdict,
         Verdict::Failed,
@@ -66,4 +85,49 @@ fn a_camera_result_worse_than_the_start_is_put_back_and_failed_and_a_better_one_
         report.to_text()
     );
     assert_eq!(pose(&written), pose(&truth));
+
+    // A result the method itself rejects (mutual information on its bound) is failed and
+    // put back, however its edges align.
+    let failures = vec![("front_camera".to_string(), "ran to its bounds".to_string())];
+    let rejected = MethodFit {
+        failures: &failures,
+        ..fit.clone()
+    };
+    let (report, written) = Report::for_cameras(&drive, &start, &truth, &rejected, &[]);
+    assert_eq!(report.sensors[0].verdict, Verdict::Failed);
+    assert!(report.sensors[0].why.starts_with("ran to its bounds"));
+    assert_eq!(pose(&written), pose(&start));
+}
+
+#[test]
+fn the_check_keeps_off_the_frames_a_method_fitted_unless_the_log_has_no_others() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (drive, _) = front_camera_drive(tmp.path(), 84, (3.0, 4.0));
+    let pair = ("front_camera", "pandar64");
+    let sweeps = drive.frames_within("pandar64", &[]);
+    assert!(sweeps.len() >= 8, "{} sweeps", sweeps.len());
+
+    // A method that fitted four sweeps spread evenly: none of the check's images is theirs.
+    let fitted = images_nearest(&drive, pair.0, pair.1, &spread_evenly(&sweeps, 4));
+    assert_eq!(fitted.len(), 4);
+    let (pairs, held_out) = held_out_pairs(&drive, pair, 4, &[], &fitted).unwrap();
+    assert!(held_out);
+    assert_eq!(pairs.len(), 4);
+    for p in &pairs {
+        assert!(
+            !fitted.contains(&p.image_index),
+            "{} was fitted",
+            p.image_index
+        );
+    }
+    // Without the exclusion the same spread lands on the fitted images themselves.
+    let (same, _) = held_out_pairs(&drive, pair, 4, &[], &[]).unwrap();
+    let same: Vec<usize> = same.iter().map(|p| p.image_index).collect();
+    assert_eq!(same, fitted);
+
+    // Every image fitted: the check falls back to them and says so.
+    let every: Vec<usize> = (0..drive.stream(pair.0).unwrap().frames.len()).collect();
+    let (pairs, held_out) = held_out_pairs(&drive, pair, 4, &[], &every).unwrap();
+    assert!(!held_out);
+    assert_eq!(pairs.len(), 4);
 }

@@ -95,6 +95,17 @@ impl Calibrator for MiCalibrator {
         self.rig.clone()
     }
 
+    /// A camera whose best pose sits on the search's bounds: the mutual information still rose
+    /// towards the bound, so the result is where the search was stopped, not a maximum.
+    fn failures(&self) -> Vec<(String, String)> {
+        crate::optim::runner::bound_failures(
+            "mutual information",
+            self.problems
+                .iter()
+                .map(|(p, s)| (p.camera.as_str(), s.at_bounds())),
+        )
+    }
+
     fn best(&self) -> Rig {
         // Steps are accepted only when MI does not drop: current is the best.
         self.rig.clone()

@@ -421,6 +421,28 @@ impl MiSearch {
         self.converged
     }
 
+    /// The axes of the best pose that sit on the search's bounds, as text (`rot y at +2°,
+    /// z at −20 cm`); empty when the best pose is inside them. A maximum on a bound is where
+    /// the search was stopped, not a maximum of mutual information.
+    pub fn at_bounds(&self) -> String {
+        let (r, t) = self.bounds;
+        let names = ["rot x", "rot y", "rot z", "x", "y", "z"];
+        self.x
+            .iter()
+            .enumerate()
+            .filter(|(_, v)| v.abs() >= 1.0 - 1e-9)
+            .map(|(i, v)| {
+                let sign = if *v > 0.0 { '+' } else { '−' };
+                if i < 3 {
+                    format!("{} at {sign}{:.1}°", names[i], r.to_degrees())
+                } else {
+                    format!("{} at {sign}{:.0} cm", names[i], t * 100.0)
+                }
+            })
+            .collect::<Vec<_>>()
+            .join(", ")
+    }
+
     /// One iteration: a central-difference gradient (12 evaluations, in parallel), the
     /// Barzilai–Borwein step, projection onto the bounds, halving until MI does not drop.
     pub fn step(&mut self, problem: &MiProblem) {
@@ -486,6 +508,25 @@ impl MiSearch {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_search_on_its_bounds_names_them() {
+        let mut search = MiSearch {
+            start: Rigid::IDENTITY,
+            x: [0.3, 0.0, 0.0, 0.0, 0.5, 0.0],
+            previous: None,
+            gamma: 0.05,
+            best_mi: 0.0,
+            best: Rigid::IDENTITY,
+            iterations: 0,
+            converged: true,
+            bounds: (2f64.to_radians(), 0.2),
+        };
+        assert_eq!(search.at_bounds(), "");
+        search.x[1] = 1.0;
+        search.x[5] = -1.0;
+        assert_eq!(search.at_bounds(), "rot y at +2.0°, z at −20 cm");
+    }
 
     #[test]
     fn mi_of_independent_and_dependent_variables() {

@@ -27,6 +27,11 @@ use crate::optim::runner::Calibrator;
 
 pub use super::calibrate_args::CalibrateArgs;
 
+/// How many sweeps (each with its nearest image) edge alignment and mutual information fit.
+const EDGE_FRAMES: usize = 4;
+const MI_FRAMES: usize = 3;
+const EDGE_HOLDS_TRANSLATION: &str = "edge alignment turns the camera only and keeps the initial guess's translation (at street distances a few centimetres move a silhouette by under a pixel)";
+
 /// The reference LiDAR: `--root`, else the rig's first LiDAR.
 fn reference_lidar(args: &CalibrateArgs, rig: &Rig) -> Result<String, String> {
     match &args.root {
@@ -255,65 +260,60 @@ pub fn calibrate(
     // moved from it.
     let initial_guess = rig.clone();
     check_sensor_kinds(args, &rig)?;
+    // Every classical method registers against one LiDAR; the camera methods fit
+    // `fitted_sweeps` of its sweeps (spread evenly), which their check then stays off.
+    let reference = reference_lidar(args, &rig)?;
+    let cameras = selected_cameras(args, &rig);
+    let target_config = TargetConfig {
+        iterations: args
+            .iterations
+            .unwrap_or(TargetConfig::default().iterations),
+        ..TargetConfig::default()
+    };
+    let fitted_sweeps = match args.method.as_str() {
+        "edge" => EDGE_FRAMES,
+        "mi" => MI_FRAMES,
+        _ => target_config.frames,
+    };
     let calibrator: Box<dyn Calibrator> = match args.method.as_str() {
-        "edge" => {
-            let lidar = reference_lidar(args, &rig)?;
-            let cameras = selected_cameras(args, &rig);
-            Box::new(
-                EdgeRefiner::new(
-                    &drive,
-                    &rig,
-                    (&lidar, &cameras),
-                    4,
-                    &segments,
-                    drive.camera_readout,
-                )
-                .map_err(|e| e.to_string())?,
-            )
-        }
-        "icp" => {
-            let reference = reference_lidar(args, &rig)?;
-            Box::new(IcpCalibrator::from_drive(
+        "edge" => Box::new(
+            EdgeRefiner::new(
                 &drive,
                 &rig,
-                &reference,
-                3,
+                (&reference, &cameras),
+                EDGE_FRAMES,
                 &segments,
-                IcpConfig::default(),
-            )?)
-        }
+                drive.camera_readout,
+            )
+            .map_err(|e| e.to_string())?,
+        ),
+        "icp" => Box::new(IcpCalibrator::from_drive(
+            &drive,
+            &rig,
+            &reference,
+            3,
+            &segments,
+            IcpConfig::default(),
+        )?),
         "mi" => {
-            let reference = reference_lidar(args, &rig)?;
-            let cameras = selected_cameras(args, &rig);
             let config = MiConfig {
                 iterations: args.iterations.unwrap_or(MiConfig::default().iterations),
                 ..MiConfig::default()
             };
             Box::new(MiCalibrator::from_drive(
-                &drive, &rig, &reference, &cameras, 3, &segments, config,
+                &drive, &rig, &reference, &cameras, MI_FRAMES, &segments, config,
             )?)
         }
-        "target" => {
-            let reference = reference_lidar(args, &rig)?;
-            let cameras = selected_cameras(args, &rig);
-            let config = TargetConfig {
-                iterations: args
-                    .iterations
-                    .unwrap_or(TargetConfig::default().iterations),
-                ..TargetConfig::default()
-            };
-            Box::new(TargetCalibrator::from_drive(
-                &drive,
-                &rig,
-                &reference,
-                &cameras,
-                &segments,
-                config,
-                &Default::default(),
-            )?)
-        }
+        "target" => Box::new(TargetCalibrator::from_drive(
+            &drive,
+            &rig,
+            &reference,
+            &cameras,
+            &segments,
+            target_config,
+            &Default::default(),
+        )?),
         "pose-graph" => {
-            let reference = reference_lidar(args, &rig)?;
             let cal = PoseGraphCalibrator::from_drive(
                 &drive,
                 &rig,
@@ -376,11 +376,16 @@ pub fn calibrate(
     // fit, and a camera that aligns worse than at the initial guess is put back there.
     let mut report = None;
     if matches!(args.method.as_str(), "edge" | "mi" | "target") && calibrator.diverged().is_none() {
-        let reference = reference_lidar(args, &rig)?;
-        let cameras = selected_cameras(args, &rig);
-        let (checked, rig_to_write) = crate::pipeline::report::Report::for_cameras(
-            &drive, &rig, &result, &reference, &cameras, &segments,
-        );
+        let failures = calibrator.failures();
+        let fit = crate::pipeline::report::MethodFit {
+            reference: &reference,
+            cameras: &cameras,
+            fitted_sweeps,
+            failures: &failures,
+            held_translation: (args.method == "edge").then_some(EDGE_HOLDS_TRANSLATION),
+        };
+        let (checked, rig_to_write) =
+            crate::pipeline::report::Report::for_cameras(&drive, &rig, &result, &fit, &segments);
         result = rig_to_write;
         report = Some(checked);
     }

@@ -59,6 +59,10 @@ impl<C: Calibrator> Calibrator for Guarded<C> {
         self.inner.name()
     }
 
+    fn failures(&self) -> Vec<(String, String)> {
+        self.inner.failures()
+    }
+
     fn max_steps(&self) -> usize {
         self.inner.max_steps()
     }

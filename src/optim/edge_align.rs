@@ -82,28 +82,73 @@ pub fn sweep_image_pairs(
     frames: usize,
     segments_nanos: &[(i64, i64)],
 ) -> Result<Vec<SweepImagePair>, AlignError> {
+    Ok(held_out_pairs(drive, (camera, lidar), frames, segments_nanos, &[])?.0)
+}
+
+/// The image of `camera` nearest in time to `stamp_nanos` (by the log's index; nothing is
+/// decoded).
+pub fn nearest_image(drive: &Drive, camera: &str, stamp_nanos: i64) -> Option<usize> {
+    let frames = &drive.stream(camera)?.frames;
+    (0..frames.len()).min_by_key(|&j| (frames[j].stamp_nanos - stamp_nanos).abs())
+}
+
+/// The images of `camera` nearest to the sweeps `sweeps` of `lidar`: the ones a method that
+/// fits those sweeps sees.
+pub fn images_nearest(drive: &Drive, camera: &str, lidar: &str, sweeps: &[usize]) -> Vec<usize> {
+    let Some(stream) = drive.stream(lidar) else {
+        return Vec::new();
+    };
+    sweeps
+        .iter()
+        .filter_map(|&i| nearest_image(drive, camera, stream.frames.get(i)?.stamp_nanos))
+        .collect()
+}
+
+/// As [`sweep_image_pairs`], but spread over the sweeps whose nearest image is none of
+/// `fitted_images` (the frames a fit used), so a check judges the fit on data it did not see.
+/// Where no such sweep is left (a log of a few frames) every sweep is a candidate; the flag
+/// says whether the pairs are held out.
+pub fn held_out_pairs(
+    drive: &Drive,
+    (camera, lidar): (&str, &str),
+    frames: usize,
+    segments_nanos: &[(i64, i64)],
+    fitted_images: &[usize],
+) -> Result<(Vec<SweepImagePair>, bool), AlignError> {
     let cam_stream = drive
         .stream(camera)
         .ok_or_else(|| AlignError::Setup(format!("no images for '{camera}' in the log")))?;
-    if drive.stream(lidar).is_none() {
+    let Some(lidar_stream) = drive.stream(lidar) else {
         return Err(AlignError::Setup(format!(
             "no sweeps for '{lidar}' in the log"
         )));
-    }
+    };
     let usable = drive.frames_within(lidar, segments_nanos);
     if usable.is_empty() {
         return Err(AlignError::Setup(format!(
             "no sweep of '{lidar}' inside the trajectory and the selected segments"
         )));
     }
+    let unfitted: Vec<usize> = if fitted_images.is_empty() {
+        usable.clone()
+    } else {
+        usable
+            .iter()
+            .copied()
+            .filter(|&i| {
+                nearest_image(drive, camera, lidar_stream.frames[i].stamp_nanos)
+                    .is_some_and(|j| !fitted_images.contains(&j))
+            })
+            .collect()
+    };
+    let held_out = !unfitted.is_empty();
+    let candidates = if held_out { unfitted } else { usable };
     let mut out = Vec::with_capacity(frames);
-    for sweep_index in crate::log::spread_evenly(&usable, frames) {
+    for sweep_index in crate::log::spread_evenly(&candidates, frames) {
         let Some(sweep) = drive.sweep_or_skip(lidar, sweep_index) else {
             continue;
         };
-        let Some(image_index) = (0..cam_stream.frames.len())
-            .min_by_key(|&j| (cam_stream.frames[j].stamp_nanos - sweep.stamp_nanos).abs())
-        else {
+        let Some(image_index) = nearest_image(drive, camera, sweep.stamp_nanos) else {
             continue;
         };
         let image_stamp_nanos = cam_stream.frames[image_index].stamp_nanos;
@@ -126,7 +171,7 @@ pub fn sweep_image_pairs(
             "no image of '{camera}' within 200 ms of a sweep of '{lidar}'"
         )));
     }
-    Ok(out)
+    Ok((out, held_out))
 }
 
 /// Silhouette points of `sweep` moved into the vehicle frame at `image_stamp_nanos`.
@@ -282,6 +327,19 @@ impl EdgeAlignment {
         segments_nanos: &[(i64, i64)],
         readout: RowTimes,
     ) -> Result<Self, AlignError> {
+        let pairs = sweep_image_pairs(drive, camera, lidar, frames, segments_nanos)?;
+        Self::from_pairs(drive, rig, (camera, lidar), pairs, readout)
+    }
+
+    /// Prepare the frames of `pairs` (from [`sweep_image_pairs`] or [`held_out_pairs`]) as
+    /// [`EdgeAlignment::from_drive`] does.
+    pub fn from_pairs(
+        drive: &Drive,
+        rig: &Rig,
+        (camera, lidar): (&str, &str),
+        pairs: Vec<SweepImagePair>,
+        readout: RowTimes,
+    ) -> Result<Self, AlignError> {
         let cam = rig
             .sensor(camera)
             .ok_or_else(|| AlignError::Setup(format!("no sensor '{camera}' in the rig")))?;
@@ -293,8 +351,8 @@ impl EdgeAlignment {
             .sensor(lidar)
             .ok_or_else(|| AlignError::Setup(format!("no sensor '{lidar}' in the rig")))?
             .vehicle_from_sensor;
-        let mut out = Vec::with_capacity(frames);
-        for pair in sweep_image_pairs(drive, camera, lidar, frames, segments_nanos)? {
+        let mut out = Vec::with_capacity(pairs.len());
+        for pair in pairs {
             let Some(image) = drive.image_or_skip(camera, pair.image_index) else {
                 continue;
             };
@@ -469,6 +527,27 @@ impl CompassSearch {
 
     pub fn converged(&self) -> bool {
         self.step_rad < self.min_step_rad && (!self.translate || self.step_m < self.min_step_m)
+    }
+
+    /// Which trust region the best pose stopped on (within one last step of it), as text
+    /// (`rotation 2.0°`); empty inside both. A minimum on the trust region is where the search
+    /// was stopped, not a minimum of the cost.
+    pub fn at_bounds(&self) -> String {
+        let (rotation, translation) = self.start.difference(self.best);
+        let mut out = Vec::new();
+        if rotation >= self.max_rotation_rad - 2.0 * self.min_step_rad {
+            out.push(format!(
+                "rotation {:.1}°",
+                self.max_rotation_rad.to_degrees()
+            ));
+        }
+        if self.translate && translation >= self.max_translation_m - 2.0 * self.min_step_m {
+            out.push(format!(
+                "translation {:.0} cm",
+                self.max_translation_m * 100.0
+            ));
+        }
+        out.join(", ")
     }
 
     /// One round of probes (±step on each searched axis); returns whether the pose improved.

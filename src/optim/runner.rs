@@ -33,6 +33,11 @@ pub trait Calibrator: Send {
     fn current(&self) -> Rig;
     /// The best rig seen (lowest total loss).
     fn best(&self) -> Rig;
+    /// Sensors whose result the method itself rejects, each with why (e.g. mutual
+    /// information's search stopped at its bound); the front end keeps their initial guess.
+    fn failures(&self) -> Vec<(String, String)> {
+        Vec::new()
+    }
 }
 
 /// A message from the worker.
@@ -237,43 +242,53 @@ fn worker(c: &mut Guarded<Box<dyn Calibrator>>, control: &AtomicU8, tx: &Sender<
     });
 }
 
-/// A borrowed calibrator steps as the one it borrows (so a caller can wrap one in [`Guarded`]).
-impl<C: Calibrator + ?Sized> Calibrator for &mut C {
-    fn name(&self) -> &str {
-        (**self).name()
-    }
-    fn max_steps(&self) -> usize {
-        (**self).max_steps()
-    }
-    fn step(&mut self) -> StepReport {
-        (**self).step()
-    }
-    fn current(&self) -> Rig {
-        (**self).current()
-    }
-    fn best(&self) -> Rig {
-        (**self).best()
-    }
+/// [`Calibrator::failures`] of searches bounded around the initial guess: each sensor with the
+/// bounds its best pose sits on (empty: inside them) fails where it sits on one, since a pose on
+/// a bound is where `method` was stopped, not an optimum.
+pub fn bound_failures<'a>(
+    method: &str,
+    at_bounds: impl Iterator<Item = (&'a str, String)>,
+) -> Vec<(String, String)> {
+    at_bounds
+        .filter(|(_, at)| !at.is_empty())
+        .map(|(name, at)| {
+            (
+                name.to_string(),
+                format!(
+                    "{method} ran to its bounds ({at} from the initial guess): a pose on a bound is not an optimum"
+                ),
+            )
+        })
+        .collect()
 }
 
-/// A boxed calibrator steps as the one inside it (so a front end can wrap one in [`Guarded`]).
-impl<C: Calibrator + ?Sized> Calibrator for Box<C> {
-    fn name(&self) -> &str {
-        (**self).name()
-    }
-    fn max_steps(&self) -> usize {
-        (**self).max_steps()
-    }
-    fn step(&mut self) -> StepReport {
-        (**self).step()
-    }
-    fn current(&self) -> Rig {
-        (**self).current()
-    }
-    fn best(&self) -> Rig {
-        (**self).best()
-    }
+/// A borrowed or boxed calibrator steps as the one inside it (so a caller or a front end can
+/// wrap one in [`Guarded`]).
+macro_rules! forward_calibrator {
+    ($($wrapper:ty),*) => {$(
+        impl<C: Calibrator + ?Sized> Calibrator for $wrapper {
+            fn name(&self) -> &str {
+                (**self).name()
+            }
+            fn max_steps(&self) -> usize {
+                (**self).max_steps()
+            }
+            fn step(&mut self) -> StepReport {
+                (**self).step()
+            }
+            fn current(&self) -> Rig {
+                (**self).current()
+            }
+            fn best(&self) -> Rig {
+                (**self).best()
+            }
+            fn failures(&self) -> Vec<(String, String)> {
+                (**self).failures()
+            }
+        }
+    )*};
 }
+forward_calibrator!(&mut C, Box<C>);
 
 #[cfg(test)]
 mod tests {

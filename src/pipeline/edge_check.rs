@@ -16,7 +16,7 @@ use glam::DVec3;
 use crate::calib::Rig;
 use crate::geometry::Rigid;
 use crate::log::Drive;
-use crate::optim::edge_align::EdgeAlignment;
+use crate::optim::edge_align::{AlignError, EdgeAlignment, held_out_pairs};
 
 /// The finite-difference steps: rotations (rad) and translations (m).
 const STEP_RAD: f64 = 0.3 * std::f64::consts::PI / 180.0;
@@ -32,6 +32,8 @@ pub struct EdgeCheck {
     /// One problem per frame (their points are fixed at construction: a point that later
     /// leaves the image costs the truncation instead of dropping out).
     frames: Vec<EdgeAlignment>,
+    /// Whether no frame is one the fit used (false only on a log with no other frames).
+    held_out: bool,
 }
 
 /// Per axis (rotations about the camera's x, y, z, then translations along them): the 1-σ
@@ -41,24 +43,29 @@ pub struct AxisSigmas(pub [f64; 6]);
 
 impl EdgeCheck {
     /// Prepare `frames` frames of `camera` against `lidar` (at their extrinsics in `rig`)
-    /// within `segments_nanos`, the points kept where `rig`'s camera pose sees them.
+    /// within `segments_nanos`, the points kept where `rig`'s camera pose sees them. The
+    /// frames avoid `fitted_images` (the camera's images the fit used) wherever the log has
+    /// others ([`EdgeCheck::held_out`] says whether it did).
     pub fn new(
         drive: &Drive,
         rig: &Rig,
-        camera: &str,
-        lidar: &str,
+        (camera, lidar): (&str, &str),
         frames: usize,
         segments_nanos: &[(i64, i64)],
+        fitted_images: &[usize],
     ) -> Result<Self, String> {
-        let mut problem = EdgeAlignment::from_drive(
+        let context = |e: AlignError| format!("{camera} × {lidar}: {e}");
+        let (pairs, held_out) = held_out_pairs(
             drive,
-            rig,
             (camera, lidar),
             frames,
             segments_nanos,
-            drive.camera_readout,
+            fitted_images,
         )
-        .map_err(|e| format!("{camera} × {lidar}: {e}"))?;
+        .map_err(context)?;
+        let mut problem =
+            EdgeAlignment::from_pairs(drive, rig, (camera, lidar), pairs, drive.camera_readout)
+                .map_err(context)?;
         let all = std::mem::take(&mut problem.frames);
         let frames = all
             .into_iter()
@@ -77,7 +84,13 @@ impl EdgeCheck {
             camera: camera.into(),
             lidar: lidar.into(),
             frames,
+            held_out,
         })
+    }
+
+    /// Whether every frame is one the fit did not use.
+    pub fn held_out(&self) -> bool {
+        self.held_out
     }
 
     pub fn frame_count(&self) -> usize {

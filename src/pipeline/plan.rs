@@ -452,6 +452,29 @@ impl Plan {
             .unwrap_or(&[])
     }
 
+    /// The images of `camera` that the last stage fitting it (UniCal, else the hand-eye) uses,
+    /// so that the check of its result can keep to others.
+    pub fn fitted_images(&self, drive: &Drive, camera: &str) -> Vec<usize> {
+        let has = |cameras: &[String]| cameras.iter().any(|c| c == camera);
+        let per_camera = self.stages.iter().rev().find_map(|s| match s {
+            Stage::Unical {
+                cameras,
+                images_per_camera,
+                ..
+            } if has(cameras) => Some(*images_per_camera),
+            Stage::CameraHandEye { cameras, .. } if has(cameras) => {
+                Some(crate::classical::camera_motion::DEFAULT_FRAMES)
+            }
+            _ => None,
+        });
+        per_camera.map_or(Vec::new(), |n| {
+            crate::log::spread_evenly(
+                &drive.frames_within(camera, &self.request.segments_nanos),
+                n,
+            )
+        })
+    }
+
     /// Whether the hand-eye keeps only the fits its edge check prefers to the start.
     pub fn hand_eye_checked(&self) -> bool {
         self.stages

@@ -104,6 +104,18 @@ pub struct SensorReport {
 
 impl SensorReport {
     /// A sensor's report before any check: every axis fixed (`fixed`) or not yet known.
+    /// The report of a sensor checked from `start` to `end`: how far it moved, with `end`
+    /// written into `out`, the rig to save.
+    fn settle(mut self, start: Rigid, end: Rigid, out: &mut Rig) -> Self {
+        let (rot, trans) = start.difference(end);
+        self.moved_deg = rot.to_degrees();
+        self.moved_cm = trans * 100.0;
+        if let Some(o) = out.sensor_mut(&self.name) {
+            o.vehicle_from_sensor = end;
+        }
+        self
+    }
+
     fn unchecked(sensor: &crate::calib::Sensor, fixed: bool) -> Self {
         SensorReport {
             name: sensor.name.clone(),
@@ -138,6 +150,21 @@ pub struct Report {
     pub sensors: Vec<SensorReport>,
     /// How the uncertainties were found.
     pub method: String,
+}
+
+/// What a camera method (`edge`, `mi`, `target`) fitted, for [`Report::for_cameras`].
+#[derive(Clone, Debug, Default)]
+pub struct MethodFit<'a> {
+    /// The LiDAR the cameras were fitted against.
+    pub reference: &'a str,
+    pub cameras: &'a [String],
+    /// How many of the reference's sweeps (spread evenly, each with its nearest image) the
+    /// method fitted: the check keeps off them.
+    pub fitted_sweeps: usize,
+    /// Cameras whose result the method itself rejects, with why ([`crate::optim::runner::Calibrator::failures`]).
+    pub failures: &'a [(String, String)],
+    /// Said of every camera when the method holds the translation at the initial guess.
+    pub held_translation: Option<&'a str>,
 }
 
 impl Report {
@@ -180,7 +207,7 @@ impl Report {
                     &reference,
                     (start, end),
                     plan.straight_travel,
-                    segments,
+                    (segments, &plan.fitted_images(drive, &s.name)),
                     &mut report,
                 );
             } else if !plan.config.lidars.register {
@@ -202,13 +229,7 @@ impl Report {
                     &mut report,
                 );
             }
-            let (rot, trans) = start.difference(end);
-            report.moved_deg = rot.to_degrees();
-            report.moved_cm = trans * 100.0;
-            if let Some(o) = out.sensor_mut(&s.name) {
-                o.vehicle_from_sensor = end;
-            }
-            sensors.push(report);
+            sensors.push(report.settle(start, end, &mut out));
         }
         let report = Report {
             sensors,
@@ -218,19 +239,23 @@ impl Report {
     }
 
     /// A camera method's check (`edge`, `mi`, `target`): every camera of `cameras` that
-    /// `result` moved from `initial`, checked against `reference` by edge alignment on frames
-    /// spread over `segments_nanos` (eight, not the method's own: those are three or four
-    /// frames spread the same way, so on a log of more than a few dozen sweeps the check's are
-    /// others). A camera whose edges align worse than at the initial guess goes back to it,
-    /// with the verdict "failed" and why. Returns the report and the rig to write.
+    /// `result` moved from `initial`, checked against `reference` by edge alignment on eight
+    /// frames spread over `segments_nanos`, none of them a frame the method fitted (it fitted
+    /// `fitted_sweeps` sweeps of `reference` spread evenly, each with its nearest image) unless
+    /// the log has no others. A camera whose edges align worse than at the initial guess goes
+    /// back to it, with the verdict "failed" and why. Returns the report and the rig to write.
     pub fn for_cameras(
         drive: &Drive,
         initial: &Rig,
         result: &Rig,
-        reference: &str,
-        cameras: &[String],
+        fit: &MethodFit,
         segments_nanos: &[(i64, i64)],
     ) -> (Report, Rig) {
+        let (reference, cameras) = (fit.reference, fit.cameras);
+        let fitted = crate::log::spread_evenly(
+            &drive.frames_within(reference, segments_nanos),
+            fit.fitted_sweeps,
+        );
         let mut out = result.clone();
         let mut sensors = Vec::new();
         for s in initial.sensors.iter().filter(|s| cameras.contains(&s.name)) {
@@ -239,23 +264,30 @@ impl Report {
             };
             let start = s.vehicle_from_sensor;
             let mut report = SensorReport::unchecked(s, false);
-            let end = camera_report(
+            let mut end = camera_report(
                 drive,
                 result,
                 &s.name,
                 reference,
                 (start, r.vehicle_from_sensor),
                 None,
-                segments_nanos,
+                (
+                    segments_nanos,
+                    &crate::optim::edge_align::images_nearest(drive, &s.name, reference, &fitted),
+                ),
                 &mut report,
             );
-            let (rot, trans) = start.difference(end);
-            report.moved_deg = rot.to_degrees();
-            report.moved_cm = trans * 100.0;
-            if let Some(o) = out.sensor_mut(&s.name) {
-                o.vehicle_from_sensor = end;
+            if let Some((_, why)) = fit.failures.iter().find(|(name, _)| *name == s.name) {
+                report.verdict = Verdict::Failed;
+                report.why = format!("{why}; the initial guess is kept");
+                if let Some(c) = report.checks.first_mut() {
+                    c.after = c.before;
+                }
+                end = start;
+            } else if let Some(held) = fit.held_translation {
+                report.why = format!("{held}; {}", report.why);
             }
-            sensors.push(report);
+            sensors.push(report.settle(start, end, &mut out));
         }
         let report = Report {
             sensors,
@@ -386,10 +418,17 @@ fn camera_report(
     reference: &str,
     (start, end): (Rigid, Rigid),
     straight_travel: Option<DVec3>,
-    segments: &[(i64, i64)],
+    (segments, fitted_images): (&[(i64, i64)], &[usize]),
     report: &mut SensorReport,
 ) -> Rigid {
-    let check = match EdgeCheck::new(drive, result, camera, reference, CHECK_FRAMES, segments) {
+    let check = match EdgeCheck::new(
+        drive,
+        result,
+        (camera, reference),
+        CHECK_FRAMES,
+        segments,
+        fitted_images,
+    ) {
         Ok(c) => c,
         Err(e) => {
             report.verdict = Verdict::CheckIt;
@@ -413,8 +452,13 @@ fn camera_report(
     let (before, after) = (check.score(start), check.score(end));
     report.checks.push(Check {
         what: format!(
-            "edge alignment against {reference} ({} frames)",
-            check.frame_count()
+            "edge alignment against {reference} ({} frames, {})",
+            check.frame_count(),
+            if check.held_out() {
+                "none of them fitted"
+            } else {
+                "the ones fitted: the log has no others"
+            }
         ),
         before,
         after,
@@ -479,6 +523,15 @@ fn camera_report(
             format!("every axis observed; edges {before:.2} → {after:.2} px"),
         )
     };
+    if !check.held_out() {
+        // Judged on its own frames a fit of the images' noise looks as good as a fit of the
+        // scene.
+        report.verdict = Verdict::CheckIt;
+        report.why = format!(
+            "checked only on the frames it fitted (the log has no others); {}",
+            report.why
+        );
+    }
     end
 }
 

@@ -335,13 +335,17 @@ pub fn prepare(
                 let (Some(before), Some(after)) = (out.rig.sensor(name), rig.sensor(name)) else {
                     return false;
                 };
+                let fitted = crate::log::spread_evenly(
+                    &drive.frames_within(name, segments),
+                    camera_motion::DEFAULT_FRAMES,
+                );
                 let check = super::edge_check::EdgeCheck::new(
                     drive,
                     &out.rig,
-                    name,
-                    &reference,
+                    (name, &reference),
                     HAND_EYE_CHECK_FRAMES,
                     segments,
+                    &fitted,
                 );
                 let (start, fit) = match &check {
                     Ok(c) => (c.score(before.vehicle_from_sensor), c.score(after.vehicle_from_sensor)),
