@@ -113,7 +113,14 @@ fn the_check_keeps_off_the_frames_a_method_fitted_unless_the_log_has_no_others()
     let (pairs, held_out) = held_out_pairs(&drive, pair, 4, &[], &fitted).unwrap();
     assert!(held_out);
     assert_eq!(pairs.len(), 4);
+    // Nor is one a neighbour of a fitted image (within a quarter of their spacing).
+    let stamp = |j: usize| drive.stream(pair.0).unwrap().frames[j].stamp_nanos;
+    let spacing = (stamp(fitted[3]) - stamp(fitted[0])) / 3;
     for p in &pairs {
+        for &f in &fitted {
+            let apart = (p.image_stamp_nanos - stamp(f)).abs();
+            assert!(apart > spacing / 4, "{} is next to {f}", p.image_index);
+        }
         assert!(
             !fitted.contains(&p.image_index),
             "{} was fitted",

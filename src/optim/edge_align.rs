@@ -88,8 +88,12 @@ pub fn sweep_image_pairs(
 /// The image of `camera` nearest in time to `stamp_nanos` (by the log's index; nothing is
 /// decoded).
 pub fn nearest_image(drive: &Drive, camera: &str, stamp_nanos: i64) -> Option<usize> {
+    // The stream is sorted by stamp: the nearest is one of the two either side (the earlier
+    // on a tie).
     let frames = &drive.stream(camera)?.frames;
-    (0..frames.len()).min_by_key(|&j| (frames[j].stamp_nanos - stamp_nanos).abs())
+    let after = frames.partition_point(|f| f.stamp_nanos < stamp_nanos);
+    (after.saturating_sub(1)..(after + 1).min(frames.len()))
+        .min_by_key(|&j| (frames[j].stamp_nanos - stamp_nanos).abs())
 }
 
 /// The images of `camera` nearest to the sweeps `sweeps` of `lidar`: the ones a method that
@@ -105,9 +109,10 @@ pub fn images_nearest(drive: &Drive, camera: &str, lidar: &str, sweeps: &[usize]
 }
 
 /// As [`sweep_image_pairs`], but spread over the sweeps whose nearest image is none of
-/// `fitted_images` (the frames a fit used), so a check judges the fit on data it did not see.
-/// Where no such sweep is left (a log of a few frames) every sweep is a candidate; the flag
-/// says whether the pairs are held out.
+/// `fitted_images` (the frames a fit used) nor within a quarter of their spacing of one (a
+/// neighbour a tenth of a second on sees the same scene), so a check judges the fit on data it
+/// did not see. Where no such sweep is left (a log of a few frames) every sweep is a candidate;
+/// the flag says whether the pairs are held out.
 pub fn held_out_pairs(
     drive: &Drive,
     (camera, lidar): (&str, &str),
@@ -129,6 +134,16 @@ pub fn held_out_pairs(
             "no sweep of '{lidar}' inside the trajectory and the selected segments"
         )));
     }
+    let fitted_stamps: Vec<i64> = fitted_images
+        .iter()
+        .filter_map(|&j| Some(cam_stream.frames.get(j)?.stamp_nanos))
+        .collect();
+    let spacing_nanos = match (fitted_stamps.iter().min(), fitted_stamps.iter().max()) {
+        (Some(first), Some(last)) if fitted_stamps.len() > 1 => {
+            (last - first) / (fitted_stamps.len() as i64 - 1)
+        }
+        _ => 0,
+    };
     let unfitted: Vec<usize> = if fitted_images.is_empty() {
         usable.clone()
     } else {
@@ -136,8 +151,13 @@ pub fn held_out_pairs(
             .iter()
             .copied()
             .filter(|&i| {
-                nearest_image(drive, camera, lidar_stream.frames[i].stamp_nanos)
-                    .is_some_and(|j| !fitted_images.contains(&j))
+                nearest_image(drive, camera, lidar_stream.frames[i].stamp_nanos).is_some_and(|j| {
+                    let t = cam_stream.frames[j].stamp_nanos;
+                    !fitted_images.contains(&j)
+                        && fitted_stamps
+                            .iter()
+                            .all(|&f| (t - f).abs() > spacing_nanos / 4)
+                })
             })
             .collect()
     };
@@ -529,19 +549,23 @@ impl CompassSearch {
         self.step_rad < self.min_step_rad && (!self.translate || self.step_m < self.min_step_m)
     }
 
-    /// Which trust region the best pose stopped on (within one last step of it), as text
+    /// Which trust region the best pose stopped on (within the search's current step of it), as text
     /// (`rotation 2.0°`); empty inside both. A minimum on the trust region is where the search
     /// was stopped, not a minimum of the cost.
     pub fn at_bounds(&self) -> String {
         let (rotation, translation) = self.start.difference(self.best);
         let mut out = Vec::new();
-        if rotation >= self.max_rotation_rad - 2.0 * self.min_step_rad {
+        // A search cut short (by its step count) may stop a whole step short of the bound.
+        let reach_rad = self.step_rad.max(self.min_step_rad);
+        if rotation >= self.max_rotation_rad - reach_rad {
             out.push(format!(
                 "rotation {:.1}°",
                 self.max_rotation_rad.to_degrees()
             ));
         }
-        if self.translate && translation >= self.max_translation_m - 2.0 * self.min_step_m {
+        if self.translate
+            && translation >= self.max_translation_m - self.step_m.max(self.min_step_m)
+        {
             out.push(format!(
                 "translation {:.0} cm",
                 self.max_translation_m * 100.0

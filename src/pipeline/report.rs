@@ -103,7 +103,6 @@ pub struct SensorReport {
 }
 
 impl SensorReport {
-    /// A sensor's report before any check: every axis fixed (`fixed`) or not yet known.
     /// The report of a sensor checked from `start` to `end`: how far it moved, with `end`
     /// written into `out`, the rig to save.
     fn settle(mut self, start: Rigid, end: Rigid, out: &mut Rig) -> Self {
@@ -116,6 +115,7 @@ impl SensorReport {
         self
     }
 
+    /// A sensor's report before any check: every axis fixed (`fixed`) or not yet known.
     fn unchecked(sensor: &crate::calib::Sensor, fixed: bool) -> Self {
         SensorReport {
             name: sensor.name.clone(),
@@ -252,10 +252,14 @@ impl Report {
         segments_nanos: &[(i64, i64)],
     ) -> (Report, Rig) {
         let (reference, cameras) = (fit.reference, fit.cameras);
-        let fitted = crate::log::spread_evenly(
-            &drive.frames_within(reference, segments_nanos),
-            fit.fitted_sweeps,
-        );
+        let fitted = if fit.fitted_sweeps == 0 {
+            Vec::new()
+        } else {
+            crate::log::spread_evenly(
+                &drive.frames_within(reference, segments_nanos),
+                fit.fitted_sweeps,
+            )
+        };
         let mut out = result.clone();
         let mut sensors = Vec::new();
         for s in initial.sensors.iter().filter(|s| cameras.contains(&s.name)) {
