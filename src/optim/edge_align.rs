@@ -549,31 +549,6 @@ impl CompassSearch {
         self.step_rad < self.min_step_rad && (!self.translate || self.step_m < self.min_step_m)
     }
 
-    /// Which trust region the best pose stopped on (within the search's current step of it), as text
-    /// (`rotation 2.0°`); empty inside both. A minimum on the trust region is where the search
-    /// was stopped, not a minimum of the cost.
-    pub fn at_bounds(&self) -> String {
-        let (rotation, translation) = self.start.difference(self.best);
-        let mut out = Vec::new();
-        // A search cut short (by its step count) may stop a whole step short of the bound.
-        let reach_rad = self.step_rad.max(self.min_step_rad);
-        if rotation >= self.max_rotation_rad - reach_rad {
-            out.push(format!(
-                "rotation {:.1}°",
-                self.max_rotation_rad.to_degrees()
-            ));
-        }
-        if self.translate
-            && translation >= self.max_translation_m - self.step_m.max(self.min_step_m)
-        {
-            out.push(format!(
-                "translation {:.0} cm",
-                self.max_translation_m * 100.0
-            ));
-        }
-        out.join(", ")
-    }
-
     /// One round of probes (±step on each searched axis); returns whether the pose improved.
     pub fn step(&mut self, problem: &EdgeAlignment) -> bool {
         self.step_with(|pose| problem.cost(pose))

@@ -109,14 +109,4 @@ impl Calibrator for EdgeRefiner {
         // The compass search only ever accepts improvements: current is the best.
         self.rig.clone()
     }
-
-    /// A camera whose best pose stopped on the search's trust region.
-    fn failures(&self) -> Vec<(String, String)> {
-        crate::optim::runner::bound_failures(
-            "edge alignment",
-            self.problems
-                .iter()
-                .map(|(p, s)| (p.camera.as_str(), s.at_bounds())),
-        )
-    }
 }
