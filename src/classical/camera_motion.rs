@@ -40,6 +40,17 @@ pub struct CameraPairs {
     pub world_from_vehicle: Vec<Option<Rigid>>,
 }
 
+/// The images of camera `name` the hand-eye reads: `frames` of them spread evenly over
+/// `segments_nanos` (a check of its fit keeps off them).
+pub fn picked_images(
+    drive: &Drive,
+    name: &str,
+    frames: usize,
+    segments_nanos: &[(i64, i64)],
+) -> Vec<usize> {
+    spread_evenly(&drive.frames_within(name, segments_nanos), frames)
+}
+
 /// The motion pairs of camera `name` of `rig` over `frames` images of `drive` within
 /// `segments_nanos`, reporting `(done, total)` per phase name. With `require_turns`, a drive too
 /// straight for the hand-eye is refused before any image is decoded (the map fits of
@@ -63,7 +74,7 @@ pub fn camera_pairs(
     let stream = drive
         .stream(name)
         .ok_or_else(|| format!("the log has no images of '{name}'"))?;
-    let picked = spread_evenly(&drive.frames_within(name, segments_nanos), frames);
+    let picked = picked_images(drive, name, frames, segments_nanos);
     // A rolling-shutter image stands at its middle row's time.
     let stamps: Vec<i64> = picked
         .iter()

@@ -144,7 +144,8 @@ pub fn held_out_pairs(
         }
         _ => 0,
     };
-    let unfitted: Vec<usize> = if fitted_images.is_empty() {
+    // A fitted image's own stamp is always inside its window (one fitted image: only itself).
+    let unfitted: Vec<usize> = if fitted_stamps.is_empty() {
         usable.clone()
     } else {
         usable
@@ -153,10 +154,9 @@ pub fn held_out_pairs(
             .filter(|&i| {
                 nearest_image(drive, camera, lidar_stream.frames[i].stamp_nanos).is_some_and(|j| {
                     let t = cam_stream.frames[j].stamp_nanos;
-                    !fitted_images.contains(&j)
-                        && fitted_stamps
-                            .iter()
-                            .all(|&f| (t - f).abs() > spacing_nanos / 4)
+                    fitted_stamps
+                        .iter()
+                        .all(|&f| (t - f).abs() > spacing_nanos / 4)
                 })
             })
             .collect()

@@ -456,23 +456,32 @@ impl Plan {
     /// so that the check of its result can keep to others.
     pub fn fitted_images(&self, drive: &Drive, camera: &str) -> Vec<usize> {
         let has = |cameras: &[String]| cameras.iter().any(|c| c == camera);
-        let per_camera = self.stages.iter().rev().find_map(|s| match s {
-            Stage::Unical {
-                cameras,
-                images_per_camera,
-                ..
-            } if has(cameras) => Some(*images_per_camera),
-            Stage::CameraHandEye { cameras, .. } if has(cameras) => {
-                Some(crate::classical::camera_motion::DEFAULT_FRAMES)
-            }
-            _ => None,
-        });
-        per_camera.map_or(Vec::new(), |n| {
-            crate::log::spread_evenly(
-                &drive.frames_within(camera, &self.request.segments_nanos),
-                n,
-            )
-        })
+        let segments = &self.request.segments_nanos;
+        self.stages
+            .iter()
+            .rev()
+            .find_map(|s| match s {
+                Stage::Unical {
+                    cameras,
+                    images_per_camera,
+                    ..
+                } if has(cameras) => Some(crate::unical::calibrator::training_images(
+                    drive,
+                    camera,
+                    *images_per_camera,
+                    segments,
+                )),
+                Stage::CameraHandEye { cameras, .. } if has(cameras) => {
+                    Some(crate::classical::camera_motion::picked_images(
+                        drive,
+                        camera,
+                        crate::classical::camera_motion::DEFAULT_FRAMES,
+                        segments,
+                    ))
+                }
+                _ => None,
+            })
+            .unwrap_or_default()
     }
 
     /// Whether the hand-eye keeps only the fits its edge check prefers to the start.

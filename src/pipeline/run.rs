@@ -335,9 +335,11 @@ pub fn prepare(
                 let (Some(before), Some(after)) = (out.rig.sensor(name), rig.sensor(name)) else {
                     return false;
                 };
-                let fitted = crate::log::spread_evenly(
-                    &drive.frames_within(name, segments),
+                let fitted = camera_motion::picked_images(
+                    drive,
+                    name,
                     camera_motion::DEFAULT_FRAMES,
+                    segments,
                 );
                 let check = super::edge_check::EdgeCheck::new(
                     drive,

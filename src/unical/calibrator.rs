@@ -222,12 +222,11 @@ impl UnicalLidarStage {
             .cameras()
             .filter_map(|cam| {
                 let (intrinsics, stream) = (cam.camera.as_ref()?, drive.stream(&cam.name)?);
-                let usable = drive.frames_within(&cam.name, segments_nanos);
                 Some((
                     cam,
                     intrinsics,
                     stream,
-                    spread_evenly(&usable, frames_per_camera),
+                    training_images(drive, &cam.name, frames_per_camera, segments_nanos),
                 ))
             })
             .collect();
@@ -405,6 +404,20 @@ impl Calibrator for UnicalLidarStage {
             _ => self.rig_now(),
         }
     }
+}
+
+/// The images of camera `name` UniCal trains on: `frames_per_camera` of them spread evenly
+/// over `segments_nanos` (a check of its result keeps off them).
+pub fn training_images(
+    drive: &Drive,
+    name: &str,
+    frames_per_camera: usize,
+    segments_nanos: &[(i64, i64)],
+) -> Vec<usize> {
+    spread_evenly(
+        &drive.frames_within(name, segments_nanos),
+        frames_per_camera,
+    )
 }
 
 /// A camera image resized to the working `intrinsics` (triangle filter), as the colour term
