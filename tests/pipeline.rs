@@ -323,3 +323,25 @@ fn a_stationary_log_is_calibrated_by_its_checkerboards() {
         after.to_degrees()
     );
 }
+
+#[test]
+fn a_sparse_real_sample_leaves_its_lidar_off_the_trajectory_fit_and_says_why() {
+    // KITTI-360's sample: twenty frames 20–220 m apart; fitting the Velodyne to the trajectory
+    // on them turned it 3.6° from a start 1° off.
+    let log = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../shared/data/kitti360-sample/kitti360-20-frames.mcap");
+    let plan = plan(&log, &PipelineConfig::default());
+    assert!(
+        !plan
+            .stages
+            .iter()
+            .any(|s| matches!(s, Stage::LidarToTrajectory { .. })),
+        "{:?}",
+        plan.decisions
+    );
+    let text = plan.decisions.join("\n");
+    assert!(
+        text.contains("velodyne (the reference) stays") && text.contains("too far apart"),
+        "{text}"
+    );
+}

@@ -23,6 +23,7 @@ pub mod pose_graph_calibrator;
 pub mod target;
 pub mod target_calibrator;
 pub mod trajectory_icp;
+pub mod trajectory_sweeps;
 
 /// The cameras' problems that could be set up, and a reason for each that could not (no
 /// overlap with the LiDAR, no boards); an error only when no camera was asked for or none

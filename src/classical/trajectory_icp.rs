@@ -281,10 +281,14 @@ pub enum TrajectoryFit {
     /// travels too little (m) for its direction of travel to place the LiDAR: it is better
     /// left where it is.
     TooStraight { turn_deg: f64, distance_m: f64 },
+    /// Too few consecutive sweeps share surfaces: `pairs` of them are near enough
+    /// ([`super::trajectory_sweeps`]).
+    TooSparse { pairs: usize },
 }
 
-/// Register LiDAR `name` of `rig` to `drive`'s trajectory on `frames` sweeps spread over the
-/// segments (every second point), reporting `(steps done, steps)`.
+/// Register LiDAR `name` of `rig` to `drive`'s trajectory on about `frames` sweeps over the
+/// segments that share surfaces ([`super::trajectory_sweeps::pick`]; every second point),
+/// reporting `(steps done, steps)`.
 pub fn register_to_trajectory(
     drive: &crate::log::Drive,
     rig: &crate::calib::Rig,
@@ -298,7 +302,12 @@ pub fn register_to_trajectory(
         .sensor(name)
         .ok_or_else(|| format!("no LiDAR '{name}' in the rig"))?
         .vehicle_from_sensor;
-    let picked = crate::log::spread_evenly(&drive.frames_within(name, segments_nanos), frames);
+    let picked = match super::trajectory_sweeps::pick(drive, name, frames, segments_nanos) {
+        super::trajectory_sweeps::Picked::Sweeps(picked) => picked,
+        super::trajectory_sweeps::Picked::TooSparse { pairs } => {
+            return Ok(TrajectoryFit::TooSparse { pairs });
+        }
+    };
     // A sweep that does not decode is skipped (and reported by the drive).
     let sweeps: Vec<_> = picked
         .into_iter()

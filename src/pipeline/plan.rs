@@ -9,7 +9,8 @@
 //! - LiDARs: the reference (the root, else the first) is fitted to the trajectory where the
 //!   drive turns enough ([`MIN_TURN_DEG`]), in pitch and yaw only where it drives straight far
 //!   enough ([`MIN_STRAIGHT_DISTANCE_M`]), otherwise left (and always left where its frame is
-//!   the vehicle frame); every other LiDAR is registered to
+//!   the vehicle frame, or where its sweeps are too far apart to share surfaces:
+//!   [`trajectory_sweeps`]); every other LiDAR is registered to
 //!   it by point-to-plane ICP; then UniCal holds them;
 //! - cameras: where the drive turns enough, each camera is fitted to its own motion (hand-eye)
 //!   and the fit kept where the camera's edges align with the reference LiDAR's at least as well
@@ -21,6 +22,7 @@
 
 use crate::calib::{Rig, SensorKind};
 use crate::classical::trajectory_icp::{MIN_STRAIGHT_DISTANCE_M, MIN_TURN_DEG};
+use crate::classical::trajectory_sweeps::{self, MIN_PAIRS, OVERLAP_M, Picked};
 use crate::geometry::so3;
 use crate::log::Drive;
 use crate::unical::depth_calib::DepthCalibConfig;
@@ -258,6 +260,16 @@ impl Plan {
             {
                 decisions.push(format!(
                     "lidars: {reference} (the reference) stays: its frame is the vehicle frame, so its pose is the identity by definition"
+                ));
+            } else if let Picked::TooSparse { pairs } = trajectory_sweeps::pick(
+                drive,
+                &reference,
+                config.lidars.trajectory_sweeps,
+                &request.segments_nanos,
+            ) {
+                decisions.push(format!(
+                    "lidars: {reference} (the reference) stays where the initial guess puts it: {}",
+                    too_sparse_why(pairs)
                 ));
             } else if motion.turn_deg < MIN_TURN_DEG && motion.distance_m < MIN_STRAIGHT_DISTANCE_M
             {
@@ -501,4 +513,11 @@ pub fn format_secs(secs: f64) -> String {
         (0, m, s) => format!("{m} min {s} s"),
         (h, m, _) => format!("{h} h {m} min"),
     }
+}
+
+/// Why a LiDAR whose sweeps share no surfaces is not fitted to the trajectory.
+pub fn too_sparse_why(pairs: usize) -> String {
+    format!(
+        "its sweeps are too far apart to share the surfaces the fit compares: {pairs} consecutive pair(s) within {OVERLAP_M:.0} m of each other, at least {MIN_PAIRS} needed"
+    )
 }

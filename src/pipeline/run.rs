@@ -14,7 +14,7 @@ use crate::log::Drive;
 use crate::optim::runner::Calibrator;
 use crate::unical::calibrator::UnicalLidarStage;
 
-use super::plan::{Plan, Stage};
+use super::plan::{Plan, Stage, too_sparse_why};
 
 /// Frames of each camera the hand-eye's fit is checked on against its start.
 const HAND_EYE_CHECK_FRAMES: usize = 6;
@@ -95,6 +95,11 @@ pub fn register_lidars(
                 let why = format!(
                     "the drive turns {turn_deg:.1}° and travels {distance_m:.0} m between its sweeps, too little to fit it to the trajectory (at least {MIN_TURN_DEG}°, or {MIN_STRAIGHT_DISTANCE_M} m)"
                 );
+                notes.push(format!("lidar icp: {reference} kept: {why}"));
+                evidence.reference_fit = Some(Err(why));
+            }
+            (TrajectoryFit::TooSparse { pairs }, _) => {
+                let why = too_sparse_why(pairs);
                 notes.push(format!("lidar icp: {reference} kept: {why}"));
                 evidence.reference_fit = Some(Err(why));
             }
