@@ -10,14 +10,14 @@
 //! instead: half as many anchors spread evenly, each with the first later sweep at least
 //! [`PAIR_TRAVEL_M`] from it (and within [`OVERLAP_M`]); the pairs see the drive's turns
 //! wherever they are, and each pair's two sweeps share surfaces. A drive whose consecutive
-//! sweeps are more than [`OVERLAP_M`] apart but for fewer than [`MIN_PAIRS`] (a sparse
-//! sample) is not fitted at all.
+//! sweeps yield fewer than [`MIN_PAIRS`] such pairs (a sparse sample, or a vehicle that barely
+//! moves between close sweeps) is not fitted at all.
 //! Positions come from the trajectory at the sweeps' stamps; nothing is decoded.
 
 use crate::log::{Drive, spread_evenly};
 use glam::DVec3;
 
-/// The farthest apart (m of vehicle travel) two sweeps of a LiDAR may be and still share
+/// The farthest apart (m between the vehicle's positions) two sweeps of a LiDAR may be and still share
 /// enough surfaces for the fit.
 pub const OVERLAP_M: f64 = 25.0;
 
@@ -25,8 +25,8 @@ pub const OVERLAP_M: f64 = 25.0;
 /// turn between them on a bend, well inside [`OVERLAP_M`].
 pub const PAIR_TRAVEL_M: f64 = 10.0;
 
-/// The fewest pairs of consecutive sweeps within [`OVERLAP_M`] a fit needs: one pair is one
-/// look at one place.
+/// The fewest pairs of sweeps [`PAIR_TRAVEL_M`]–[`OVERLAP_M`] apart a fit needs (fewer where
+/// fewer sweeps are asked for): one pair is one look at one place.
 pub const MIN_PAIRS: usize = 3;
 
 /// The sweeps [`pick`] chose.
@@ -34,8 +34,8 @@ pub const MIN_PAIRS: usize = 3;
 pub enum Picked {
     /// Sweep indices of the LiDAR's stream, in time order.
     Sweeps(Vec<usize>),
-    /// Fewer than [`MIN_PAIRS`] consecutive sweeps are within [`OVERLAP_M`] of each other
-    /// (`pairs` are).
+    /// Fewer than [`MIN_PAIRS`] pairs of sweeps [`PAIR_TRAVEL_M`]–[`OVERLAP_M`] apart were
+    /// found (`pairs` were).
     TooSparse { pairs: usize },
 }
 
@@ -72,15 +72,13 @@ pub fn pick_among(
     if spread.len() < 2 || largest_gap(&spread) <= OVERLAP_M {
         return Picked::Sweeps(spread);
     }
-    let pairs = usable
-        .windows(2)
-        .filter(|w| apart(w[0], w[1]) <= OVERLAP_M)
-        .count();
-    if pairs < MIN_PAIRS {
-        return Picked::TooSparse { pairs };
-    }
-    let mut picked = Vec::new();
+    // Pairs in time order, [a, b, a, b, …]: the fit splits the sweeps by parity, so each
+    // pair's two sweeps fall in different sets (an anchor before the last partner is passed).
+    let mut picked: Vec<usize> = Vec::new();
     for anchor in spread_evenly(usable, (frames / 2).max(1)) {
+        if picked.last().is_some_and(|&last| anchor <= last) {
+            continue;
+        }
         let partner = usable
             .iter()
             .copied()
@@ -91,12 +89,9 @@ pub fn pick_among(
             picked.extend([anchor, j]);
         }
     }
-    picked.sort_unstable();
-    picked.dedup();
-    if picked.len() < 2 {
-        // Sweeps close enough exist, but none a pair's travel apart: the vehicle barely
-        // moves between them; the even spread is as good as any.
-        return Picked::Sweeps(spread);
+    let pairs = picked.len() / 2;
+    if pairs < MIN_PAIRS.min((frames / 2).max(1)) {
+        return Picked::TooSparse { pairs };
     }
     Picked::Sweeps(picked)
 }
