@@ -8,14 +8,20 @@
 #
 #   scripts/bench-real-cameras.sh [METHODS] [SEEDS] [DATASETS]
 #   scripts/bench-real-cameras.sh "edge mi" "301 302 303 304 305" "kitti360 kitti000008 pandaset"
+#   RIGCAL_BIN=/tmp/rigcal-before TMPDIR=/tmp/before scripts/bench-real-cameras.sh auto 306 kitti360
 set -euo pipefail
 cd "$(dirname "$0")/.."
 export CARGO_TARGET_DIR="${CARGO_TARGET_DIR:-$HOME/.cache/rigcal-target}"
 methods="${1:-edge mi}"
 seeds="${2:-301 302 303 304 305}"
 datasets="${3:-kitti360 kitti000008 pandaset}"
-cargo build -q --release --no-default-features --bin rigcal
-bin="$CARGO_TARGET_DIR/release/rigcal"
+# RIGCAL_BIN: a binary built elsewhere (another commit, for a before/after in one sitting).
+if [ -n "${RIGCAL_BIN:-}" ]; then
+  bin="$RIGCAL_BIN"
+else
+  cargo build -q --release --no-default-features --bin rigcal
+  bin="$CARGO_TARGET_DIR/release/rigcal"
+fi
 work="${TMPDIR:-/tmp}/rigcal-bench-real-cameras"
 mkdir -p "$work"
 data=../shared/data

@@ -345,3 +345,35 @@ fn a_sparse_real_sample_leaves_its_lidar_off_the_trajectory_fit_and_says_why() {
         "{text}"
     );
 }
+
+#[test]
+fn a_single_real_frame_is_checked_on_the_frame_it_fitted_and_says_so() {
+    // KITTI frame 000008: one sweep, one image. The stationary stage's edge alignment fits
+    // that image, so its check has no other to judge the result on.
+    let log = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../shared/data/kitti-000008/kitti-000008.mcap");
+    let drive = Drive::open(&log).unwrap();
+    let plan = plan(&log, &PipelineConfig::default());
+    assert_eq!(plan.fitted_images(&drive, "camera_2"), vec![0]);
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("c.yaml");
+    let (ok, _, err) = rigcal(&[
+        "calibrate",
+        log.to_str().unwrap(),
+        "--perturb-deg",
+        "1",
+        "--perturb-cm",
+        "10",
+        "--seed",
+        "301",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(ok, "{err}");
+    assert!(
+        err.contains("the ones fitted: the log has no others"),
+        "{err}"
+    );
+    assert!(err.contains("camera_2  check it"), "{err}");
+    assert!(!err.contains("camera_2  good"), "{err}");
+}

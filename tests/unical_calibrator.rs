@@ -1,7 +1,8 @@
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 //! UniCal's LiDAR stage as a runner `Calibrator` on the real PandaSet drive: it prepares from
 //! the drive, steps with finite losses, moves only LiDAR extrinsics, ends at its step budget,
-//! and a segment without sweeps is a clear error.
+//! and a segment without sweeps is a clear error; on the real KITTI-360 sample, its scene
+//! holds a sweep near every training image.
 
 use std::path::PathBuf;
 
@@ -206,4 +207,48 @@ fn cameras_join_the_stage_through_the_colour_term() {
         .err()
         .unwrap();
     assert!(e.contains("scale"), "{e}");
+}
+
+/// The real KITTI-360 sample: twenty frames 20–220 m apart, where four sweeps spread over the
+/// drive leave most of the cameras' training images looking at places no sweep saw.
+#[test]
+fn the_scene_holds_a_sweep_near_every_image_the_cameras_train_on() {
+    use rigcal::unical::calibrator::training_stamps;
+    let log = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../shared/data/kitti360-sample/kitti360-20-frames.mcap");
+    let drive = Drive::open(&log).unwrap();
+    let stamps = training_stamps(&drive, &drive.rig, 16, &[]);
+    assert_eq!(stamps.len(), 32, "16 images of each of the two cameras");
+    let config = DepthCalibConfig {
+        geometry_init_steps: 0,
+        ..DepthCalibConfig::default()
+    };
+    let stage =
+        UnicalLidarStage::from_drive_covering(&drive, &drive.rig, 4, &[], &stamps, config.clone())
+            .unwrap();
+    let lidar = &stage.calibration().lidars[0];
+    let stream = drive.stream(&lidar.name).unwrap();
+    let nearest = |t: i64| {
+        stream
+            .frames
+            .iter()
+            .map(|f| f.stamp_nanos)
+            .min_by_key(|s| (s - t).abs())
+            .unwrap()
+    };
+    let scene: Vec<i64> = lidar.sweeps.iter().map(|s| s.stamp_nanos).collect();
+    let at = |t: i64| drive.trajectory.world_from_vehicle(t).unwrap().translation;
+    for &t in &stamps {
+        let within = scene
+            .iter()
+            .any(|&s| at(s).distance(at(t)) <= rigcal::unical::scene_sweeps::COVER_M);
+        assert!(
+            within || scene.contains(&nearest(t)),
+            "no sweep near the image at {t}: {scene:?}"
+        );
+    }
+    // Without the images, the four of the spread.
+    let spread = UnicalLidarStage::from_drive(&drive, &drive.rig, 4, &[], config).unwrap();
+    assert_eq!(spread.calibration().lidars[0].sweeps.len(), 4);
+    assert!(scene.len() > 4);
 }

@@ -443,11 +443,17 @@ pub fn start(studio: &mut Studio) {
             } else {
                 prepare_rig
             };
-            let stage = crate::unical::calibrator::UnicalLidarStage::from_drive(
+            let covered = if method == Method::Unical {
+                crate::unical::calibrator::training_stamps(&drive, &prepare_rig, frames, &segments)
+            } else {
+                Vec::new()
+            };
+            let stage = crate::unical::calibrator::UnicalLidarStage::from_drive_covering(
                 &drive,
                 &prepare_rig,
                 frames,
                 &segments,
+                &covered,
                 config,
             )?;
             let stage = if method == Method::Unical {

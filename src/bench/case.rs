@@ -22,7 +22,7 @@ use crate::optim::edge_refine::EdgeRefiner;
 use crate::optim::runner::Calibrator;
 use crate::sim::rigs::{RigPreset, SimRig};
 use crate::sim::synth::{SynthConfig, perturb_rig, synthesize};
-use crate::unical::calibrator::UnicalLidarStage;
+use crate::unical::calibrator::{UnicalLidarStage, training_stamps};
 use crate::unical::depth_calib::DepthCalibConfig;
 use crate::unical::pose_newton::{NewtonConfig, PoseUpdate};
 
@@ -337,12 +337,9 @@ fn unical_stage(
         seed,
         ..DepthCalibConfig::default()
     };
-    UnicalLidarStage::from_drive(drive, rig, s.sweeps_per_lidar, &[], config)?.with_cameras(
-        drive,
-        s.camera_frames,
-        &[],
-        s.camera_scale,
-    )
+    let covered = training_stamps(drive, rig, s.camera_frames, &[]);
+    UnicalLidarStage::from_drive_covering(drive, rig, s.sweeps_per_lidar, &[], &covered, config)?
+        .with_cameras(drive, s.camera_frames, &[], s.camera_scale)
 }
 
 /// Mean errors of the optimised sensors (the root excluded) of `rig` against `reference`.

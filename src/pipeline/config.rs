@@ -109,7 +109,8 @@ pub struct LidarSettings {
     pub icp_sweeps: usize,
     /// Sweeps of the reference LiDAR fitted to the trajectory.
     pub trajectory_sweeps: usize,
-    /// Sweeps per LiDAR that shape UniCal's scene.
+    /// Sweeps per LiDAR spread over the drive that shape UniCal's scene, besides the one nearest
+    /// each image the cameras are fitted on (`unical::scene_sweeps`).
     pub scene_sweeps: usize,
 }
 

@@ -40,6 +40,9 @@ const SECS_PER_CAMERA_RAY: f64 = 1.3e-4;
 const SECS_PER_LIDAR_RAY: f64 = 6.0e-5;
 const PREPARE_SECS_PER_IMAGE: f64 = 0.4;
 const PREPARE_SECS: f64 = 30.0;
+/// Preparation per sweep added to the scene for the cameras' images (decoded, placed in the
+/// occupancy grid and fitted by the geometry initialisation; about 2.7 s an HDL-64 sweep).
+const PREPARE_SECS_PER_ADDED_SWEEP: f64 = 2.5;
 
 /// The sensors and times a plan is made for, besides the configuration.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -378,11 +381,36 @@ impl Plan {
         let mut iterations = config.iterations.unwrap_or(preset.iterations);
         let run_unical = !unical_cameras.is_empty() || lidars_move;
         if run_unical {
+            // The sweeps that shape the scene, as the stage will pick them.
+            let stamps = crate::unical::calibrator::training_stamps(
+                drive,
+                rig,
+                if unical_cameras.is_empty() { 0 } else { images },
+                &request.segments_nanos,
+            );
+            let sweeps: Vec<(&String, usize)> = lidars
+                .iter()
+                .map(|l| {
+                    let picked = crate::unical::scene_sweeps::pick(
+                        drive,
+                        l,
+                        config.lidars.scene_sweeps,
+                        &request.segments_nanos,
+                        &stamps,
+                    );
+                    (l, picked.len())
+                })
+                .collect();
+            let added: usize = sweeps
+                .iter()
+                .map(|(_, n)| n.saturating_sub(config.lidars.scene_sweeps))
+                .sum();
             let camera_rays = (unical_cameras.len() as f64) * config.unical.rays_per_camera as f64;
             let lidar_rays = (lidars.len() as f64) * config.unical.rays_per_sensor as f64;
             let step_secs = camera_rays * SECS_PER_CAMERA_RAY + lidar_rays * SECS_PER_LIDAR_RAY;
-            let prepare =
-                PREPARE_SECS + PREPARE_SECS_PER_IMAGE * images as f64 * unical_cameras.len() as f64;
+            let prepare = PREPARE_SECS
+                + PREPARE_SECS_PER_IMAGE * images as f64 * unical_cameras.len() as f64
+                + PREPARE_SECS_PER_ADDED_SWEEP * added as f64;
             if let (None, Some(budget)) = (config.iterations, resolved.budget_secs) {
                 let fits = ((budget - prepare) / step_secs.max(1e-6)).floor().max(0.0) as usize;
                 // Fewer steps than the poses' warm-up and ramp would leave them unmoved.
@@ -407,8 +435,19 @@ impl Plan {
                     unical_cameras.len()
                 )
             };
+            let shaped: Vec<String> = sweeps
+                .iter()
+                .map(|(l, n)| format!("{n} sweep(s) of {l}"))
+                .collect();
+            let nearest = if stamps.is_empty() {
+                ""
+            } else {
+                ", and the nearest to each image a camera is fitted on"
+            };
             decisions.push(format!(
-                "unical: one scene, {what}, {iterations} steps (about {} planned){}",
+                "unical: one scene from {} ({} spread over the drive{nearest}), {what}, {iterations} steps (about {} planned){}",
+                shaped.join(", "),
+                config.lidars.scene_sweeps,
                 format_secs(prepare + iterations as f64 * step_secs),
                 if lidars_move { "" } else { "; the LiDARs held" }
             ));
@@ -464,7 +503,8 @@ impl Plan {
             .unwrap_or(&[])
     }
 
-    /// The images of `camera` that the last stage fitting it (UniCal, else the hand-eye) uses,
+    /// The images of `camera` that the last stage fitting it (UniCal, else the hand-eye, else a
+    /// stationary log's edge alignment) uses,
     /// so that the check of its result can keep to others.
     pub fn fitted_images(&self, drive: &Drive, camera: &str) -> Vec<usize> {
         let has = |cameras: &[String]| cameras.iter().any(|c| c == camera);
@@ -483,6 +523,16 @@ impl Plan {
                     *images_per_camera,
                     segments,
                 )),
+                // The edge alignment's frames (the checkerboards' are whichever show boards).
+                Stage::StationaryCameras { reference, cameras } if has(cameras) => {
+                    let sweeps = crate::log::spread_evenly(
+                        &drive.frames_within(reference, segments),
+                        super::run::STATIONARY_EDGE_FRAMES,
+                    );
+                    Some(crate::optim::edge_align::images_nearest(
+                        drive, camera, reference, &sweeps,
+                    ))
+                }
                 Stage::CameraHandEye { cameras, .. } if has(cameras) => {
                     Some(crate::classical::camera_motion::picked_images(
                         drive,

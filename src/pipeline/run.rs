@@ -12,7 +12,7 @@ use crate::classical::trajectory_icp::{
 };
 use crate::log::Drive;
 use crate::optim::runner::Calibrator;
-use crate::unical::calibrator::UnicalLidarStage;
+use crate::unical::calibrator::{UnicalLidarStage, training_stamps};
 
 use super::plan::{Plan, Stage, too_sparse_why};
 
@@ -192,6 +192,10 @@ pub fn fit_cameras(
     (out, fitted, notes)
 }
 
+/// The sweeps of the reference (spread over the log) a stationary log's edge alignment fits
+/// each camera on, with the image nearest each ([`crate::optim::edge_align::sweep_image_pairs`]).
+pub const STATIONARY_EDGE_FRAMES: usize = 4;
+
 /// A log that stands still: calibrate `cameras` against `reference` by checkerboards where
 /// boards are found, else by edge alignment, each run to its end. Returns the rig and one line
 /// per decision or result.
@@ -235,7 +239,7 @@ pub fn stationary_cameras(
                 drive,
                 rig,
                 (reference, cameras),
-                4,
+                STATIONARY_EDGE_FRAMES,
                 segments_nanos,
                 drive.camera_readout,
             ) {
@@ -427,11 +431,12 @@ pub fn unical(
     } else {
         *images_per_camera
     };
-    let stage = UnicalLidarStage::from_drive(
+    let stage = UnicalLidarStage::from_drive_covering(
         drive,
         &prepared.rig,
         plan.config.lidars.scene_sweeps,
         &plan.request.segments_nanos,
+        &training_stamps(drive, &prepared.rig, frames, &plan.request.segments_nanos),
         config,
     )?
     .with_cameras_reporting(

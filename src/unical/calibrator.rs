@@ -13,6 +13,7 @@ use super::depth_calib::{CameraData, CameraFrame, DepthCalibConfig, DepthCalibra
 use super::masks::{ego_mask, is_masked, mark_traffic};
 use super::pose_window::{PoseWindow, window_len};
 use super::scene_bounds::{Kept, keep_near_drive};
+use super::scene_sweeps;
 use super::surface_align::AlignmentLoss;
 use super::transient::{TransientStats, Witnesses, remove_transient};
 use crate::calib::Rig;
@@ -57,14 +58,31 @@ impl UnicalLidarStage {
         segments_nanos: &[(i64, i64)],
         config: DepthCalibConfig,
     ) -> Result<Self, String> {
+        Self::from_drive_covering(drive, rig, sweeps_per_lidar, segments_nanos, &[], config)
+    }
+
+    /// [`UnicalLidarStage::from_drive`], with each LiDAR's sweep nearest every one of
+    /// `image_stamps_nanos` (the cameras' training images: [`training_stamps`]) in the scene
+    /// too ([`scene_sweeps`]), so that what the cameras are fitted on was seen by a LiDAR.
+    pub fn from_drive_covering(
+        drive: &Drive,
+        rig: &Rig,
+        sweeps_per_lidar: usize,
+        segments_nanos: &[(i64, i64)],
+        image_stamps_nanos: &[i64],
+        config: DepthCalibConfig,
+    ) -> Result<Self, String> {
         let mut lidars = Vec::new();
         for lidar in rig.lidars() {
-            let usable = drive.frames_within(&lidar.name, segments_nanos);
-            if usable.is_empty() {
-                continue;
-            }
+            let picked = scene_sweeps::pick(
+                drive,
+                &lidar.name,
+                sweeps_per_lidar,
+                segments_nanos,
+                image_stamps_nanos,
+            );
             // A sweep that does not decode is skipped (and reported by the drive).
-            let sweeps: Vec<_> = spread_evenly(&usable, sweeps_per_lidar)
+            let sweeps: Vec<_> = picked
                 .into_iter()
                 .filter_map(|i| drive.sweep_or_skip(&lidar.name, i))
                 .collect();
@@ -418,6 +436,32 @@ pub fn training_images(
         &drive.frames_within(name, segments_nanos),
         frames_per_camera,
     )
+}
+
+/// The stamps of the images [`UnicalLidarStage::with_cameras`] trains on: `frames_per_camera`
+/// of every camera of `rig` with intrinsics and a stream in `drive` ([`training_images`]).
+pub fn training_stamps(
+    drive: &Drive,
+    rig: &Rig,
+    frames_per_camera: usize,
+    segments_nanos: &[(i64, i64)],
+) -> Vec<i64> {
+    if frames_per_camera == 0 {
+        return Vec::new();
+    }
+    rig.cameras()
+        .filter(|cam| cam.camera.is_some())
+        .filter_map(|cam| {
+            let stream = drive.stream(&cam.name)?;
+            Some(
+                training_images(drive, &cam.name, frames_per_camera, segments_nanos)
+                    .into_iter()
+                    .filter_map(|i| stream.frames.get(i).map(|f| f.stamp_nanos))
+                    .collect::<Vec<_>>(),
+            )
+        })
+        .flatten()
+        .collect()
 }
 
 /// A camera image resized to the working `intrinsics` (triangle filter), as the colour term

@@ -10,6 +10,8 @@
 //! - [`pose`]: extrinsics as 6D rotation + translation (§11) and the ray → pose backward pass.
 //! - [`occupancy`]: the 0.5 m occupancy grid from aggregated LiDAR and 10 cm ray sampling (§7).
 //! - [`scene_bounds`]: optionally, the scene box around the drive instead of the LiDARs' reach.
+//! - [`scene_sweeps`]: the sweeps that shape the scene: spread over the drive, and the nearest
+//!   to every training image.
 //! - [`lidar_terms`]: the LiDAR terms (depth, intensity, regulariser) for a batch of rays with
 //!   scene, β, decoder, intensity-mapping and pose gradients.
 //! - [`intensity`]: the LiDAR intensity decoder and per-LiDAR intensity mapping.
@@ -55,6 +57,7 @@ pub mod pose_steps;
 pub mod pose_window;
 pub mod regulariser;
 pub mod scene_bounds;
+pub mod scene_sweeps;
 pub mod sdf_init;
 pub mod surface_align;
 pub mod transient;
