@@ -111,7 +111,8 @@ pub fn images_nearest(drive: &Drive, camera: &str, lidar: &str, sweeps: &[usize]
 /// As [`sweep_image_pairs`], but spread over the sweeps whose nearest image is none of
 /// `fitted_images` (the frames a fit used) nor within a quarter of their spacing of one (a
 /// neighbour a tenth of a second on sees the same scene), so a check judges the fit on data it
-/// did not see. Where no such sweep is left (a log of a few frames) every sweep is a candidate;
+/// did not see. Where no such sweep is left (a log of a few frames), or none of them makes a
+/// pair, every sweep is a candidate;
 /// the flag says whether the pairs are held out.
 pub fn held_out_pairs(
     drive: &Drive,
@@ -161,10 +162,40 @@ pub fn held_out_pairs(
             })
             .collect()
     };
-    let held_out = !unfitted.is_empty();
-    let candidates = if held_out { unfitted } else { usable };
+    // Held-out sweeps that make no pair (not decoded, no image near, outside the trajectory)
+    // leave the check the fitted ones, as a log with no others does.
+    let mut held_out = !unfitted.is_empty();
+    let mut out = pairs_of(
+        drive,
+        (camera, lidar),
+        frames,
+        if held_out { &unfitted } else { &usable },
+    );
+    if out.is_empty() && held_out {
+        held_out = false;
+        out = pairs_of(drive, (camera, lidar), frames, &usable);
+    }
+    if out.is_empty() {
+        return Err(AlignError::Setup(format!(
+            "no image of '{camera}' within 200 ms of a sweep of '{lidar}'"
+        )));
+    }
+    Ok((out, held_out))
+}
+
+/// Up to `frames` sweep–image pairs spread over the sweeps `candidates` of `lidar`: each with
+/// the image of `camera` nearest in time, within 200 ms and inside the trajectory.
+fn pairs_of(
+    drive: &Drive,
+    (camera, lidar): (&str, &str),
+    frames: usize,
+    candidates: &[usize],
+) -> Vec<SweepImagePair> {
+    let Some(cam_stream) = drive.stream(camera) else {
+        return Vec::new();
+    };
     let mut out = Vec::with_capacity(frames);
-    for sweep_index in crate::log::spread_evenly(&candidates, frames) {
+    for sweep_index in crate::log::spread_evenly(candidates, frames) {
         let Some(sweep) = drive.sweep_or_skip(lidar, sweep_index) else {
             continue;
         };
@@ -186,12 +217,7 @@ pub fn held_out_pairs(
             image_stamp_nanos,
         });
     }
-    if out.is_empty() {
-        return Err(AlignError::Setup(format!(
-            "no image of '{camera}' within 200 ms of a sweep of '{lidar}'"
-        )));
-    }
-    Ok((out, held_out))
+    out
 }
 
 /// Silhouette points of `sweep` moved into the vehicle frame at `image_stamp_nanos`.
