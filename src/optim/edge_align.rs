@@ -108,6 +108,18 @@ pub fn images_nearest(drive: &Drive, camera: &str, lidar: &str, sweeps: &[usize]
         .collect()
 }
 
+/// The images of `camera` that [`sweep_image_pairs`] pairs with `frames` sweeps of `lidar`
+/// (by the log's index; nothing is decoded): the ones an edge alignment on them fits.
+pub fn picked_images(
+    drive: &Drive,
+    (camera, lidar): (&str, &str),
+    frames: usize,
+    segments_nanos: &[(i64, i64)],
+) -> Vec<usize> {
+    let sweeps = crate::log::spread_evenly(&drive.frames_within(lidar, segments_nanos), frames);
+    images_nearest(drive, camera, lidar, &sweeps)
+}
+
 /// As [`sweep_image_pairs`], but spread over the sweeps whose nearest image is none of
 /// `fitted_images` (the frames a fit used) nor within a quarter of their spacing of one (a
 /// neighbour a tenth of a second on sees the same scene), so a check judges the fit on data it

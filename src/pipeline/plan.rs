@@ -525,12 +525,11 @@ impl Plan {
                 )),
                 // The edge alignment's frames (the checkerboards' are whichever show boards).
                 Stage::StationaryCameras { reference, cameras } if has(cameras) => {
-                    let sweeps = crate::log::spread_evenly(
-                        &drive.frames_within(reference, segments),
+                    Some(crate::optim::edge_align::picked_images(
+                        drive,
+                        (camera, reference),
                         super::run::STATIONARY_EDGE_FRAMES,
-                    );
-                    Some(crate::optim::edge_align::images_nearest(
-                        drive, camera, reference, &sweeps,
+                        segments,
                     ))
                 }
                 Stage::CameraHandEye { cameras, .. } if has(cameras) => {

@@ -16,10 +16,10 @@ use super::scene_bounds::{Kept, keep_near_drive};
 use super::scene_sweeps;
 use super::surface_align::AlignmentLoss;
 use super::transient::{TransientStats, Witnesses, remove_transient};
-use crate::calib::Rig;
+use crate::calib::{Rig, Sensor};
 use crate::geometry::Rigid;
 use crate::geometry::camera::CameraIntrinsics;
-use crate::log::{Drive, spread_evenly};
+use crate::log::{Drive, SensorStream, spread_evenly};
 use crate::optim::runner::{Calibrator, StepReport};
 use glam::{DVec2, DVec3};
 use std::collections::HashMap;
@@ -235,19 +235,7 @@ impl UnicalLidarStage {
         let with_keypoints = self.calib.config.alignment != AlignmentLoss::None;
         // Every camera with intrinsics and a stream, and the frames it contributes (counted
         // first, for the progress).
-        let chosen: Vec<_> = self
-            .rig
-            .cameras()
-            .filter_map(|cam| {
-                let (intrinsics, stream) = (cam.camera.as_ref()?, drive.stream(&cam.name)?);
-                Some((
-                    cam,
-                    intrinsics,
-                    stream,
-                    training_images(drive, &cam.name, frames_per_camera, segments_nanos),
-                ))
-            })
-            .collect();
+        let chosen = cameras_to_train(drive, &self.rig, frames_per_camera, segments_nanos);
         let total: usize = chosen.iter().map(|c| c.3.len()).sum();
         let mut loaded = 0;
         report(LOADING_IMAGES, 0, total);
@@ -438,8 +426,34 @@ pub fn training_images(
     )
 }
 
+/// The cameras of `rig` UniCal trains on (those with intrinsics and a stream in `drive`), each
+/// with its intrinsics, stream and training images ([`training_images`]).
+fn cameras_to_train<'a>(
+    drive: &'a Drive,
+    rig: &'a Rig,
+    frames_per_camera: usize,
+    segments_nanos: &[(i64, i64)],
+) -> Vec<(
+    &'a Sensor,
+    &'a CameraIntrinsics,
+    &'a SensorStream,
+    Vec<usize>,
+)> {
+    rig.cameras()
+        .filter_map(|cam| {
+            let (intrinsics, stream) = (cam.camera.as_ref()?, drive.stream(&cam.name)?);
+            Some((
+                cam,
+                intrinsics,
+                stream,
+                training_images(drive, &cam.name, frames_per_camera, segments_nanos),
+            ))
+        })
+        .collect()
+}
+
 /// The stamps of the images [`UnicalLidarStage::with_cameras`] trains on: `frames_per_camera`
-/// of every camera of `rig` with intrinsics and a stream in `drive` ([`training_images`]).
+/// of every camera of `rig` with intrinsics and a stream in `drive`.
 pub fn training_stamps(
     drive: &Drive,
     rig: &Rig,
@@ -449,18 +463,13 @@ pub fn training_stamps(
     if frames_per_camera == 0 {
         return Vec::new();
     }
-    rig.cameras()
-        .filter(|cam| cam.camera.is_some())
-        .filter_map(|cam| {
-            let stream = drive.stream(&cam.name)?;
-            Some(
-                training_images(drive, &cam.name, frames_per_camera, segments_nanos)
-                    .into_iter()
-                    .filter_map(|i| stream.frames.get(i).map(|f| f.stamp_nanos))
-                    .collect::<Vec<_>>(),
-            )
+    cameras_to_train(drive, rig, frames_per_camera, segments_nanos)
+        .into_iter()
+        .flat_map(|(_, _, stream, images)| {
+            images
+                .into_iter()
+                .filter_map(|i| stream.frames.get(i).map(|f| f.stamp_nanos))
         })
-        .flatten()
         .collect()
 }
 
