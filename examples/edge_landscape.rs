@@ -31,7 +31,7 @@ fn main() {
     let cameras: Vec<String> = truth.cameras().map(|c| c.name.clone()).collect();
     for cam in &cameras {
         let at_truth = truth.sensor(cam).unwrap().vehicle_from_sensor;
-        let p = EdgeAlignment::from_drive(
+        let mut p = EdgeAlignment::from_drive(
             &drive,
             &truth,
             (cam, &lidar),
@@ -40,20 +40,20 @@ fn main() {
             drive.camera_readout,
         )
         .unwrap();
-        let mut p = p;
-        if let Ok(w) = std::env::var("EDGE_WINDOW_DEG") {
-            // Silhouettes from neighbours in an angular window instead of one elevation bin.
-            let el_window: f32 = w.parse().unwrap();
+        if let Some(el_window) = env_f32("EDGE_WINDOW_DEG") {
+            // Silhouettes from an angular window instead of one elevation bin per beam, for the
+            // same sweeps (matched by stamp: a frame outside the trajectory was left out).
+            let az_window = env_f32("EDGE_AZ").unwrap_or(0.6);
             let pairs =
                 rigcal::optim::edge_align::sweep_image_pairs(&drive, cam, &lidar, frames, &[])
                     .unwrap();
             let vehicle_from_lidar = truth.sensor(&lidar).unwrap().vehicle_from_sensor;
-            for (f, pair) in p.frames.iter_mut().zip(pairs) {
-                let az: f32 = std::env::var("EDGE_AZ")
-                    .ok()
-                    .and_then(|s| s.parse().ok())
-                    .unwrap_or(0.6);
-                let idx = occluding_points(&pair.sweep.points_in_sensor, el_window, az);
+            for f in &mut p.frames {
+                let pair = pairs
+                    .iter()
+                    .find(|pair| pair.sweep.stamp_nanos == f.sweep_stamp_nanos)
+                    .unwrap();
+                let idx = occluding_points(&pair.sweep.points_in_sensor, el_window, az_window);
                 f.points_in_vehicle = rigcal::optim::edge_align::points_in_vehicle_at(
                     &pair.sweep,
                     &idx,
@@ -65,10 +65,15 @@ fn main() {
             }
             p.keep_visible(at_truth);
         }
-        if let Ok(t) = std::env::var("EDGE_TAU") {
-            p.truncation_px = t.parse().unwrap();
+        if let Some(tau) = env_f32("EDGE_TAU") {
+            p.truncation_px = tau as f64;
         }
         let c0 = p.cost(at_truth);
+        println!(
+            "{cam} × {lidar}: {} frames, {} points, cost at the reference {c0:.3} px",
+            p.frames.len(),
+            p.point_count()
+        );
         let mut d = p.distances(at_truth);
         d.sort_by(f32::total_cmp);
         let share = |r: f32| d.iter().filter(|&&x| x <= r).count() as f64 / d.len() as f64;
@@ -83,11 +88,6 @@ fn main() {
         if let Ok(dir) = std::env::var("EDGE_PNG_DIR") {
             draw(&p, at_truth, &format!("{dir}/{cam}.png"));
         }
-        println!(
-            "{cam} × {lidar}: {} frames, {} points, cost at the reference {c0:.3} px",
-            p.frames.len(),
-            p.point_count()
-        );
         for axis in 0..3 {
             let row: Vec<String> = (-8..=8)
                 .map(|k| {
@@ -123,6 +123,11 @@ fn main() {
             println!("{line}");
         }
     }
+}
+
+/// A number from the environment, if set.
+fn env_f32(name: &str) -> Option<f32> {
+    std::env::var(name).ok().map(|v| v.parse().unwrap())
 }
 
 fn search(p: &EdgeAlignment, start: Rigid) -> (Rigid, f64) {
@@ -174,10 +179,10 @@ fn draw(p: &EdgeAlignment, pose: Rigid, path: &str) {
 /// Indices of occluding points: a point whose nearest neighbour to the left or to the right in
 /// azimuth, among the points within `elevation_window_deg` of its elevation and
 /// `azimuth_window_deg` of its azimuth (seen from the LiDAR's origin), is farther by more than
-/// max(0.5 m, 10 %): the nearer side of a depth edge, as `rigcal::eval::edges::depth_discontinuities` finds it on
-/// one beam.
+/// max(0.5 m, 10 %): the nearer side of a depth edge, as
+/// `rigcal::eval::edges::depth_discontinuities` finds it on one beam.
 ///
-/// Unlike `rigcal::eval::edges::depth_discontinuities` this needs no beam structure: a multi-laser LiDAR's lasers sit
+/// Unlike that detector this needs no beam structure: a multi-laser LiDAR's lasers sit
 /// centimetres off its origin, so one beam's elevation *from the origin* changes with range
 /// (about offset / range: 0.6° for 4 cm at 4 m), and a near object and the background behind it
 /// on the same beam fall in different elevation bins; a cropped or reordered cloud has no ring
