@@ -15,12 +15,14 @@
 //! - [`interop`]: export to and import from the formats other tools read (URDF, ROS, Autoware,
 //!   OpenCV, Kalibr, KITTI, nuScenes, MCAP /tf_static).
 //! - [`pipeline`]: the automatic pipeline (plan, stages, confidence report) every front end runs.
+//! - [`error`]: the shared errors of a run on a drive and of a value a user typed.
 //! - [`util`]: atomic file writes and small helpers shared by every module.
 
 pub mod bench;
 pub mod calib;
 pub mod classical;
 pub mod cli;
+pub mod error;
 pub mod eval;
 pub mod features;
 pub mod geometry;
@@ -32,6 +34,8 @@ pub mod session;
 pub mod sim;
 pub mod unical;
 pub mod util;
+
+pub use error::{ParseError, RunError};
 
 #[cfg(feature = "app")]
 pub mod app;

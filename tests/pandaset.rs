@@ -181,6 +181,11 @@ fn a_rolling_shutter_keeps_only_frames_whose_rows_are_inside_the_trajectory() {
         plain.frames_within("pandar64", &[])
     );
     assert_eq!(rolling.camera_readout.last_row_nanos, 10_000_000);
+    // The studio's way: the open log seen with the readout, without reading the file again.
+    let viewed = plain.with_camera_readout(options.camera_readout);
+    assert_eq!(viewed.frames_within("back_camera", &[]), back_rolling);
+    assert_eq!(viewed.camera_readout, rolling.camera_readout);
+    assert_eq!(plain.frames_within("back_camera", &[]), back);
     // The hand-eye places each image at its middle row's time (25 ms before its stamp here).
     let rolled = rigcal::classical::camera_motion::camera_pairs(
         &rolling,

@@ -285,14 +285,7 @@ fn start_pipeline(studio: &mut Studio, drive: std::sync::Arc<crate::log::Drive>)
         let started = std::time::Instant::now();
         let drive = match config.cameras.readout_ms {
             Some((first, last)) => {
-                let options = crate::log::DriveOptions {
-                    camera_readout: RowTimes::from_millis(first, last),
-                    ..crate::log::DriveOptions::default()
-                };
-                std::sync::Arc::new(
-                    crate::log::Drive::open_with(drive.path(), &options)
-                        .map_err(|e| format!("cannot read the log with the readout: {e}"))?,
-                )
+                std::sync::Arc::new(drive.with_camera_readout(RowTimes::from_millis(first, last)))
             }
             None => drive,
         };
@@ -394,20 +387,15 @@ pub fn start(studio: &mut Studio) {
             .map(|(first, last)| RowTimes::from_millis(first, last));
         let notes = studio.optimiser.hand_eye_notes.clone();
         studio.optimiser.run = Some(Run::spawn_preparing(move |preparing| {
-            // The studio's drive has a global shutter: the run reads the log again with the
-            // readout (the index only, about a second), for its images and the hand-eye.
+            // The studio's drive has a global shutter: the run sees the same log with the
+            // readout, for its images and the hand-eye.
             let drive = match readout {
                 Some(readout) => {
-                    let options = crate::log::DriveOptions {
-                        camera_readout: readout,
-                        ..crate::log::DriveOptions::default()
-                    };
-                    let reread = crate::log::Drive::open_with(drive.path(), &options)
-                        .map_err(|e| format!("cannot read the log with the readout: {e}"))?;
+                    let rolling = drive.with_camera_readout(readout);
                     if let Ok(mut notes) = notes.lock() {
-                        notes.push(readout_note(&drive, &reread, &cameras, &segments, readout));
+                        notes.push(readout_note(&drive, &rolling, &cameras, &segments, readout));
                     }
-                    std::sync::Arc::new(reread)
+                    std::sync::Arc::new(rolling)
                 }
                 None => drive,
             };

@@ -150,7 +150,7 @@ enum Kept {
 }
 
 pub struct Drive {
-    container: McapContainer,
+    container: Arc<McapContainer>,
     pub topics: Vec<TopicStats>,
     pub tf: TfTree,
     pub fixed_frame: Option<String>,
@@ -164,10 +164,10 @@ pub struct Drive {
     pub camera_infos: BTreeMap<String, CameraIntrinsics>,
     pub streams: Vec<SensorStream>,
     pub problems: Problems,
-    image_cache: Mutex<VecDeque<((usize, usize), Arc<RgbImage>)>>,
+    image_cache: Arc<Mutex<VecDeque<((usize, usize), Arc<RgbImage>)>>>,
     image_cache_len: usize,
     /// The frames runs skipped because they did not decode ([`super::frames`]).
-    pub(super) skipped_frames: super::frames::SkippedFrames,
+    pub(super) skipped_frames: Arc<super::frames::SkippedFrames>,
     /// When each image row of the cameras was exposed relative to the image's stamp (a
     /// rolling shutter; [`RowTimes::GLOBAL`] unless the user gave a readout).
     pub camera_readout: RowTimes,
@@ -482,7 +482,7 @@ impl Drive {
             .map(|(frame, (_, info))| (frame, info.intrinsics))
             .collect();
         Ok(Self {
-            container,
+            container: Arc::new(container),
             topics,
             tf,
             fixed_frame,
@@ -492,7 +492,7 @@ impl Drive {
             camera_infos,
             streams,
             problems,
-            image_cache: Mutex::new(VecDeque::new()),
+            image_cache: Arc::new(Mutex::new(VecDeque::new())),
             skipped_frames: Default::default(),
             image_cache_len: options.image_cache_len.max(1),
             camera_readout: options.camera_readout,
@@ -501,6 +501,29 @@ impl Drive {
 
     pub fn path(&self) -> &Path {
         self.container.path()
+    }
+
+    /// The same log with cameras exposed row by row over `readout`, without reading it again:
+    /// the file, its index, the decoded-image cache and the skipped-frame record are shared, and
+    /// only which frames lie inside the trajectory ([`Drive::frames_within`]) and the runs'
+    /// image times change. The studio gives its runs the user's readout this way.
+    pub fn with_camera_readout(&self, readout: RowTimes) -> Self {
+        Self {
+            container: Arc::clone(&self.container),
+            topics: self.topics.clone(),
+            tf: self.tf.clone(),
+            fixed_frame: self.fixed_frame.clone(),
+            trajectory: self.trajectory.clone(),
+            trajectory_source: self.trajectory_source.clone(),
+            rig: self.rig.clone(),
+            camera_infos: self.camera_infos.clone(),
+            streams: self.streams.clone(),
+            problems: self.problems.clone(),
+            image_cache: Arc::clone(&self.image_cache),
+            image_cache_len: self.image_cache_len,
+            skipped_frames: Arc::clone(&self.skipped_frames),
+            camera_readout: readout,
+        }
     }
 
     pub fn container(&self) -> &McapContainer {
