@@ -13,7 +13,7 @@ use rigcal::classical::lidar_translation::fit_pose;
 use rigcal::log::Drive;
 use rigcal::sim::synth::perturb_rig;
 
-fn main() -> Result<(), String> {
+fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let (log, gt) = match (args.first(), args.get(1)) {
         (Some(l), Some(g)) => (l, g),

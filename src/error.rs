@@ -12,7 +12,12 @@ use std::path::PathBuf;
 
 use thiserror::Error;
 
+use crate::classical::hand_eye::HandEyeError;
+use crate::classical::pose_graph::PoseGraphError;
+use crate::geometry::TrajectoryError;
 use crate::log::LogError;
+use crate::optim::edge_align::AlignError;
+use crate::pipeline::plan::PlanError;
 
 /// Why a calibration, a check or an evaluation cannot run on a drive.
 #[derive(Debug, Error)]
@@ -20,6 +25,21 @@ pub enum RunError {
     /// The log, or a frame of it, could not be read.
     #[error(transparent)]
     Log(#[from] LogError),
+    /// A stamp outside the vehicle's trajectory, or no trajectory.
+    #[error("trajectory: {0}")]
+    Trajectory(#[from] TrajectoryError),
+    /// A LiDAR–camera alignment problem that could not be set up.
+    #[error(transparent)]
+    Align(#[from] AlignError),
+    /// A hand-eye fit of a camera's motion to the vehicle's.
+    #[error(transparent)]
+    HandEye(#[from] HandEyeError),
+    /// A pose graph that could not be built.
+    #[error(transparent)]
+    PoseGraph(#[from] PoseGraphError),
+    /// The pipeline could not plan a run on this drive.
+    #[error(transparent)]
+    Plan(#[from] PlanError),
     /// A sensor the run was asked about is not in the rig (or not of the kind it needs).
     #[error("no {kind} '{name}' in the rig")]
     NoSensor { kind: &'static str, name: String },
@@ -73,6 +93,18 @@ pub struct ParseError(String);
 impl ParseError {
     pub fn new(what: impl Into<String>) -> Self {
         Self(what.into())
+    }
+}
+
+impl From<String> for ParseError {
+    fn from(what: String) -> Self {
+        Self(what)
+    }
+}
+
+impl From<&str> for ParseError {
+    fn from(what: &str) -> Self {
+        Self(what.to_owned())
     }
 }
 

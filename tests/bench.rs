@@ -283,7 +283,7 @@ fn an_unwritable_output_folder_fails_before_any_run() {
         &mut |_, _, _| called = true,
     )
     .unwrap_err();
-    assert!(e.contains("/proc/rigcal-bench-out"), "{e}");
+    assert!(e.to_string().contains("/proc/rigcal-bench-out"), "{e}");
     assert!(!called);
 }
 

@@ -122,7 +122,7 @@ fn a_known_perturbation_is_reported_exactly_both_ways_and_under_a_common_offset(
         ..Default::default()
     };
     let e = evaluate(&args, &mut |_, _| {}).unwrap_err();
-    assert!(e.contains("nope"), "{e}");
+    assert!(e.to_string().contains("nope"), "{e}");
     // Frames per pair outside 1–1000 are refused before any work (not allocated for).
     for frames in [0, 1001, usize::MAX] {
         let args = EvalArgs {
@@ -132,7 +132,7 @@ fn a_known_perturbation_is_reported_exactly_both_ways_and_under_a_common_offset(
             ..Default::default()
         };
         let e = evaluate(&args, &mut |_, _| {}).unwrap_err();
-        assert!(e.contains("--frames must be 1–1000"), "{e}");
+        assert!(e.to_string().contains("--frames must be 1–1000"), "{e}");
     }
 }
 
@@ -340,12 +340,14 @@ fn a_rolling_shutter_readout_reaches_the_photometric_and_edge_metrics() {
     };
     let e = evaluate(&no_log, &mut |_, _| {}).unwrap_err();
     assert!(
-        e.contains("--camera-readout-ms applies to the metrics measured on a log: give one"),
+        e.to_string()
+            .contains("--camera-readout-ms applies to the metrics measured on a log: give one"),
         "{e}"
     );
     let e = evaluate(&args(Some("-30"), true), &mut |_, _| {}).unwrap_err();
     assert!(
-        e.contains("--camera-readout-ms '-30': expected FIRST..LAST"),
+        e.to_string()
+            .contains("--camera-readout-ms '-30': expected FIRST..LAST"),
         "{e}"
     );
 }

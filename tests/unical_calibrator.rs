@@ -67,7 +67,7 @@ fn the_lidar_stage_runs_as_a_calibrator_on_the_real_drive_with_a_frozen_root() {
     )
     .err()
     .unwrap();
-    assert!(e.contains("segments"), "{e}");
+    assert!(e.to_string().contains("segments"), "{e}");
 }
 
 /// The result is every pose averaged over the run's latest iterates: here the last two of four
@@ -206,7 +206,7 @@ fn cameras_join_the_stage_through_the_colour_term() {
         .with_cameras(&drive, 1, &[], 1.5)
         .err()
         .unwrap();
-    assert!(e.contains("scale"), "{e}");
+    assert!(e.to_string().contains("scale"), "{e}");
 }
 
 /// The real KITTI-360 sample: twenty frames 20–220 m apart, where four sweeps spread over the

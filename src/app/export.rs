@@ -18,12 +18,12 @@ pub struct ExportPanel {
     /// Sensors left out of the export (by name); empty: every sensor.
     pub left_out: Vec<String>,
     /// The last export and what it was made from (an MCAP export writes a file: not every frame).
-    cache: Option<(String, Result<Export, String>)>,
+    cache: Option<(String, Result<Export, interop::ExportError>)>,
 }
 
 impl ExportPanel {
     /// The export the panel shows (made on the last frame), or why it could not be made.
-    pub fn last(&self) -> Option<&Result<Export, String>> {
+    pub fn last(&self) -> Option<&Result<Export, interop::ExportError>> {
         self.cache.as_ref().map(|(_, e)| e)
     }
 }
@@ -199,15 +199,14 @@ pub(crate) fn export_ui(studio: &mut Studio, ui: &mut egui::Ui) {
     };
     let key = format!("{}|{:?}|{}", format.name(), options, doc.to_yaml());
     if studio.export.cache.as_ref().is_none_or(|(k, _)| *k != key) {
-        let made = interop::export(&doc, format, &options).map_err(|e| e.to_string());
+        let made = interop::export(&doc, format, &options);
         studio.export.cache = Some((key, made));
     }
     let Some((_, made)) = &studio.export.cache else {
         return;
     };
-    let made = made.clone();
     let export = match made {
-        Ok(e) => e,
+        Ok(e) => e.clone(),
         Err(e) => {
             ui.colored_label(egui::Color32::LIGHT_RED, format!("cannot export: {e}"));
             return;

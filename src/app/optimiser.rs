@@ -290,8 +290,7 @@ fn start_pipeline(studio: &mut Studio, drive: std::sync::Arc<crate::log::Drive>)
             None => drive,
         };
         preparing.report("planning", 0, 1);
-        let plan = crate::pipeline::Plan::build(&drive, &rig, &request, &config)
-            .map_err(|e| e.to_string())?;
+        let plan = crate::pipeline::Plan::build(&drive, &rig, &request, &config)?;
         if let Ok(mut notes) = notes.lock() {
             notes.extend(plan.decisions.iter().map(|d| format!("plan: {d}")));
         }
@@ -306,7 +305,7 @@ fn start_pipeline(studio: &mut Studio, drive: std::sync::Arc<crate::log::Drive>)
         if let Ok(mut notes) = notes.lock() {
             notes.extend(run.notes().iter().cloned());
         }
-        Ok(Box::new(run) as Box<dyn Calibrator>)
+        Ok::<_, crate::RunError>(Box::new(run) as Box<dyn Calibrator>)
     }));
 }
 
@@ -455,7 +454,7 @@ pub fn start(studio: &mut Studio) {
             } else {
                 stage
             };
-            Ok(Box::new(stage) as Box<dyn Calibrator>)
+            Ok::<_, crate::RunError>(Box::new(stage) as Box<dyn Calibrator>)
         }));
         return;
     }

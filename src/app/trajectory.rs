@@ -85,11 +85,11 @@ pub struct TrajectoryPanel {
 const MAP_POINTS: usize = 60_000;
 
 /// Aggregate up to ~`MAP_POINTS` LiDAR points (every LiDAR, sweeps spread over the drive).
-pub fn build_map(drive: &Drive, rig: &Rig) -> Result<MapData, String> {
+pub fn build_map(drive: &Drive, rig: &Rig) -> Result<MapData, crate::RunError> {
     let (t0, t1) = drive
         .trajectory
         .time_range_nanos()
-        .ok_or("the drive has no trajectory")?;
+        .ok_or_else(|| crate::RunError::NotEnoughData("the drive has no trajectory".into()))?;
     let trajectory: Vec<(i64, [f64; 2])> = Trajectory::sample_stamps(t0, t1, 100_000_000, 20_000)
         .into_iter()
         .filter_map(|t| {
@@ -139,7 +139,7 @@ pub fn poll(studio: &mut Studio, ctx: &egui::Context) {
         let (tx, rx) = channel();
         let rig = studio.current.clone();
         std::thread::spawn(move || {
-            let _ = tx.send(build_map(&drive, &rig));
+            let _ = tx.send(build_map(&drive, &rig).map_err(|e| e.to_string()));
         });
         panel.job = Some(rx);
     }

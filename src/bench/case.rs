@@ -123,7 +123,7 @@ pub fn ensure_drive(
     spec: &DriveSpec,
     drives_dir: &Path,
     progress: &mut dyn FnMut(usize, usize),
-) -> Result<(PathBuf, PathBuf), String> {
+) -> Result<(PathBuf, PathBuf), super::BenchError> {
     match spec {
         DriveSpec::Log { mcap, ground_truth } => Ok((mcap.clone(), ground_truth.clone())),
         DriveSpec::Sim {
@@ -227,7 +227,8 @@ fn run_into(
                 plan,
                 started,
                 &|_, _, _| {},
-            )?;
+            )
+            .map_err(|e| e.to_string())?;
             out.prepare_secs = started.elapsed().as_secs_f64();
             optimise(&mut run, &reference, &initial, &optimised, progress, out)?;
         }
@@ -338,8 +339,10 @@ fn unical_stage(
         ..DepthCalibConfig::default()
     };
     let covered = training_stamps(drive, rig, s.camera_frames, &[]);
-    UnicalLidarStage::from_drive_covering(drive, rig, s.sweeps_per_lidar, &[], &covered, config)?
+    UnicalLidarStage::from_drive_covering(drive, rig, s.sweeps_per_lidar, &[], &covered, config)
+        .map_err(|e| e.to_string())?
         .with_cameras(drive, s.camera_frames, &[], s.camera_scale)
+        .map_err(|e| e.to_string())
 }
 
 /// Mean errors of the optimised sensors (the root excluded) of `rig` against `reference`.

@@ -14,6 +14,30 @@ pub mod plot;
 pub mod report;
 pub mod suite;
 
+/// Why a benchmark suite could not run or write its outputs (a failed *case* is not one: it is
+/// a row of the report with its reason).
+#[derive(Debug, thiserror::Error)]
+pub enum BenchError {
+    /// A drive could not be simulated or read.
+    #[error(transparent)]
+    Run(#[from] crate::error::RunError),
+    /// A file or folder of the outputs, or a drive's, named in the message.
+    #[error("{0}")]
+    Output(String),
+}
+
+impl From<String> for BenchError {
+    fn from(what: String) -> Self {
+        Self::Output(what)
+    }
+}
+
+impl From<&str> for BenchError {
+    fn from(what: &str) -> Self {
+        Self::Output(what.to_owned())
+    }
+}
+
 use std::path::Path;
 use std::time::Instant;
 
@@ -40,7 +64,7 @@ pub fn run_suite(
     suite: &Suite,
     out_dir: &Path,
     progress: &mut dyn FnMut(&Stage, usize, usize),
-) -> Result<BenchReport, String> {
+) -> Result<BenchReport, BenchError> {
     std::fs::create_dir_all(out_dir)
         .map_err(|e| format!("cannot create {}: {e}", out_dir.display()))?;
     // Fail on an unwritable folder now, not after an hour of runs.
@@ -70,7 +94,7 @@ pub fn run_suite(
         };
         let result = match drive {
             Ok((mcap, gt)) => case::run_case(case, &mcap, &gt, &mut |d, t| progress(&stage, d, t)),
-            Err(e) => case::CaseResult::failed(case, Some(e)),
+            Err(e) => case::CaseResult::failed(case, Some(e.to_string())),
         };
         results.push(result);
     }
@@ -86,7 +110,7 @@ pub fn run_suite(
 }
 
 /// Write the report's files into `out_dir`.
-pub fn write_outputs(report: &BenchReport, out_dir: &Path) -> Result<(), String> {
+pub fn write_outputs(report: &BenchReport, out_dir: &Path) -> Result<(), BenchError> {
     let write = |name: &str, bytes: &[u8]| {
         let path = out_dir.join(name);
         crate::util::write_atomic(&path, bytes)

@@ -89,7 +89,7 @@ fn tick(v: &f64) -> String {
 }
 
 /// Convergence curves of the perturbation protocol's runs (one line per run, colour per run).
-pub fn convergence(report: &BenchReport, path: &Path) -> Result<(), String> {
+pub fn convergence(report: &BenchReport, path: &Path) -> Result<(), super::BenchError> {
     let runs: Vec<(String, &CaseResult)> = report
         .cases
         .iter()
@@ -100,7 +100,7 @@ pub fn convergence(report: &BenchReport, path: &Path) -> Result<(), String> {
             Some((label, r)).filter(|_| r.error.is_none() && r.curve.len() > 1)
         })
         .collect();
-    render(path, |root| {
+    Ok(render(path, |root| {
         let err = |e: DrawingAreaErrorKind<_>| e.to_string();
         let (title, body) = root.split_vertically(50);
         title
@@ -175,11 +175,11 @@ pub fn convergence(report: &BenchReport, path: &Path) -> Result<(), String> {
                 .map_err(err)?;
         }
         Ok(())
-    })
+    })?)
 }
 
 /// Final error against the initial perturbation, per method (mean ± std over seeds).
-pub fn error_vs_perturbation(report: &BenchReport, path: &Path) -> Result<(), String> {
+pub fn error_vs_perturbation(report: &BenchReport, path: &Path) -> Result<(), super::BenchError> {
     // (method, quantity index) → points (initial level, final stat) for rotation and translation
     // sweeps separately.
     let mut methods: Vec<&'static str> = Vec::new();
@@ -234,7 +234,7 @@ pub fn error_vs_perturbation(report: &BenchReport, path: &Path) -> Result<(), St
             })
             .collect::<Vec<_>>()
     };
-    render(path, |root| {
+    Ok(render(path, |root| {
         let err = |e: DrawingAreaErrorKind<_>| e.to_string();
         let (title, body) = root.split_vertically(50);
         title
@@ -340,5 +340,5 @@ pub fn error_vs_perturbation(report: &BenchReport, path: &Path) -> Result<(), St
                 .map_err(err)?;
         }
         Ok(())
-    })
+    })?)
 }

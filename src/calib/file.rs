@@ -84,7 +84,7 @@ impl ExtrinsicYaml {
     }
 
     /// The authoritative transform; errors if the quaternion is far from unit or not finite.
-    pub fn to_rigid(&self) -> Result<Rigid, String> {
+    pub fn to_rigid(&self) -> Result<Rigid, crate::error::ParseError> {
         let [x, y, z, w] = self.rotation_xyzw;
         let q = DQuat::from_xyzw(x, y, z, w);
         let t = DVec3::from_array(self.translation_m);
@@ -93,9 +93,9 @@ impl ExtrinsicYaml {
         }
         let norm = q.length();
         if (norm - 1.0).abs() > 1e-3 {
-            return Err(format!(
-                "rotation_xyzw has norm {norm:.6}, expected a unit quaternion"
-            ));
+            return Err(
+                format!("rotation_xyzw has norm {norm:.6}, expected a unit quaternion").into(),
+            );
         }
         Ok(Rigid::new(q / norm, t))
     }

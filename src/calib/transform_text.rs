@@ -9,6 +9,7 @@
 use glam::{DMat3, DQuat, DVec3, EulerRot};
 
 use super::file::ExtrinsicYaml;
+use crate::error::ParseError;
 use crate::geometry::Rigid;
 
 /// The transform as the native file writes it (translation, quaternion, derived roll/pitch/yaw).
@@ -21,7 +22,7 @@ pub fn format_transform(t: Rigid) -> String {
     )
 }
 
-pub fn parse_transform(text: &str) -> Result<Rigid, String> {
+pub fn parse_transform(text: &str) -> Result<Rigid, ParseError> {
     let text = text.trim();
     if text.is_empty() {
         return Err("nothing to parse".into());
@@ -61,18 +62,19 @@ pub fn parse_transform(text: &str) -> Result<Rigid, String> {
         12 | 16 => rigid_from_matrix(&numbers),
         n => Err(format!(
             "{n} numbers: expected 6 (x y z roll pitch yaw°), 7 (x y z qx qy qz qw), 12 (3×4) or 16 (4×4)"
-        )),
+        ).into()),
     }
 }
 
 /// A rigid transform from a row-major 3×4 or 4×4 matrix (12 or 16 numbers), validated: finite,
 /// last row `0 0 0 1`, rotation block orthonormal with determinant +1 (to 1e-4).
-pub fn rigid_from_matrix(numbers: &[f64]) -> Result<Rigid, String> {
+pub fn rigid_from_matrix(numbers: &[f64]) -> Result<Rigid, ParseError> {
     if numbers.len() != 12 && numbers.len() != 16 {
         return Err(format!(
             "{} numbers: a matrix needs 12 (3×4) or 16 (4×4)",
             numbers.len()
-        ));
+        )
+        .into());
     }
     if numbers.iter().any(|v| !v.is_finite()) {
         return Err("numbers must be finite".into());
@@ -95,7 +97,8 @@ pub fn rigid_from_matrix(numbers: &[f64]) -> Result<Rigid, String> {
     if err > 1e-4 || rot.determinant() < 0.0 {
         return Err(format!(
             "the rotation part is not a rotation (orthonormality error {err:.1e})"
-        ));
+        )
+        .into());
     }
     Ok(Rigid::new(
         DQuat::from_mat3(&rot).normalize(),
@@ -103,11 +106,11 @@ pub fn rigid_from_matrix(numbers: &[f64]) -> Result<Rigid, String> {
     ))
 }
 
-fn from_quaternion(t: [f64; 3], xyzw: [f64; 4]) -> Result<Rigid, String> {
+fn from_quaternion(t: [f64; 3], xyzw: [f64; 4]) -> Result<Rigid, ParseError> {
     let q = DQuat::from_xyzw(xyzw[0], xyzw[1], xyzw[2], xyzw[3]);
     let n = q.length();
     if !(0.9..=1.1).contains(&n) {
-        return Err(format!("the quaternion's norm is {n:.3}, not 1"));
+        return Err(format!("the quaternion's norm is {n:.3}, not 1").into());
     }
     Ok(Rigid::new(q.normalize(), DVec3::from_array(t)))
 }
@@ -164,18 +167,35 @@ mod tests {
 
     #[test]
     fn bad_text_is_a_clear_error() {
-        assert!(parse_transform("").unwrap_err().contains("nothing"));
-        assert!(parse_transform("1 2 3").unwrap_err().contains("3 numbers"));
-        assert!(parse_transform("1 2 x 4 5 6").unwrap_err().contains("'x'"));
+        assert!(
+            parse_transform("")
+                .unwrap_err()
+                .to_string()
+                .contains("nothing")
+        );
+        assert!(
+            parse_transform("1 2 3")
+                .unwrap_err()
+                .to_string()
+                .contains("3 numbers")
+        );
+        assert!(
+            parse_transform("1 2 x 4 5 6")
+                .unwrap_err()
+                .to_string()
+                .contains("'x'")
+        );
         assert!(
             parse_transform("0 0 0 0 0 0 2")
                 .unwrap_err()
+                .to_string()
                 .contains("norm")
         );
         let sheared = "1 0.5 0 0  0 1 0 0  0 0 1 0  0 0 0 1";
         assert!(
             parse_transform(sheared)
                 .unwrap_err()
+                .to_string()
                 .contains("not a rotation")
         );
         assert!(parse_transform("translation_m: [1, 2]\n").is_err());

@@ -8,6 +8,7 @@
 //! model unprojects them. Every pair of them whose vehicle poses are 1–8 m apart is matched
 //! and verified in parallel; the solve then fits the extrinsic from the camera's start.
 
+use crate::error::RunError;
 use glam::{DVec2, DVec3};
 use rayon::prelude::*;
 
@@ -63,17 +64,17 @@ pub fn camera_pairs(
     segments_nanos: &[(i64, i64)],
     require_turns: bool,
     report: &(dyn Fn(&str, usize, usize) + Sync),
-) -> Result<CameraPairs, String> {
+) -> Result<CameraPairs, RunError> {
     let sensor = rig
         .sensor(name)
-        .ok_or_else(|| format!("no camera '{name}' in the rig"))?;
+        .ok_or_else(|| RunError::no_sensor("camera", name))?;
     let intrinsics = sensor
         .camera
         .as_ref()
-        .ok_or_else(|| format!("'{name}' has no intrinsics"))?;
+        .ok_or_else(|| RunError::Invalid(format!("'{name}' has no intrinsics")))?;
     let stream = drive
         .stream(name)
-        .ok_or_else(|| format!("the log has no images of '{name}'"))?;
+        .ok_or_else(|| RunError::NotEnoughData(format!("the log has no images of '{name}'")))?;
     let picked = picked_images(drive, name, frames, segments_nanos);
     // A rolling-shutter image stands at its middle row's time.
     let stamps: Vec<i64> = picked
@@ -82,7 +83,7 @@ pub fn camera_pairs(
         .collect();
     let candidates = candidate_pairs(&drive.trajectory, &stamps);
     if require_turns {
-        check_turns(&candidates).map_err(|e| e.to_string())?;
+        check_turns(&candidates)?;
     }
     let done = std::sync::atomic::AtomicUsize::new(0);
     let keypoints = picked
@@ -95,9 +96,9 @@ pub fn camera_pairs(
             };
             let n = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
             report("camera keypoints", n, picked.len());
-            Ok(found)
+            found
         })
-        .collect::<Result<Vec<_>, String>>()?;
+        .collect::<Vec<_>>();
     let unproject = |x: f64, y: f64| -> Option<DVec3> { intrinsics.unproject(DVec2::new(x, y)) };
     let pairs = motion_pairs(&keypoints, &candidates, &unproject, &|d, t| {
         report("camera motion", d, t)
@@ -122,9 +123,9 @@ pub fn fit_camera(
     frames: usize,
     segments_nanos: &[(i64, i64)],
     report: &(dyn Fn(&str, usize, usize) + Sync),
-) -> Result<HandEyeFit, String> {
+) -> Result<HandEyeFit, RunError> {
     let found = camera_pairs(drive, rig, name, frames, segments_nanos, true, report)?;
-    solve(&found.pairs, found.start).map_err(|e| e.to_string())
+    Ok(solve(&found.pairs, found.start)?)
 }
 
 /// What the hand-eye did to one camera of a rig.
@@ -214,7 +215,7 @@ pub fn fit_rig_cameras(
         );
         let fit = match &found {
             Ok(found) => solve(&found.pairs, found.start).map_err(|e| e.to_string()),
-            Err(e) => Err(e.clone()),
+            Err(e) => Err(e.to_string()),
         };
         let translation = match (&found, &fit, map) {
             (Ok(found), Ok(fit), Some(map)) => Some(
@@ -249,9 +250,7 @@ pub fn fit_rig_cameras(
 
 /// The LiDAR map [`fit_rig_cameras`] measures translations against: every LiDAR of `rig`
 /// (at its extrinsic there), 16 sweeps each spread over the drive, one point per 10 cm voxel.
-pub fn lidar_map(drive: &Drive, rig: &Rig) -> Result<LidarMap, String> {
+pub fn lidar_map(drive: &Drive, rig: &Rig) -> Result<LidarMap, RunError> {
     let config = crate::optim::photo_consistency::PhotoConfig::default();
-    crate::optim::photo_consistency::lidar_map(drive, rig, &config)
-        .map(LidarMap::new)
-        .map_err(|e| e.to_string())
+    Ok(crate::optim::photo_consistency::lidar_map(drive, rig, &config).map(LidarMap::new)?)
 }

@@ -4,6 +4,7 @@
 //! deskewed with the trajectory at each point's firing time; one step is one Gauss–Newton step
 //! of every pair ([`super::icp`]).
 
+use crate::error::RunError;
 use glam::DVec3;
 
 use super::icp::{IcpConfig, IcpProblem, SourcePoint};
@@ -53,7 +54,7 @@ pub fn reference_points_near(
     vehicle_from_reference: Rigid,
     frames: &[usize],
     stamp_nanos: i64,
-) -> Result<Vec<DVec3>, String> {
+) -> Result<Vec<DVec3>, RunError> {
     let Some(stream) = drive.stream(reference) else {
         return Ok(Vec::new());
     };
@@ -69,7 +70,7 @@ pub fn reference_points_near(
         };
         out.extend(
             world_points(&t.view(), &drive.trajectory, vehicle_from_reference, 1)
-                .map_err(|e| format!("{reference}: {e}"))?,
+                .map_err(|e| RunError::from(e).within(reference))?,
         );
     }
     Ok(out)
@@ -84,17 +85,17 @@ impl IcpCalibrator {
         frames: usize,
         segments_nanos: &[(i64, i64)],
         config: IcpConfig,
-    ) -> Result<Self, String> {
+    ) -> Result<Self, RunError> {
         let fixed = rig
             .sensor(reference)
-            .ok_or_else(|| format!("no LiDAR '{reference}' in the rig"))?
+            .ok_or_else(|| RunError::no_sensor("LiDAR", reference))?
             .vehicle_from_sensor;
         let targets = drive.frames_within(reference, segments_nanos);
         if drive.stream(reference).is_none() {
-            return Err(format!(
+            return Err(RunError::NotEnoughData(format!(
                 "no sweeps of '{reference}' in {}",
                 drive.path().display()
-            ));
+            )));
         }
         let mut problems = Vec::new();
         for lidar in rig.lidars().filter(|l| l.name != reference) {
@@ -124,9 +125,9 @@ impl IcpCalibrator {
             problems.push((lidar.name.clone(), problem));
         }
         if problems.is_empty() {
-            return Err(format!(
+            return Err(RunError::NotEnoughData(format!(
                 "no LiDAR to register against '{reference}' inside the trajectory and the selected segments"
-            ));
+            )));
         }
         let max_steps = config.levels.len() * config.iterations_per_level;
         Ok(Self {

@@ -2,6 +2,7 @@
 //! (which stays fixed), each by its own bounded Barzilai–Borwein ascent ([`super::mutual_info`]);
 //! the cameras step in parallel.
 
+use crate::error::RunError;
 use rayon::prelude::*;
 
 use super::mutual_info::{MiConfig, MiProblem, MiSearch};
@@ -28,21 +29,21 @@ impl MiCalibrator {
         frames: usize,
         segments_nanos: &[(i64, i64)],
         config: MiConfig,
-    ) -> Result<Self, String> {
+    ) -> Result<Self, RunError> {
         let problems = cameras
             .iter()
             .map(|cam| {
                 let p =
                     MiProblem::from_drive(drive, rig, cam, lidar, frames, segments_nanos, &config)
-                        .map_err(|e| format!("{cam} × {lidar}: {e}"))?;
+                        .map_err(|e| RunError::from(e).within(format!("{cam} × {lidar}")))?;
                 let start = rig
                     .sensor(cam)
                     .map(|s| s.vehicle_from_sensor)
-                    .ok_or_else(|| format!("no sensor '{cam}'"))?;
+                    .ok_or_else(|| RunError::no_sensor("camera", cam))?;
                 let search = MiSearch::new(&p, start, &config);
                 Ok((p, search))
             })
-            .collect::<Vec<Result<_, String>>>();
+            .collect::<Vec<Result<_, RunError>>>();
         let (problems, skipped) = super::per_camera(problems)?;
         Ok(Self {
             rig: rig.clone(),

@@ -25,22 +25,24 @@ pub mod target_calibrator;
 pub mod trajectory_icp;
 pub mod trajectory_sweeps;
 
+use crate::error::RunError;
+
 /// The cameras' problems that could be set up, and a reason for each that could not (no
 /// overlap with the LiDAR, no boards); an error only when no camera was asked for or none
 /// could be set up.
 pub(crate) fn per_camera<T>(
-    results: Vec<Result<T, String>>,
-) -> Result<(Vec<T>, Vec<String>), String> {
+    results: Vec<Result<T, RunError>>,
+) -> Result<(Vec<T>, Vec<String>), RunError> {
     if results.is_empty() {
-        return Err("no camera selected".into());
+        return Err(RunError::Invalid("no camera selected".into()));
     }
     let mut skipped = Vec::new();
     let problems: Vec<T> = results
         .into_iter()
-        .filter_map(|r| r.map_err(|e| skipped.push(e)).ok())
+        .filter_map(|r| r.map_err(|e| skipped.push(e.to_string())).ok())
         .collect();
     if problems.is_empty() {
-        return Err(skipped.join("; "));
+        return Err(RunError::NotEnoughData(skipped.join("; ")));
     }
     Ok((problems, skipped))
 }

@@ -158,15 +158,30 @@ pub struct PoseGraph {
     pub converged: bool,
 }
 
+/// A pose graph that cannot be built or an edge it refuses.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+pub enum PoseGraphError {
+    #[error("no sensor '{0}' in the pose graph")]
+    UnknownSensor(String),
+    #[error("edge from '{0}' to itself")]
+    SelfEdge(String),
+    #[error("edge {parent} → {child} ({source_name}): information is not finite and non-negative")]
+    BadInformation {
+        parent: String,
+        child: String,
+        source_name: String,
+    },
+}
+
 impl PoseGraph {
     /// Nodes are `rig`'s sensors at their current extrinsics (each with a weak prior there);
     /// `fixed` is the gauge.
-    pub fn new(rig: &Rig, fixed: &str) -> Result<Self, String> {
+    pub fn new(rig: &Rig, fixed: &str) -> Result<Self, PoseGraphError> {
         let names: Vec<String> = rig.sensors.iter().map(|s| s.name.clone()).collect();
         let fixed = names
             .iter()
             .position(|n| n == fixed)
-            .ok_or_else(|| format!("no sensor '{fixed}' to fix the pose graph's gauge"))?;
+            .ok_or_else(|| PoseGraphError::UnknownSensor(fixed.to_owned()))?;
         let poses: Vec<Rigid> = rig.sensors.iter().map(|s| s.vehicle_from_sensor).collect();
         let prior = diagonal(PRIOR_SIGMA_DEG.to_radians(), PRIOR_SIGMA_M);
         let factors = poses
@@ -192,27 +207,28 @@ impl PoseGraph {
         })
     }
 
-    fn index(&self, name: &str) -> Result<usize, String> {
+    fn index(&self, name: &str) -> Result<usize, PoseGraphError> {
         self.names
             .iter()
             .position(|n| n == name)
-            .ok_or_else(|| format!("no sensor '{name}' in the pose graph"))
+            .ok_or_else(|| PoseGraphError::UnknownSensor(name.to_owned()))
     }
 
     /// Add a pairwise result; its information must be symmetric positive semi-definite and finite.
-    pub fn add_edge(&mut self, edge: Edge) -> Result<(), String> {
+    pub fn add_edge(&mut self, edge: Edge) -> Result<(), PoseGraphError> {
         let parent = self.index(&edge.parent)?;
         let child = self.index(&edge.child)?;
         if parent == child {
-            return Err(format!("edge from '{}' to itself", edge.parent));
+            return Err(PoseGraphError::SelfEdge(edge.parent));
         }
         if edge.information.iter().any(|v| !v.is_finite())
             || (0..6).any(|i| edge.information[i * 6 + i] < 0.0)
         {
-            return Err(format!(
-                "edge {} → {} ({}): information is not finite and non-negative",
-                edge.parent, edge.child, edge.source
-            ));
+            return Err(PoseGraphError::BadInformation {
+                parent: edge.parent,
+                child: edge.child,
+                source_name: edge.source,
+            });
         }
         self.factors.push(Factor {
             parent: Some(parent),
@@ -586,7 +602,12 @@ mod tests {
             "x",
         );
         e.information[0] = f64::NAN;
-        assert!(g.add_edge(e).unwrap_err().contains("top → front"));
+        assert!(
+            g.add_edge(e)
+                .unwrap_err()
+                .to_string()
+                .contains("top → front")
+        );
         let e = measured(
             &truth(),
             "top",

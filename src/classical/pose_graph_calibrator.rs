@@ -16,6 +16,7 @@
 //! fixed, and its rig is the result. Losses report each stage's own terms, then the graph's
 //! cost and every edge's disagreement with the solved rig.
 
+use crate::error::RunError;
 use rayon::prelude::*;
 
 use super::icp::IcpConfig;
@@ -121,9 +122,9 @@ impl PoseGraphCalibrator {
         reference: &str,
         segments_nanos: &[(i64, i64)],
         config: PoseGraphConfig,
-    ) -> Result<Self, String> {
+    ) -> Result<Self, RunError> {
         if !rig.lidars().any(|l| l.name == reference) {
-            return Err(format!("'{reference}' is not a LiDAR of the rig"));
+            return Err(RunError::no_sensor("LiDAR", reference));
         }
         // The reference first, so ICP edges hang off it where they can.
         let mut lidars: Vec<String> = vec![reference.to_string()];
@@ -232,10 +233,10 @@ impl PoseGraphCalibrator {
             }
         }
         if pairwise.is_empty() {
-            return Err(format!(
+            return Err(RunError::NotEnoughData(format!(
                 "no pairwise calibration could be set up: {}",
                 skipped.join("; ")
-            ));
+            )));
         }
         let max_steps = pairwise
             .iter_mut()
@@ -407,7 +408,7 @@ impl Calibrator for PoseGraphCalibrator {
                 self.skipped.extend(notes);
                 for edge in edges {
                     if let Err(e) = self.graph.add_edge(edge) {
-                        self.skipped.push(e);
+                        self.skipped.push(e.to_string());
                     }
                 }
                 self.stage += 1;

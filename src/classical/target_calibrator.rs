@@ -3,6 +3,7 @@
 //! ([`super::target`]); the cameras step in parallel. Cameras that see no board with the LiDAR
 //! are reported by name when the run is prepared.
 
+use crate::error::RunError;
 use rayon::prelude::*;
 
 use super::target::{BoardCache, TargetConfig, TargetProblem, TargetSearch, TargetSolution};
@@ -29,7 +30,7 @@ impl TargetCalibrator {
         segments_nanos: &[(i64, i64)],
         config: TargetConfig,
         boards: &BoardCache,
-    ) -> Result<Self, String> {
+    ) -> Result<Self, RunError> {
         let problems = cameras
             .par_iter()
             .map(|cam| {
@@ -42,15 +43,15 @@ impl TargetCalibrator {
                     &config,
                     boards,
                 )
-                .map_err(|e| format!("{cam} × {lidar}: {e}"))?;
+                .map_err(|e| RunError::from(e).within(format!("{cam} × {lidar}")))?;
                 let start = rig
                     .sensor(cam)
                     .map(|s| s.vehicle_from_sensor)
-                    .ok_or_else(|| format!("no sensor '{cam}'"))?;
+                    .ok_or_else(|| RunError::no_sensor("camera", cam))?;
                 let search = TargetSearch::new(&p, start);
                 Ok((p, search))
             })
-            .collect::<Vec<Result<_, String>>>();
+            .collect::<Vec<Result<_, RunError>>>();
         let (problems, skipped) = super::per_camera(problems)?;
         Ok(Self {
             rig: rig.clone(),

@@ -297,10 +297,10 @@ pub fn register_to_trajectory(
     segments_nanos: &[(i64, i64)],
     config: IcpConfig,
     report: &mut dyn FnMut(usize, usize),
-) -> Result<TrajectoryFit, String> {
+) -> Result<TrajectoryFit, crate::error::RunError> {
     let start = rig
         .sensor(name)
-        .ok_or_else(|| format!("no LiDAR '{name}' in the rig"))?
+        .ok_or_else(|| crate::error::RunError::no_sensor("LiDAR", name))?
         .vehicle_from_sensor;
     let picked = match super::trajectory_sweeps::pick(drive, name, frames, segments_nanos) {
         super::trajectory_sweeps::Picked::Sweeps(picked) => picked,
@@ -323,7 +323,9 @@ pub fn register_to_trajectory(
         });
     }
     let mut icp = TrajectoryIcp::new(&sweeps, start, config).ok_or_else(|| {
-        format!("'{name}': fewer than two sweeps inside the trajectory and the selected segments")
+        crate::error::RunError::NotEnoughData(format!(
+            "'{name}': fewer than two sweeps inside the trajectory and the selected segments"
+        ))
     })?;
     let total = icp.config.levels.len() * icp.config.iterations_per_level;
     let mut done = 0;

@@ -11,6 +11,7 @@
 //! pair by ICP and every camera–LiDAR pair by checkerboards, or mutual information where there
 //! are none, unified by a pose graph with the reference LiDAR fixed).
 
+use super::CliError;
 use crate::calib::{CalibrationFile, Rig};
 use crate::classical::icp::IcpConfig;
 use crate::classical::icp_calibrator::IcpCalibrator;
@@ -19,6 +20,7 @@ use crate::classical::mutual_info::MiConfig;
 use crate::classical::pose_graph_calibrator::{PoseGraphCalibrator, PoseGraphConfig};
 use crate::classical::target::TargetConfig;
 use crate::classical::target_calibrator::TargetCalibrator;
+use crate::error::ParseError;
 use crate::geometry::Rigid;
 use crate::log::Drive;
 use crate::optim::divergence::Guarded;
@@ -33,19 +35,20 @@ const MI_FRAMES: usize = 3;
 const EDGE_HOLDS_TRANSLATION: &str = "edge alignment turns the camera only and keeps the initial guess's translation (at street distances a few centimetres move a silhouette by under a pixel)";
 
 /// The reference LiDAR: `--root`, else the rig's first LiDAR.
-fn reference_lidar(args: &CalibrateArgs, rig: &Rig) -> Result<String, String> {
+fn reference_lidar(args: &CalibrateArgs, rig: &Rig) -> Result<String, CliError> {
     match &args.root {
         Some(r) if rig.lidars().any(|l| &l.name == r) => Ok(r.clone()),
         Some(r) => Err(format!(
             "--root: '{r}' is not a LiDAR of {}; --method {} registers against a LiDAR",
             args.log().display(),
             args.method
-        )),
+        )
+        .into()),
         None => rig
             .lidars()
             .next()
             .map(|l| l.name.clone())
-            .ok_or_else(|| "the log has no LiDAR".to_string()),
+            .ok_or_else(|| CliError::Usage("the log has no LiDAR".into())),
     }
 }
 
@@ -61,12 +64,13 @@ fn selected_cameras(args: &CalibrateArgs, rig: &Rig) -> Vec<String> {
 /// Parse `--camera-readout-ms FIRST..LAST`: when a rolling shutter exposed the first and the
 /// last image rows, in milliseconds after the stamp (each within ±1000; LAST below FIRST is a
 /// readout from the bottom up).
-pub(crate) fn parse_readout(text: &str) -> Result<crate::geometry::RowTimes, String> {
-    crate::geometry::RowTimes::parse_millis(text).map_err(|e| format!("--camera-readout-ms {e}"))
+pub(crate) fn parse_readout(text: &str) -> Result<crate::geometry::RowTimes, ParseError> {
+    crate::geometry::RowTimes::parse_millis(text)
+        .map_err(|e| ParseError::new(format!("--camera-readout-ms {e}")))
 }
 
 /// Parse `START..END` (seconds from `t0`) into nanoseconds.
-pub fn parse_segment(text: &str, t0_nanos: i64) -> Result<(i64, i64), String> {
+pub fn parse_segment(text: &str, t0_nanos: i64) -> Result<(i64, i64), ParseError> {
     let (a, b) = text
         .split_once("..")
         .ok_or_else(|| format!("--segment '{text}': expected START..END in seconds"))?;
@@ -79,7 +83,7 @@ pub fn parse_segment(text: &str, t0_nanos: i64) -> Result<(i64, i64), String> {
     };
     let (a, b) = (parse(a)?, parse(b)?);
     if b <= a {
-        return Err(format!("--segment '{text}': END must be after START"));
+        return Err(format!("--segment '{text}': END must be after START").into());
     }
     Ok((t0_nanos + (a * 1e9) as i64, t0_nanos + (b * 1e9) as i64))
 }
@@ -103,7 +107,7 @@ fn unknown_method(method: &str) -> String {
 
 /// `--sensors` naming a sensor the method does not calibrate (a camera for ICP, a LiDAR for
 /// mutual information) would be written back unchanged; it is refused instead.
-fn check_sensor_kinds(args: &CalibrateArgs, rig: &Rig) -> Result<(), String> {
+fn check_sensor_kinds(args: &CalibrateArgs, rig: &Rig) -> Result<(), CliError> {
     use crate::calib::SensorKind;
     let calibrates = match args.method.as_str() {
         "icp" => Some((SensorKind::Lidar, "LiDARs")),
@@ -122,7 +126,8 @@ fn check_sensor_kinds(args: &CalibrateArgs, rig: &Rig) -> Result<(), String> {
         Some(s) => Err(format!(
             "--sensors: --method {} calibrates {what}; '{s}' is not one",
             args.method
-        )),
+        )
+        .into()),
         None => Ok(()),
     }
 }
@@ -133,7 +138,7 @@ fn check_segment_in_log(
     (start, end): (i64, i64),
     (first, last): (i64, i64),
     log: &std::path::Path,
-) -> Result<(), String> {
+) -> Result<(), CliError> {
     if start < last && end > first {
         return Ok(());
     }
@@ -141,7 +146,8 @@ fn check_segment_in_log(
         "--segment '{text}' lies outside {}, which spans 0..{:.1} s",
         log.display(),
         (last - first) as f64 * 1e-9
-    ))
+    )
+    .into())
 }
 
 /// The drive, the initial guess (after `--init` and `--perturb-*`) and the segments of a run,
@@ -150,7 +156,7 @@ pub(crate) fn open_inputs(
     args: &CalibrateArgs,
     options: &crate::log::DriveOptions,
     perturbation: Option<(f64, f64)>,
-) -> Result<(Drive, Rig, Vec<(i64, i64)>), String> {
+) -> Result<(Drive, Rig, Vec<(i64, i64)>), CliError> {
     let drive = Drive::open_with(args.log(), options).map_err(|e| e.to_string())?;
     let mut rig = drive.rig.clone();
     if let Some(init) = &args.init {
@@ -184,7 +190,8 @@ pub(crate) fn open_inputs(
             return Err(format!(
                 "{option}: '{s}' is not a sensor of {}",
                 args.log().display()
-            ));
+            )
+            .into());
         }
     }
     let range = drive.time_range_nanos();
@@ -208,17 +215,18 @@ pub(crate) fn open_inputs(
 pub fn calibrate(
     args: &CalibrateArgs,
     progress: &mut dyn FnMut(usize, usize),
-) -> Result<(CalibrationFile, String), String> {
+) -> Result<(CalibrationFile, String), CliError> {
     let perturbation = args.perturbation()?;
     if !METHODS.contains(&args.method.as_str()) {
-        return Err(unknown_method(&args.method));
+        return Err(unknown_method(&args.method).into());
     }
     let classical = !matches!(args.method.as_str(), "auto" | "unical");
     if matches!(args.method.as_str(), "icp" | "pose-graph") && args.iterations.is_some() {
         return Err(format!(
             "--iterations: --method {} runs until it converges",
             args.method
-        ));
+        )
+        .into());
     }
     let pipeline_only: Vec<&str> = [
         ("--quality", args.quality.is_some()),
@@ -234,19 +242,21 @@ pub fn calibrate(
             "{} appl{} to the pipeline and --method unical only",
             pipeline_only.join(", "),
             if pipeline_only.len() == 1 { "ies" } else { "y" }
-        ));
+        )
+        .into());
     }
     if let Ok(crate::util::OutputTarget::Direct(_)) = crate::util::output_target(args.out()) {
         return Err(format!(
             "--out {} is not a regular file (a device or pipe); calibrate writes its file at the start and replaces it every 30 s",
             args.out().display()
-        ));
+        ).into());
     }
     if crate::util::same_file(args.out(), args.log()) {
         return Err(format!(
             "--out {} is the log itself; the calibration would overwrite it",
             args.out().display()
-        ));
+        )
+        .into());
     }
     if !classical {
         if args.iterations == Some(0) {
@@ -326,7 +336,7 @@ pub fn calibrate(
             }
             Box::new(cal)
         }
-        m => return Err(unknown_method(m)),
+        m => return Err(unknown_method(m).into()),
     };
     // A NaN or an infinity ends the run with the best result before it.
     let mut calibrator = Guarded::new(calibrator);
@@ -400,10 +410,10 @@ pub fn calibrate(
     record_skipped(&drive, &mut doc);
     doc.save(args.out()).map_err(|e| e.to_string())?;
     if let Some(why) = calibrator.diverged() {
-        return Err(format!(
+        return Err(CliError::Failed(format!(
             "{why}; that result is written to {}",
             args.out().display()
-        ));
+        )));
     }
     let mut closing = moves_report(&initial_guess, &result);
     if let Some(r) = &report {
@@ -640,16 +650,31 @@ mod tests {
             parse_segment("1.5..4", 100),
             Ok((1_500_000_100, 4_000_000_100))
         );
-        assert!(parse_segment("4..1", 0).unwrap_err().contains("after"));
-        assert!(parse_segment("a..1", 0).unwrap_err().contains("'a'"));
-        assert!(parse_segment("3", 0).unwrap_err().contains("START..END"));
+        assert!(
+            parse_segment("4..1", 0)
+                .unwrap_err()
+                .to_string()
+                .contains("after")
+        );
+        assert!(
+            parse_segment("a..1", 0)
+                .unwrap_err()
+                .to_string()
+                .contains("'a'")
+        );
+        assert!(
+            parse_segment("3", 0)
+                .unwrap_err()
+                .to_string()
+                .contains("START..END")
+        );
         // A segment must overlap the log: 100..200 s of an 8-second log is refused by name.
         let log = std::path::Path::new("drive.mcap");
         let range = (1_000, 1_000 + 8_000_000_000);
         let far = parse_segment("100..200", 1_000).unwrap();
         let err = check_segment_in_log("100..200", far, range, log).unwrap_err();
         assert!(
-            err.contains("drive.mcap") && err.contains("0..8.0 s"),
+            err.to_string().contains("drive.mcap") && err.to_string().contains("0..8.0 s"),
             "{err}"
         );
         let inside = parse_segment("7..20", 1_000).unwrap();
@@ -678,7 +703,10 @@ mod tests {
             ("nan..0", "'nan'"),
         ] {
             let err = parse_readout(bad).unwrap_err();
-            assert!(err.contains(says) && err.contains(bad), "{err}");
+            assert!(
+                err.to_string().contains(says) && err.to_string().contains(bad),
+                "{err}"
+            );
         }
     }
 }

@@ -2,6 +2,7 @@
 //! their help from this type; docs/cli.md lists them and a test checks the list), and the
 //! options that moved to the configuration file, so that typing one says where it went.
 
+use super::CliError;
 use std::path::{Path, PathBuf};
 
 /// Typical `calibrate` commands, printed after its options.
@@ -134,7 +135,7 @@ impl CalibrateArgs {
 
     /// The perturbation of the initial guess, `None` when there is none; an error for
     /// negative, non-finite or too large values.
-    pub(crate) fn perturbation(&self) -> Result<Option<(f64, f64)>, String> {
+    pub(crate) fn perturbation(&self) -> Result<Option<(f64, f64)>, CliError> {
         let (deg, cm) = (self.perturb_deg, self.perturb_cm);
         crate::sim::synth::check_perturbation(deg, cm)?;
         Ok((deg > 0.0 || cm > 0.0).then_some((deg, cm)))

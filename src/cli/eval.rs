@@ -19,6 +19,7 @@
 //! `--camera-readout-ms` the edge-alignment and photometric metrics place each image row at its
 //! own time (a rolling shutter); the checkerboard metric still projects at the stamp.
 
+use super::CliError;
 use std::path::PathBuf;
 
 use serde::Serialize;
@@ -150,12 +151,9 @@ pub struct EvalReport {
 pub fn evaluate(
     args: &EvalArgs,
     progress: &mut dyn FnMut(usize, usize),
-) -> Result<EvalReport, String> {
+) -> Result<EvalReport, CliError> {
     if !(1..=MAX_FRAMES).contains(&args.frames) {
-        return Err(format!(
-            "--frames must be 1–{MAX_FRAMES}, got {}",
-            args.frames
-        ));
+        return Err(format!("--frames must be 1–{MAX_FRAMES}, got {}", args.frames).into());
     }
     let reference = load_reference(&args.ground_truth).map_err(|e| e.to_string())?;
     let calibration = CalibrationFile::load_rig(&args.calibration).map_err(|e| e.to_string())?;
@@ -167,7 +165,8 @@ pub fn evaluate(
                 "--root '{r}' is not a sensor of both {} and {}",
                 args.ground_truth.display(),
                 args.calibration.display()
-            ));
+            )
+            .into());
         }
         None => reference
             .lidars()
@@ -236,7 +235,8 @@ pub fn evaluate(
                 } else {
                     in_log.join(", ")
                 }
-            ));
+            )
+            .into());
         }
         // The log's extrinsics against the reference, with the same root (when the log has it).
         report.initial = rig_errors(
@@ -306,7 +306,7 @@ fn measure_on_data(
         let cm = |e: &Option<_>| e.as_ref().map(|e: &RegistrationError| e.mean_cm);
         let (c, r) = match pair_registration_errors(drive, &rigs, &a, &b, frames, 4) {
             Ok(v) => (Ok(cm(&v[0])), Ok(cm(&v[1]))),
-            Err(e) => (Err(e.clone()), Err(e)),
+            Err(e) => (Err(e.to_string()), Err(e.to_string())),
         };
         report
             .registration_cm
@@ -373,6 +373,7 @@ fn measure_on_data(
             let run = |rig: &Rig| {
                 pair_corner_error(drive, rig, cam, lidar, frames, &spec)
                     .map(|e| e.map(|e| e.mean_px * to_1920))
+                    .map_err(|e| e.to_string())
             };
             report.corners_px.push(metric(
                 cam,

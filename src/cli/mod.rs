@@ -14,6 +14,46 @@ pub mod progress;
 pub mod synth;
 pub mod usage;
 
+use thiserror::Error;
+
+/// Why a command could not do what it was asked; the message names the flag, file or sensor.
+#[derive(Debug, Error)]
+pub enum CliError {
+    /// A flag, or a combination of flags, the command refuses.
+    #[error("{0}")]
+    Usage(String),
+    /// The run produced a result it will not stand behind (it diverged); the message says
+    /// where that result was written.
+    #[error("{0}")]
+    Failed(String),
+    #[error(transparent)]
+    Parse(#[from] crate::error::ParseError),
+    #[error(transparent)]
+    Run(#[from] crate::error::RunError),
+    #[error(transparent)]
+    Log(#[from] crate::log::LogError),
+    #[error(transparent)]
+    Config(#[from] crate::pipeline::config::ConfigError),
+    #[error(transparent)]
+    Plan(#[from] crate::pipeline::plan::PlanError),
+    #[error(transparent)]
+    CalibFile(#[from] crate::calib::CalibFileError),
+    #[error(transparent)]
+    Import(#[from] crate::interop::ImportError),
+}
+
+impl From<String> for CliError {
+    fn from(what: String) -> Self {
+        Self::Usage(what)
+    }
+}
+
+impl From<&str> for CliError {
+    fn from(what: &str) -> Self {
+        Self::Usage(what.to_owned())
+    }
+}
+
 // What the studio opens (`rigcal studio`, and `rigcal` alone; a plain comment: clap would take
 // a doc comment for the subcommand's description).
 #[derive(Clone, Debug, Default, clap::Args)]

@@ -4,6 +4,7 @@
 //! the budget is spent, and the report ends the run: printed, and written in the output's
 //! `metrics.report`. The output is written before the first step and every 30 s (atomically).
 
+use super::CliError;
 use std::path::PathBuf;
 use std::time::Instant;
 
@@ -22,7 +23,7 @@ const CHECKPOINT_SECS: f64 = 30.0;
 /// The configuration `args` asks for: `--config` (a `--print-config` output or an earlier
 /// output file), then `--quality`, `--budget`, `--seed` and `--iterations` over it; with
 /// `--method unical`, no classical LiDAR stage and no hand-eye.
-pub fn resolve_config(args: &CalibrateArgs) -> Result<PipelineConfig, String> {
+pub fn resolve_config(args: &CalibrateArgs) -> Result<PipelineConfig, CliError> {
     let mut config = match &args.config_file {
         Some(path) => PipelineConfig::load(path).map_err(|e| format!("--config: {e}"))?,
         None => PipelineConfig::default(),
@@ -65,7 +66,7 @@ pub fn calibrate_auto(
     args: &CalibrateArgs,
     perturbation: Option<(f64, f64)>,
     progress: &mut dyn FnMut(usize, usize),
-) -> Result<(CalibrationFile, String), String> {
+) -> Result<(CalibrationFile, String), CliError> {
     let config = resolve_config(args)?;
     let options = crate::log::DriveOptions {
         camera_time_offset_nanos: (config.cameras.time_offset_ms * 1e6).round() as i64,
@@ -163,10 +164,10 @@ pub fn calibrate_auto(
     }
     if let Some(why) = run.diverged() {
         write(&run, format!("diverged: {why}"), &last)?;
-        return Err(format!(
+        return Err(CliError::Failed(format!(
             "{why}; that result is written to {}",
             args.out().display()
-        ));
+        )));
     }
     let doc = write(&run, "complete".into(), &last)?;
     let result = run.best();

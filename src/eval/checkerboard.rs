@@ -21,6 +21,7 @@
 //!   *without* the shift. A board counts when all its corners project inside the image and at
 //!   least half of them are found there.
 
+use crate::error::RunError;
 use std::collections::{HashMap, HashSet};
 
 use glam::{DVec2, DVec3};
@@ -468,24 +469,26 @@ pub fn pair_corner_error(
     lidar: &str,
     frames: usize,
     spec: &BoardSpec,
-) -> Result<Option<CornerError>, String> {
+) -> Result<Option<CornerError>, RunError> {
     use crate::geometry::projection::world_points;
-    let cam = rig.sensor(camera).ok_or(format!("no sensor '{camera}'"))?;
+    let cam = rig
+        .sensor(camera)
+        .ok_or_else(|| RunError::no_sensor("camera", camera))?;
     let intr = cam
         .camera
         .as_ref()
-        .ok_or(format!("'{camera}' has no intrinsics"))?;
+        .ok_or_else(|| RunError::Invalid(format!("'{camera}' has no intrinsics")))?;
     let vehicle_from_lidar = rig
         .sensor(lidar)
-        .ok_or(format!("no sensor '{lidar}'"))?
+        .ok_or_else(|| RunError::no_sensor("LiDAR", lidar))?
         .vehicle_from_sensor;
     let images = &drive
         .stream(camera)
-        .ok_or(format!("no images of '{camera}'"))?
+        .ok_or_else(|| RunError::NotEnoughData(format!("no images of '{camera}'")))?
         .frames;
     let sweeps = &drive
         .stream(lidar)
-        .ok_or(format!("no sweeps of '{lidar}'"))?
+        .ok_or_else(|| RunError::NotEnoughData(format!("no sweeps of '{lidar}'")))?
         .frames;
     if images.is_empty() || sweeps.is_empty() {
         return Ok(None);

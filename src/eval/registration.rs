@@ -10,6 +10,7 @@
 //! over those inliers, in centimetres. A miscalibrated LiDAR puts the same wall at two depths,
 //! and this distance grows with the error; two views of a flat surface agree to the range noise.
 
+use crate::error::RunError;
 use std::collections::HashMap;
 
 use glam::{DMat3, DVec3};
@@ -191,23 +192,25 @@ pub fn pair_registration_errors(
     target: &str,
     frames: usize,
     stride: usize,
-) -> Result<Vec<Option<RegistrationError>>, String> {
+) -> Result<Vec<Option<RegistrationError>>, RunError> {
     use crate::geometry::projection::world_points;
     let extrinsics = |name: &str| {
         rigs.iter()
             .map(|rig| {
                 rig.sensor(name)
                     .map(|s| s.vehicle_from_sensor)
-                    .ok_or(format!("no sensor '{name}' in the calibration"))
+                    .ok_or_else(|| RunError::no_sensor("sensor", name))
             })
             .collect::<Result<Vec<_>, _>>()
     };
     let (vehicle_from_source, vehicle_from_target) = (extrinsics(source)?, extrinsics(target)?);
     let stream = |name: &str| {
-        drive.stream(name).map(|s| &s.frames).ok_or(format!(
-            "no sweeps of '{name}' in {}",
-            drive.path().display()
-        ))
+        drive.stream(name).map(|s| &s.frames).ok_or_else(|| {
+            RunError::NotEnoughData(format!(
+                "no sweeps of '{name}' in {}",
+                drive.path().display()
+            ))
+        })
     };
     let (sources, targets) = (stream(source)?, stream(target)?);
     // Per rig: Σ mean·inliers, inliers, points tried.
@@ -228,7 +231,7 @@ pub fn pair_registration_errors(
         for (r, sum) in sums.iter_mut().enumerate() {
             let world = |sweep: &crate::log::LidarSweep, extrinsic, stride, name: &str| {
                 world_points(&sweep.view(), &drive.trajectory, extrinsic, stride)
-                    .map_err(|e| format!("{name}: {e}"))
+                    .map_err(|e| RunError::from(e).within(name))
             };
             let src = world(&src_sweep, vehicle_from_source[r], stride, source)?;
             let tgt = world(&tgt_sweep, vehicle_from_target[r], 1, target)?;

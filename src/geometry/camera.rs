@@ -14,6 +14,23 @@ use glam::{DVec2, DVec3};
 use serde::{Deserialize, Serialize};
 use std::f64::consts::FRAC_PI_2;
 
+/// Intrinsics that cannot be used: the message says which value is wrong and why.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+#[error("{0}")]
+pub struct IntrinsicsError(String);
+
+impl From<String> for IntrinsicsError {
+    fn from(what: String) -> Self {
+        Self(what)
+    }
+}
+
+impl From<&str> for IntrinsicsError {
+    fn from(what: &str) -> Self {
+        Self(what.to_owned())
+    }
+}
+
 /// Distortion model, named as in ROS `CameraInfo.distortion_model`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Default)]
 #[serde(rename_all = "snake_case")]
@@ -53,14 +70,14 @@ impl CameraModel {
     /// fisheye: r = f·θ, not f·tan θ). A pinhole (an empty, `none` or `pinhole` model name)
     /// given non-zero coefficients is an error: dropping them would silently mis-project the
     /// whole image, and guessing a model for them could be wrong.
-    pub fn normalized(self, distortion: Vec<f64>) -> Result<(Self, Vec<f64>), String> {
+    pub fn normalized(self, distortion: Vec<f64>) -> Result<(Self, Vec<f64>), IntrinsicsError> {
         let zero = distortion.iter().all(|&v| v == 0.0);
         if self == CameraModel::Pinhole && !zero {
             return Err(format!(
                 "the distortion model is empty, none or pinhole, which takes no coefficients, but {} of the {} given are non-zero; name the model (plumb_bob, rational_polynomial or equidistant)",
                 distortion.iter().filter(|&&v| v != 0.0).count(),
                 distortion.len()
-            ));
+            ).into());
         }
         Ok(
             if self == CameraModel::Pinhole || (self != CameraModel::Equidistant && zero) {
@@ -132,12 +149,9 @@ impl CameraIntrinsics {
         model_name: &str,
         distortion: Vec<f64>,
         k: &[f64],
-    ) -> Result<Self, String> {
+    ) -> Result<Self, IntrinsicsError> {
         if k.len() < 9 {
-            return Err(format!(
-                "camera calibration K has {} values, expected 9",
-                k.len()
-            ));
+            return Err(format!("camera calibration K has {} values, expected 9", k.len()).into());
         }
         let model = CameraModel::parse(model_name)
             .ok_or_else(|| format!("unknown distortion_model '{model_name}'"))?;
@@ -167,30 +181,33 @@ impl CameraIntrinsics {
     /// positive (an uncalibrated ROS driver publishes K = 0), the principal point and every
     /// distortion coefficient finite, the image non-empty, and no more coefficients than the
     /// model has.
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), IntrinsicsError> {
         if !(self.fx.is_finite() && self.fy.is_finite() && self.fx > 0.0 && self.fy > 0.0) {
             return Err(format!(
                 "focal lengths must be finite and positive (fx = {}, fy = {}); an uncalibrated camera publishes zeros",
                 self.fx, self.fy
-            ));
+            ).into());
         }
         if !(self.cx.is_finite() && self.cy.is_finite()) {
             return Err(format!(
                 "principal point must be finite (cx = {}, cy = {})",
                 self.cx, self.cy
-            ));
+            )
+            .into());
         }
         if self.width == 0 || self.height == 0 {
             return Err(format!(
                 "image size must be positive ({} × {})",
                 self.width, self.height
-            ));
+            )
+            .into());
         }
         if self.width.max(self.height) > MAX_IMAGE_SIDE_PX {
             return Err(format!(
                 "image size {} × {} is more than {MAX_IMAGE_SIDE_PX} px a side",
                 self.width, self.height
-            ));
+            )
+            .into());
         }
         if self.model == CameraModel::Pinhole && self.distortion.iter().any(|&v| v != 0.0) {
             return Err(
@@ -199,7 +216,7 @@ impl CameraIntrinsics {
             );
         }
         if let Some(v) = self.distortion.iter().find(|v| !v.is_finite()) {
-            return Err(format!("distortion coefficient {v} is not finite"));
+            return Err(format!("distortion coefficient {v} is not finite").into());
         }
         let most = self.model.ros_distortion_len();
         if self.distortion.len() > most && self.distortion[most..].iter().any(|&v| v != 0.0) {
@@ -207,7 +224,8 @@ impl CameraIntrinsics {
                 "{} takes {most} distortion coefficients, got {} non-zero beyond them",
                 self.model.as_str(),
                 self.distortion.len() - most
-            ));
+            )
+            .into());
         }
         Ok(())
     }
@@ -504,16 +522,44 @@ mod tests {
             f(&mut c);
             c.validate().unwrap_err()
         };
-        assert!(with(&|c| c.fx = 0.0).contains("focal"));
-        assert!(with(&|c| c.fy = f64::INFINITY).contains("focal"));
-        assert!(with(&|c| c.cx = f64::NAN).contains("principal point"));
-        assert!(with(&|c| c.height = 0).contains("image size"));
-        assert!(with(&|c| c.distortion[2] = f64::NAN).contains("not finite"));
-        assert!(with(&|c| c.distortion.extend([0.0, 0.3])).contains("plumb_bob takes 5"));
-        assert!(with(&|c| c.width = 200_000).contains("32768 px a side"));
-        assert!(with(&|c| c.height = u32::MAX).contains("32768 px a side"));
+        assert!(with(&|c| c.fx = 0.0).to_string().contains("focal"));
+        assert!(
+            with(&|c| c.fy = f64::INFINITY)
+                .to_string()
+                .contains("focal")
+        );
+        assert!(
+            with(&|c| c.cx = f64::NAN)
+                .to_string()
+                .contains("principal point")
+        );
+        assert!(with(&|c| c.height = 0).to_string().contains("image size"));
+        assert!(
+            with(&|c| c.distortion[2] = f64::NAN)
+                .to_string()
+                .contains("not finite")
+        );
+        assert!(
+            with(&|c| c.distortion.extend([0.0, 0.3]))
+                .to_string()
+                .contains("plumb_bob takes 5")
+        );
+        assert!(
+            with(&|c| c.width = 200_000)
+                .to_string()
+                .contains("32768 px a side")
+        );
+        assert!(
+            with(&|c| c.height = u32::MAX)
+                .to_string()
+                .contains("32768 px a side")
+        );
         // A pinhole has no coefficients to use: non-zero ones are refused, zeros are fine.
-        assert!(with(&|c| c.model = CameraModel::Pinhole).contains("pinhole takes no"));
+        assert!(
+            with(&|c| c.model = CameraModel::Pinhole)
+                .to_string()
+                .contains("pinhole takes no")
+        );
         let mut zeros = plumb_bob_wide();
         zeros.model = CameraModel::Pinhole;
         zeros.distortion = vec![0.0; 5];
@@ -714,7 +760,10 @@ mod tests {
         let e = Pinhole
             .normalized(vec![0.1, 0.0, 0.0, 0.0, 0.0])
             .unwrap_err();
-        assert!(e.contains("1 of the 5 given are non-zero"), "{e}");
+        assert!(
+            e.to_string().contains("1 of the 5 given are non-zero"),
+            "{e}"
+        );
         assert!(
             CameraIntrinsics::from_camera_info(
                 10,

@@ -42,7 +42,7 @@ impl RowTimes {
 
     /// Parse `FIRST..LAST` in milliseconds, each within ±1000 (LAST below FIRST is a readout
     /// from the bottom up); the error says what is wrong with `text`.
-    pub fn parse_millis(text: &str) -> Result<Self, String> {
+    pub fn parse_millis(text: &str) -> Result<Self, crate::error::ParseError> {
         let (a, b) = text.split_once("..").ok_or_else(|| {
             format!("'{text}': expected FIRST..LAST in milliseconds, e.g. -30..10")
         })?;

@@ -8,9 +8,9 @@ use std::path::Path;
 
 use serde::Deserialize;
 
-use super::ExportedFile;
 use super::numbers::list;
 use super::text::{comment, yaml_str};
+use super::{ExportedFile, ImportError, NotExportable};
 use crate::calib::{Rig, Sensor};
 use crate::geometry::camera::{CameraIntrinsics, CameraModel};
 
@@ -50,7 +50,7 @@ pub fn text(camera: &Sensor, c: &CameraIntrinsics) -> String {
 }
 
 /// `<camera>.yaml` for every camera with intrinsics.
-pub fn export(rig: &Rig) -> Result<Vec<ExportedFile>, String> {
+pub fn export(rig: &Rig) -> Result<Vec<ExportedFile>, NotExportable> {
     let files: Vec<ExportedFile> = rig
         .cameras()
         .filter_map(|s| s.camera.as_ref().map(|c| (s, c)))
@@ -98,7 +98,7 @@ struct CameraInfoYaml {
 }
 
 /// A parsed file: the camera it names (if any) and its intrinsics.
-pub fn parse(text: &str, path: &Path) -> Result<(Option<String>, CameraIntrinsics), String> {
+pub fn parse(text: &str, path: &Path) -> Result<(Option<String>, CameraIntrinsics), ImportError> {
     let file = path.display();
     let y: CameraInfoYaml = crate::calib::yaml::from_str(text)
         .map_err(|e| format!("{file}: not a ROS camera_info YAML: {e}"))?;
@@ -107,7 +107,8 @@ pub fn parse(text: &str, path: &Path) -> Result<(Option<String>, CameraIntrinsic
         return Err(format!(
             "{file}: camera_matrix.data needs 9 finite numbers, has {}",
             k.len()
-        ));
+        )
+        .into());
     }
     let model_name = y.distortion_model.unwrap_or_default();
     let model = CameraModel::parse(&model_name)
@@ -117,13 +118,13 @@ pub fn parse(text: &str, path: &Path) -> Result<(Option<String>, CameraIntrinsic
         .map(|m| m.data)
         .unwrap_or_default();
     if distortion.iter().any(|v| !v.is_finite()) {
-        return Err(format!("{file}: distortion_coefficients must be finite"));
+        return Err(format!("{file}: distortion_coefficients must be finite").into());
     }
     let (fx, fy) = (k[0], k[4]);
     if !(fx > 0.0 && fy > 0.0) || y.image_width == 0 || y.image_height == 0 {
-        return Err(format!(
-            "{file}: fx, fy, image_width and image_height must be positive"
-        ));
+        return Err(
+            format!("{file}: fx, fy, image_width and image_height must be positive").into(),
+        );
     }
     // A pinhole written as plumb_bob with zeros reads back as pinhole.
     let (model, distortion) = model
@@ -173,15 +174,18 @@ mod tests {
             p,
         )
         .unwrap_err();
-        assert!(e.contains("cam.yaml") && e.contains("9"), "{e}");
+        assert!(
+            e.to_string().contains("cam.yaml") && e.to_string().contains("9"),
+            "{e}"
+        );
         let e = parse("image_width: 10\nimage_height: 10\ncamera_matrix: {data: [1,0,1,0,1,1,0,0,1]}\ndistortion_model: weird", p).unwrap_err();
-        assert!(e.contains("weird"), "{e}");
+        assert!(e.to_string().contains("weird"), "{e}");
         // No model named but coefficients given: refused, naming the file.
         let e = parse("image_width: 10\nimage_height: 10\ncamera_matrix: {data: [1,0,1,0,1,1,0,0,1]}\ndistortion_coefficients: {data: [-0.2, 0.1, 0, 0, 0]}", p).unwrap_err();
         assert!(
-            e.contains("cam.yaml") && e.contains("takes no coefficients"),
+            e.to_string().contains("cam.yaml") && e.to_string().contains("takes no coefficients"),
             "{e}"
         );
-        assert!(parse("[", p).unwrap_err().contains("cam.yaml"));
+        assert!(parse("[", p).unwrap_err().to_string().contains("cam.yaml"));
     }
 }

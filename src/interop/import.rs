@@ -21,6 +21,8 @@ pub enum ImportError {
         path: PathBuf,
         source: std::io::Error,
     },
+    #[error(transparent)]
+    Log(#[from] crate::log::LogError),
     #[error("{0}")]
     Invalid(String),
     #[error("{path}: matches none of the rig's sensors ({sensors}); {hint}")]
@@ -29,6 +31,12 @@ pub enum ImportError {
         sensors: String,
         hint: String,
     },
+}
+
+impl From<String> for ImportError {
+    fn from(what: String) -> Self {
+        Self::Invalid(what)
+    }
 }
 
 /// What [`load_initial_guess`] found.
@@ -60,7 +68,7 @@ pub fn load_initial_guess(path: &Path, base: &Rig) -> Result<Imported, ImportErr
         let (r, m) = camera_info_dir(path, base)?;
         (r, m, "camera_info YAML directory")
     } else if ext == "mcap" {
-        let (r, m) = mcap_tf::import(path, base).map_err(ImportError::Invalid)?;
+        let (r, m) = mcap_tf::import(path, base)?;
         (r, m, "MCAP /tf_static")
     } else if ext == "urdf" || ext == "xml" {
         let (r, m) = from_urdf(&read(path)?, path, base)?;
@@ -151,7 +159,7 @@ fn from_native(text: &str, path: &Path, base: &Rig) -> Result<(Rig, Vec<String>)
 }
 
 fn from_urdf(text: &str, path: &Path, base: &Rig) -> Result<(Rig, Vec<String>), ImportError> {
-    let edges = urdf::parse_joints(text, path).map_err(ImportError::Invalid)?;
+    let edges = urdf::parse_joints(text, path)?;
     let has_vehicle = edges
         .values()
         .any(|(parent, _)| *parent == base.vehicle_frame);
@@ -182,7 +190,7 @@ fn from_camera_info(
     let mut rig = base.clone();
     let mut matched = Vec::new();
     for (path, text) in files {
-        let (name, intrinsics) = camera_info::parse(text, path).map_err(ImportError::Invalid)?;
+        let (name, intrinsics) = camera_info::parse(text, path)?;
         let stem = path
             .file_stem()
             .and_then(|s| s.to_str())

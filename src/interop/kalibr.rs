@@ -7,13 +7,13 @@
 //! are refused by name. `cam_overlaps` lists the cameras whose fields of view intersect.
 
 use super::numbers::{list, num};
-use super::pick;
 use super::text::{comment, yaml_str};
+use super::{NotExportable, pick};
 use crate::calib::{Rig, Sensor, SensorKind};
 use crate::geometry::Rigid;
 use crate::geometry::camera::{CameraIntrinsics, CameraModel};
 
-fn distortion(s: &Sensor, c: &CameraIntrinsics) -> Result<(&'static str, Vec<f64>), String> {
+fn distortion(s: &Sensor, c: &CameraIntrinsics) -> Result<(&'static str, Vec<f64>), NotExportable> {
     let coeff = |i: usize| c.distortion.get(i).copied().unwrap_or(0.0);
     match c.model {
         CameraModel::Pinhole => Ok(("none", Vec::new())),
@@ -24,14 +24,14 @@ fn distortion(s: &Sensor, c: &CameraIntrinsics) -> Result<(&'static str, Vec<f64
             "camera '{}' has k3 = {} (plumb_bob with five coefficients); Kalibr's radtan has four",
             s.name,
             coeff(4)
-        )),
+        ).into()),
         CameraModel::Equidistant => {
             Ok(("equidistant", vec![coeff(0), coeff(1), coeff(2), coeff(3)]))
         }
         CameraModel::RationalPolynomial => Err(format!(
             "camera '{}' uses rational_polynomial, which Kalibr has no model for (export the other cameras with --sensors)",
             s.name
-        )),
+        ).into()),
     }
 }
 
@@ -57,7 +57,7 @@ fn matrix(t: Rigid) -> String {
         .collect()
 }
 
-pub fn export(rig: &Rig, reference: Option<&str>) -> Result<String, String> {
+pub fn export(rig: &Rig, reference: Option<&str>) -> Result<String, NotExportable> {
     let first = pick(rig, SensorKind::Camera, reference)?;
     let mut cams: Vec<&Sensor> = vec![first];
     cams.extend(rig.cameras().filter(|c| c.name != first.name));
@@ -128,7 +128,7 @@ mod tests {
         let rig = test_rig::rig();
         let e = export(&rig, None).unwrap_err();
         assert!(
-            e.contains("right_camera") && e.contains("rational_polynomial"),
+            e.to_string().contains("right_camera") && e.to_string().contains("rational_polynomial"),
             "{e}"
         );
         let mut rig = rig;

@@ -14,20 +14,20 @@
 //! refused by name (its images would have to be rectified first), and so is a fourth camera.
 
 use super::numbers::{rows_3x4, spaced};
-use super::pick;
+use super::{NotExportable, pick};
 use crate::calib::{Rig, Sensor, SensorKind};
 use crate::geometry::Rigid;
 
-fn projection(cam: &Sensor, cam0: &Sensor) -> Result<[f64; 12], String> {
+fn projection(cam: &Sensor, cam0: &Sensor) -> Result<[f64; 12], NotExportable> {
     let Some(c) = &cam.camera else {
-        return Err(format!("camera '{}' has no intrinsics", cam.name));
+        return Err(format!("camera '{}' has no intrinsics", cam.name).into());
     };
     if c.has_lens_distortion() {
         return Err(format!(
             "camera '{}' has {} distortion; KITTI calib files have none (rectify its images, or leave it out with --sensors)",
             cam.name,
             c.model.as_str()
-        ));
+        ).into());
     }
     // The reference camera gets an exact identity, not a product that rounds.
     let cam_from_cam0 = if cam.name == cam0.name {
@@ -48,7 +48,7 @@ fn projection(cam: &Sensor, cam0: &Sensor) -> Result<[f64; 12], String> {
 
 /// The camera in each of the slots P0..P3: the reference in P0 and P2, the next camera in P3,
 /// the one after in P1.
-pub fn slots<'a>(rig: &'a Rig, camera: Option<&str>) -> Result<[&'a Sensor; 4], String> {
+pub fn slots<'a>(rig: &'a Rig, camera: Option<&str>) -> Result<[&'a Sensor; 4], NotExportable> {
     let cam0 = pick(rig, SensorKind::Camera, camera)?;
     let others: Vec<&Sensor> = rig.cameras().filter(|c| c.name != cam0.name).collect();
     if others.len() > 2 {
@@ -57,14 +57,18 @@ pub fn slots<'a>(rig: &'a Rig, camera: Option<&str>) -> Result<[&'a Sensor; 4], 
             "a KITTI calib file holds at most three cameras (P0/P2, P3, P1); the calibration has {} ({}): choose with --sensors",
             names.len(),
             names.join(", ")
-        ));
+        ).into());
     }
     let p3 = others.first().copied().unwrap_or(cam0);
     let p1 = others.get(1).copied().unwrap_or(cam0);
     Ok([cam0, p1, cam0, p3])
 }
 
-pub fn export(rig: &Rig, camera: Option<&str>, lidar: Option<&str>) -> Result<String, String> {
+pub fn export(
+    rig: &Rig,
+    camera: Option<&str>,
+    lidar: Option<&str>,
+) -> Result<String, NotExportable> {
     let cams = slots(rig, camera)?;
     let cam0 = cams[0];
     let velo = pick(rig, SensorKind::Lidar, lidar)?;
@@ -114,7 +118,10 @@ mod tests {
         two.sensors
             .retain(|s| ["front_camera", "left_camera", "lidar_top"].contains(&s.name.as_str()));
         let e = export(&two, None, None).unwrap_err();
-        assert!(e.contains("left_camera") && e.contains("plumb_bob"), "{e}");
+        assert!(
+            e.to_string().contains("left_camera") && e.to_string().contains("plumb_bob"),
+            "{e}"
+        );
         rig.sensors
             .retain(|s| s.camera.as_ref().is_none_or(|c| c.distortion.is_empty()));
         // A second undistorted camera.
@@ -188,7 +195,8 @@ mod tests {
         }
         let e = export(&rig, None, None).unwrap_err();
         assert!(
-            e.contains("at most three cameras") && e.contains("back_camera"),
+            e.to_string().contains("at most three cameras")
+                && e.to_string().contains("back_camera"),
             "{e}"
         );
         let slots = slots(&rig, Some("left_camera"));
@@ -213,7 +221,7 @@ mod tests {
             export(&rig, None, None)
         };
         let e = with_model(CameraModel::Equidistant).unwrap_err();
-        assert!(e.contains("equidistant"), "{e}");
+        assert!(e.to_string().contains("equidistant"), "{e}");
         assert!(with_model(CameraModel::PlumbBob).is_ok());
     }
 }

@@ -7,10 +7,11 @@
 
 use std::path::Path;
 
+use super::ImportError;
 use crate::calib::{Rig, SensorKind};
 use crate::log::Drive;
 use crate::log::tf::normalize_frame;
-use crate::sim::writer::Ros2McapWriter;
+use crate::sim::writer::{Ros2McapWriter, WriterError};
 
 /// The camera-info topic of a camera: the one it lists, or `/<name>/camera_info`.
 pub fn camera_info_topic(s: &crate::calib::Sensor) -> String {
@@ -22,21 +23,21 @@ pub fn camera_info_topic(s: &crate::calib::Sensor) -> String {
 }
 
 /// The MCAP's bytes (written in memory).
-pub fn export(rig: &Rig) -> Result<Vec<u8>, String> {
-    let mut w = Ros2McapWriter::in_memory().map_err(|e| e.to_string())?;
+pub fn export(rig: &Rig) -> Result<Vec<u8>, WriterError> {
+    let mut w = Ros2McapWriter::in_memory()?;
     fill(rig, &mut w)?;
-    w.finish_bytes().map_err(|e| e.to_string())
+    w.finish_bytes()
 }
 
 /// Write the MCAP to `path` (atomically).
-pub fn write(rig: &Rig, path: &Path) -> Result<(), String> {
-    let mut w = Ros2McapWriter::create(path).map_err(|e| e.to_string())?;
+pub fn write(rig: &Rig, path: &Path) -> Result<(), WriterError> {
+    let mut w = Ros2McapWriter::create(path)?;
     fill(rig, &mut w)?;
-    w.finish().map_err(|e| e.to_string())
+    w.finish()
 }
 
 /// The rig's /tf_static and every camera's CameraInfo, stamped 0.
-fn fill(rig: &Rig, w: &mut Ros2McapWriter) -> Result<(), String> {
+fn fill(rig: &Rig, w: &mut Ros2McapWriter) -> Result<(), WriterError> {
     let transforms: Vec<_> = rig
         .sensors
         .iter()
@@ -50,12 +51,10 @@ fn fill(rig: &Rig, w: &mut Ros2McapWriter) -> Result<(), String> {
             )
         })
         .collect();
-    w.write_tf_static(0, &transforms)
-        .map_err(|e| e.to_string())?;
+    w.write_tf_static(0, &transforms)?;
     for s in rig.cameras() {
         if let Some(c) = &s.camera {
-            w.write_camera_info(&camera_info_topic(s), 0, &s.frame_id, c)
-                .map_err(|e| e.to_string())?;
+            w.write_camera_info(&camera_info_topic(s), 0, &s.frame_id, c)?;
         }
     }
     Ok(())
@@ -63,10 +62,13 @@ fn fill(rig: &Rig, w: &mut Ros2McapWriter) -> Result<(), String> {
 
 /// `base`'s sensors with the extrinsics (and camera intrinsics) the MCAP at `path` gives their
 /// frames; returns the names of the sensors it matched.
-pub fn import(path: &Path, base: &Rig) -> Result<(Rig, Vec<String>), String> {
-    let drive = Drive::open(path).map_err(|e| e.to_string())?;
+pub fn import(path: &Path, base: &Rig) -> Result<(Rig, Vec<String>), ImportError> {
+    let drive = Drive::open(path)?;
     if drive.tf.static_edges.is_empty() {
-        return Err(format!("{}: has no /tf_static transforms", path.display()));
+        return Err(ImportError::Invalid(format!(
+            "{}: has no /tf_static transforms",
+            path.display()
+        )));
     }
     let mut rig = base.clone();
     let mut matched = Vec::new();

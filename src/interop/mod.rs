@@ -26,12 +26,32 @@ pub mod ros_tf;
 pub mod text;
 pub mod urdf;
 
+pub use import::ImportError;
+
 use std::path::{Path, PathBuf};
 
 use thiserror::Error;
 
 use crate::calib::{CalibrationFile, Rig, Sensor, SensorKind};
 use crate::geometry::Rigid;
+
+/// Why one format cannot hold the rig as asked (a camera model it has no name for, a sensor
+/// it has no slot for, two names that collide); [`export`] says it of the format.
+#[derive(Clone, Debug, PartialEq, Eq, Error)]
+#[error("{0}")]
+pub struct NotExportable(String);
+
+impl From<String> for NotExportable {
+    fn from(what: String) -> Self {
+        Self(what)
+    }
+}
+
+impl From<&str> for NotExportable {
+    fn from(what: &str) -> Self {
+        Self(what.to_owned())
+    }
+}
 
 #[derive(Debug, Error)]
 pub enum ExportError {
@@ -261,6 +281,7 @@ pub fn export(
         format: format.name(),
         what,
     };
+    let cannot = |e: NotExportable| unsupported(e.0);
     // --lidar and --camera choose within the formats that hold one pair; elsewhere they would
     // be ignored, and a user who gave one expects it to matter.
     for (option, given, takes) in [
@@ -342,33 +363,38 @@ pub fn export(
             out.metrics = doc.metrics.clone();
             one(out.to_yaml())
         }
-        ExportFormat::CameraInfo => camera_info::export(&rig).map_err(unsupported)?,
-        ExportFormat::Mcap => one_binary(format, mcap_tf::export(&rig).map_err(unsupported)?),
+        ExportFormat::CameraInfo => camera_info::export(&rig).map_err(cannot)?,
+        ExportFormat::Mcap => one_binary(
+            format,
+            mcap_tf::export(&rig).map_err(|e| unsupported(e.to_string()))?,
+        ),
         ExportFormat::Urdf => one(urdf::export(&rig)),
         ExportFormat::Ros2StaticTf => one(ros_tf::script(&rig)),
         ExportFormat::Ros2Launch => one(ros_tf::launch(&rig)),
         ExportFormat::Autoware => one(autoware::export(&rig)),
-        ExportFormat::OpenCv => {
-            opencv::export(&rig, options.lidar.as_deref()).map_err(unsupported)?
-        }
+        ExportFormat::OpenCv => opencv::export(&rig, options.lidar.as_deref()).map_err(cannot)?,
         ExportFormat::Kalibr => {
-            one(kalibr::export(&rig, options.camera.as_deref()).map_err(unsupported)?)
+            one(kalibr::export(&rig, options.camera.as_deref()).map_err(cannot)?)
         }
         ExportFormat::Kitti => {
             one(
                 kitti::export(&rig, options.camera.as_deref(), options.lidar.as_deref())
-                    .map_err(unsupported)?,
+                    .map_err(cannot)?,
             )
         }
         ExportFormat::Nuscenes => one(nuscenes::export(&rig)),
     };
-    distinct_names(format, &rig, &files).map_err(unsupported)?;
+    distinct_names(format, &rig, &files).map_err(cannot)?;
     Ok(Export { format, files })
 }
 
 /// Names derived from sensor names must not collide: two cameras written to one file, a URDF
 /// link that is the child of two joints, an Autoware key given twice.
-fn distinct_names(format: ExportFormat, rig: &Rig, files: &[ExportedFile]) -> Result<(), String> {
+fn distinct_names(
+    format: ExportFormat,
+    rig: &Rig,
+    files: &[ExportedFile],
+) -> Result<(), NotExportable> {
     let first_repeat = |names: Vec<String>| {
         let mut seen = std::collections::HashSet::new();
         names.into_iter().find(|n| !seen.insert(n.clone()))
@@ -376,7 +402,7 @@ fn distinct_names(format: ExportFormat, rig: &Rig, files: &[ExportedFile]) -> Re
     if let Some(name) = first_repeat(files.iter().map(|f| f.name.clone()).collect()) {
         return Err(format!(
             "two cameras would both be written to '{name}' (their names differ only in characters a file name cannot hold): rename one or export them separately with --sensors"
-        ));
+        ).into());
     }
     let repeated = match format {
         ExportFormat::Urdf => {
@@ -393,7 +419,7 @@ fn distinct_names(format: ExportFormat, rig: &Rig, files: &[ExportedFile]) -> Re
         }
         _ => None,
     };
-    repeated.map_or(Ok(()), Err)
+    repeated.map_or(Ok(()), |what| Err(what.into()))
 }
 
 fn one_binary(format: ExportFormat, bytes: Vec<u8>) -> Vec<ExportedFile> {
@@ -408,17 +434,17 @@ pub(crate) fn pick<'a>(
     rig: &'a Rig,
     kind: SensorKind,
     name: Option<&str>,
-) -> Result<&'a Sensor, String> {
+) -> Result<&'a Sensor, NotExportable> {
     match name {
         Some(n) => rig
             .sensor(n)
             .filter(|s| s.kind == kind)
-            .ok_or_else(|| format!("'{n}' is not a {} of the calibration", kind.as_str())),
+            .ok_or_else(|| format!("'{n}' is not a {} of the calibration", kind.as_str()).into()),
         None => rig
             .sensors
             .iter()
             .find(|s| s.kind == kind)
-            .ok_or_else(|| format!("the calibration has no {}", kind.as_str())),
+            .ok_or_else(|| format!("the calibration has no {}", kind.as_str()).into()),
     }
 }
 

@@ -9,7 +9,7 @@
 use super::camera_info::{file_stem, k_matrix};
 use super::numbers::{list, rows_4x4};
 use super::text::comment;
-use super::{ExportedFile, pick};
+use super::{ExportedFile, NotExportable, pick};
 use crate::calib::{Rig, SensorKind};
 use crate::geometry::Rigid;
 
@@ -20,7 +20,7 @@ fn matrix(name: &str, rows: usize, cols: usize, data: &[f64]) -> String {
     )
 }
 
-pub fn export(rig: &Rig, lidar: Option<&str>) -> Result<Vec<ExportedFile>, String> {
+pub fn export(rig: &Rig, lidar: Option<&str>) -> Result<Vec<ExportedFile>, NotExportable> {
     let reference = match lidar {
         Some(_) => Some(pick(rig, SensorKind::Lidar, lidar)?),
         None => rig.lidars().next(),
@@ -141,6 +141,7 @@ mod tests {
         assert!(
             export(&rig, Some("front_camera"))
                 .unwrap_err()
+                .to_string()
                 .contains("not a lidar")
         );
     }

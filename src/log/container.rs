@@ -80,6 +80,18 @@ impl Deref for MessageBytes {
     }
 }
 
+/// A chunk or message the index points at that cannot be read (out of the file, not a chunk,
+/// not decompressible); the drive reports it as a problem of that message.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+#[error("{0}")]
+pub struct RecordError(String);
+
+impl From<String> for RecordError {
+    fn from(what: String) -> Self {
+        Self(what)
+    }
+}
+
 pub struct McapContainer {
     path: PathBuf,
     file: Mutex<File>,
@@ -470,7 +482,7 @@ impl McapContainer {
     }
 
     /// Decompressed records of chunk `index`, through the LRU cache.
-    pub fn chunk_data(&self, index: u32) -> Result<Arc<Vec<u8>>, String> {
+    pub fn chunk_data(&self, index: u32) -> Result<Arc<Vec<u8>>, RecordError> {
         if let Ok(mut cache) = self.cache.lock()
             && let Some(hit) = cache.get(index)
         {
@@ -483,7 +495,7 @@ impl McapContainer {
         Ok(data)
     }
 
-    fn load_chunk(&self, index: u32) -> Result<Vec<u8>, String> {
+    fn load_chunk(&self, index: u32) -> Result<Vec<u8>, RecordError> {
         let loc = self
             .chunks
             .get(index as usize)
@@ -495,18 +507,20 @@ impl McapContainer {
             return Err(format!(
                 "the index points at byte {} but no chunk is there",
                 loc.offset
-            ));
+            )
+            .into());
         }
-        decompress_chunk(&record[9..]).map_err(|e| format!("chunk at byte {}: {e}", loc.offset))
+        decompress_chunk(&record[9..])
+            .map_err(|e| format!("chunk at byte {}: {e}", loc.offset).into())
     }
 
     /// The payload of one message.
-    pub fn message_bytes(&self, r: &MessageRef) -> Result<MessageBytes, String> {
+    pub fn message_bytes(&self, r: &MessageRef) -> Result<MessageBytes, RecordError> {
         match r.location {
             Location::Chunk { chunk, start, end } => {
                 let buf = self.chunk_data(chunk)?;
                 if end as usize > buf.len() || start > end {
-                    return Err("message location outside its chunk".into());
+                    return Err(RecordError("message location outside its chunk".into()));
                 }
                 Ok(MessageBytes {
                     buf,
@@ -517,7 +531,7 @@ impl McapContainer {
             Location::File { start, end } => {
                 let buf = self
                     .read_at(start, end - start)
-                    .map_err(|e| e.to_string())?;
+                    .map_err(|e| RecordError(e.to_string()))?;
                 let len = buf.len();
                 Ok(MessageBytes {
                     buf: Arc::new(buf),
@@ -543,7 +557,7 @@ impl McapContainer {
                 let data = match self.load_chunk(index) {
                     Ok(d) => d,
                     Err(what) => {
-                        problems.push(Problem::file(what));
+                        problems.push(Problem::file(what.0));
                         return (kept, problems);
                     }
                 };
@@ -606,7 +620,7 @@ impl McapContainer {
                         kept.push((r, t));
                     }
                 }
-                Err(what) => problems.push(Problem::message(&channel.topic, log_time, what)),
+                Err(what) => problems.push(Problem::message(&channel.topic, log_time, what.0)),
             }
         }
         (kept, problems)

@@ -583,7 +583,7 @@ impl Drive {
         let bytes = self
             .container
             .message_bytes(&frame.msg)
-            .map_err(|e| self.payload_error(stream, &frame.msg, e))?;
+            .map_err(|e| self.payload_error(stream, &frame.msg, e.to_string()))?;
         let decoded = stream
             .codec
             .decode(&bytes)
@@ -610,7 +610,7 @@ impl Drive {
         let bytes = self
             .container
             .message_bytes(&frame.msg)
-            .map_err(|e| self.payload_error(stream, &frame.msg, e))?;
+            .map_err(|e| self.payload_error(stream, &frame.msg, e.to_string()))?;
         let decoded = stream
             .codec
             .decode(&bytes)

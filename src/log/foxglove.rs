@@ -112,8 +112,8 @@ fn calibration(
     d: Vec<f64>,
     k: &[f64],
 ) -> DecodeResult<Decoded<'static>> {
-    let intrinsics =
-        CameraIntrinsics::from_camera_info(width, height, model, d, k).map_err(DecodeError::new)?;
+    let intrinsics = CameraIntrinsics::from_camera_info(width, height, model, d, k)
+        .map_err(|e| DecodeError::new(e.to_string()))?;
     Ok(Decoded::CameraInfo(CameraInfoMsg {
         stamp_nanos: stamp,
         frame_id,

@@ -149,7 +149,7 @@ pub fn decode(kind: Ros2Type, payload: &[u8]) -> DecodeResult<Decoded<'_>> {
             let d = r.f64_seq("d")?;
             let k = r.f64_array::<9>("k")?;
             let intrinsics = CameraIntrinsics::from_camera_info(width, height, &model_name, d, &k)
-                .map_err(DecodeError::new)?;
+                .map_err(|e| DecodeError::new(e.to_string()))?;
             Decoded::CameraInfo(CameraInfoMsg {
                 stamp_nanos: h.stamp_nanos,
                 frame_id: h.frame_id,

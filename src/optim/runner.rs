@@ -95,23 +95,25 @@ pub struct Run {
 impl Run {
     /// Start stepping `calibrator` on a new thread.
     pub fn spawn(calibrator: Box<dyn Calibrator>) -> Self {
-        Self::spawn_with(move || Ok(calibrator))
+        Self::spawn_with(move || Ok::<_, std::convert::Infallible>(calibrator))
     }
 
     /// Prepare a calibrator on the worker thread (loading images, building problems: slow work
     /// the UI must not wait on), then step it. A failed preparation sends one packet with
-    /// `error` set.
-    pub fn spawn_with<F>(prepare: F) -> Self
+    /// `error` set (the error's message).
+    pub fn spawn_with<F, E>(prepare: F) -> Self
     where
-        F: FnOnce() -> Result<Box<dyn Calibrator>, String> + Send + 'static,
+        F: FnOnce() -> Result<Box<dyn Calibrator>, E> + Send + 'static,
+        E: std::fmt::Display,
     {
         Self::spawn_preparing(move |_| prepare())
     }
 
     /// [`Run::spawn_with`] for a preparation that reports its progress ([`Run::preparing`]).
-    pub fn spawn_preparing<F>(prepare: F) -> Self
+    pub fn spawn_preparing<F, E>(prepare: F) -> Self
     where
-        F: FnOnce(&Preparing) -> Result<Box<dyn Calibrator>, String> + Send + 'static,
+        F: FnOnce(&Preparing) -> Result<Box<dyn Calibrator>, E> + Send + 'static,
+        E: std::fmt::Display,
     {
         let control = Arc::new(AtomicU8::new(RUN));
         let (tx, rx) = channel();
@@ -131,7 +133,7 @@ impl Run {
                         current: Rig::default(),
                         best: Rig::default(),
                         finished: true,
-                        error: Some(e),
+                        error: Some(e.to_string()),
                         note: None,
                     });
                 }
@@ -307,7 +309,7 @@ mod tests {
         // preparation still ends with its error packet.
         let run = Run::spawn_preparing(|preparing| {
             preparing.report("matching", 7, 9);
-            Err("no cameras".into())
+            Err::<Box<dyn Calibrator>, _>("no cameras")
         });
         let status = run.preparing.clone();
         let packets = run.join();

@@ -52,7 +52,7 @@ impl PipelineCalibrator {
         plan: Plan,
         started: Instant,
         progress: Progress,
-    ) -> Result<Self, String> {
+    ) -> Result<Self, crate::error::RunError> {
         let prepared = super::run::prepare(&drive, &initial, &plan, progress)?;
         let stage = super::run::unical(&drive, &plan, &prepared, progress)?;
         let steps = match &stage {

@@ -10,6 +10,7 @@
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
+use crate::error::ParseError;
 use crate::unical::depth_calib::DepthCalibConfig;
 
 /// How hard the pipeline works: the images, their scale, the steps and the time budget it
@@ -71,16 +72,16 @@ impl Quality {
 }
 
 impl std::str::FromStr for Quality {
-    type Err = String;
+    type Err = ParseError;
 
-    fn from_str(text: &str) -> Result<Self, String> {
+    fn from_str(text: &str) -> Result<Self, ParseError> {
         match text {
             "fast" => Ok(Quality::Fast),
             "default" => Ok(Quality::Default),
             "paper" => Ok(Quality::Paper),
-            other => Err(format!(
+            other => Err(ParseError::new(format!(
                 "unknown quality '{other}' (expected fast, default or paper)"
-            )),
+            ))),
         }
     }
 }
@@ -384,8 +385,12 @@ impl PipelineConfig {
 }
 
 /// Parse a duration: `90` or `90s` (seconds), `10m`, `1h`, `1h30m`.
-pub fn parse_duration_secs(text: &str) -> Result<f64, String> {
-    let bad = || format!("'{text}': expected a duration such as 600, 600s, 10m or 1h30m");
+pub fn parse_duration_secs(text: &str) -> Result<f64, ParseError> {
+    let bad = || {
+        ParseError::new(format!(
+            "'{text}': expected a duration such as 600, 600s, 10m or 1h30m"
+        ))
+    };
     let t = text.trim();
     if t.is_empty() {
         return Err(bad());

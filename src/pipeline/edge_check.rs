@@ -11,6 +11,7 @@
 //! centred scatter of the frames' gradients times their count. A direction along which `H`
 //! is flat or not convex is one the images do not observe.
 
+use crate::error::RunError;
 use glam::DVec3;
 
 use crate::calib::Rig;
@@ -53,8 +54,8 @@ impl EdgeCheck {
         frames: usize,
         segments_nanos: &[(i64, i64)],
         fitted_images: &[usize],
-    ) -> Result<Self, String> {
-        let context = |e: AlignError| format!("{camera} × {lidar}: {e}");
+    ) -> Result<Self, RunError> {
+        let context = |e: AlignError| RunError::from(e).within(format!("{camera} × {lidar}"));
         let (pairs, held_out) = held_out_pairs(
             drive,
             (camera, lidar),
@@ -76,9 +77,9 @@ impl EdgeCheck {
             })
             .collect::<Vec<_>>();
         if frames.is_empty() {
-            return Err(format!(
+            return Err(RunError::NotEnoughData(format!(
                 "{camera} × {lidar}: no LiDAR silhouette inside the image"
-            ));
+            )));
         }
         Ok(Self {
             camera: camera.into(),

@@ -10,6 +10,7 @@ use crate::classical::icp_calibrator::IcpCalibrator;
 use crate::classical::trajectory_icp::{
     MIN_STRAIGHT_DISTANCE_M, MIN_TURN_DEG, TrajectoryFit, register_to_trajectory,
 };
+use crate::error::RunError;
 use crate::log::Drive;
 use crate::optim::runner::Calibrator;
 use crate::unical::calibrator::{UnicalLidarStage, training_stamps};
@@ -45,7 +46,7 @@ pub fn register_lidars(
     sweeps: (usize, usize),
     segments_nanos: &[(i64, i64)],
     progress: Progress,
-) -> Result<(Rig, Vec<String>, LidarEvidence), String> {
+) -> Result<(Rig, Vec<String>, LidarEvidence), RunError> {
     let (trajectory_sweeps, icp_sweeps) = sweeps;
     let mut rig = rig.clone();
     let mut notes = Vec::new();
@@ -118,7 +119,7 @@ pub fn register_lidars(
         segments_nanos,
         IcpConfig::default(),
     )
-    .map_err(|e| format!("lidar icp: {e}"))?;
+    .map_err(|e| e.within("lidar icp"))?;
     let total = icp.max_steps();
     for step in 1..=total {
         progress("lidar icp", step, total);
@@ -285,7 +286,7 @@ pub fn prepare(
     rig: &Rig,
     plan: &Plan,
     progress: Progress,
-) -> Result<Prepared, String> {
+) -> Result<Prepared, RunError> {
     let segments = &plan.request.segments_nanos;
     let mut out = Prepared {
         rig: rig.clone(),
@@ -396,7 +397,7 @@ pub fn unical(
     plan: &Plan,
     prepared: &Prepared,
     progress: Progress,
-) -> Result<Option<UnicalLidarStage>, String> {
+) -> Result<Option<UnicalLidarStage>, RunError> {
     let Some(Stage::Unical {
         cameras,
         images_per_camera,

@@ -6,20 +6,29 @@
 use std::collections::HashMap;
 use std::path::Path;
 
+use super::writer::WriterError;
+
 /// Write `from` into `to` damaged as above; returns how many messages it damaged.
-pub fn damaged_copy(from: &Path, to: &Path) -> Result<usize, String> {
-    let bytes = std::fs::read(from).map_err(|e| format!("{}: {e}", from.display()))?;
-    let file = std::fs::File::create(to).map_err(|e| format!("{}: {e}", to.display()))?;
+pub fn damaged_copy(from: &Path, to: &Path) -> Result<usize, WriterError> {
+    let io = |path: &Path, what: &str| {
+        let (path, what) = (path.to_path_buf(), what.to_owned());
+        move |source| WriterError::Io { path, what, source }
+    };
+    let mcap = |path: &Path| {
+        let path = path.to_path_buf();
+        move |source| WriterError::Mcap { path, source }
+    };
+    let bytes = std::fs::read(from).map_err(io(from, "cannot read"))?;
+    let file = std::fs::File::create(to).map_err(io(to, "cannot create"))?;
     let mut writer = mcap::WriteOptions::new()
         .profile("ros2")
         .create(std::io::BufWriter::new(file))
-        .map_err(|e| format!("{}: {e}", to.display()))?;
+        .map_err(mcap(to))?;
     let mut seen = HashMap::<String, usize>::new();
     let mut damaged = 0;
-    let stream =
-        mcap::MessageStream::new(&bytes).map_err(|e| format!("{}: {e}", from.display()))?;
+    let stream = mcap::MessageStream::new(&bytes).map_err(mcap(from))?;
     for message in stream {
-        let mut message = message.map_err(|e| format!("{}: {e}", from.display()))?;
+        let mut message = message.map_err(mcap(from))?;
         let schema = message
             .channel
             .schema
@@ -42,12 +51,8 @@ pub fn damaged_copy(from: &Path, to: &Path) -> Result<usize, String> {
             }
             message.data = data.into();
         }
-        writer
-            .write(&message)
-            .map_err(|e| format!("{}: {e}", to.display()))?;
+        writer.write(&message).map_err(mcap(to))?;
     }
-    writer
-        .finish()
-        .map_err(|e| format!("{}: {e}", to.display()))?;
+    writer.finish().map_err(mcap(to))?;
     Ok(damaged)
 }

@@ -94,15 +94,13 @@ pub const MAX_PERTURB_CM: f64 = 1000.0;
 
 /// Why a perturbation cannot be used, if it cannot: each value finite, ≥ 0 and at most
 /// [`MAX_PERTURB_DEG`] / [`MAX_PERTURB_CM`]; the message names the option.
-pub fn check_perturbation(deg: f64, cm: f64) -> Result<(), String> {
+pub fn check_perturbation(deg: f64, cm: f64) -> Result<(), crate::error::ParseError> {
     for (name, value, most) in [
         ("--perturb-deg", deg, MAX_PERTURB_DEG),
         ("--perturb-cm", cm, MAX_PERTURB_CM),
     ] {
         if !(value.is_finite() && (0.0..=most).contains(&value)) {
-            return Err(format!(
-                "{name} must be a number in [0, {most}], got {value}"
-            ));
+            return Err(format!("{name} must be a number in [0, {most}], got {value}").into());
         }
     }
     Ok(())
@@ -167,7 +165,8 @@ fn check_config(cfg: &SynthConfig) -> Result<(), SimError> {
             cfg.camera_rate_hz
         ));
     }
-    check_perturbation(cfg.perturb_deg, cfg.perturb_cm).map_err(SimError::Config)?;
+    check_perturbation(cfg.perturb_deg, cfg.perturb_cm)
+        .map_err(|e| SimError::Config(e.to_string()))?;
     for camera in &cfg.rig.cameras {
         let (w, h) = (camera.intrinsics.width, camera.intrinsics.height);
         let (sw, sh) = (w as f64 * cfg.scale, h as f64 * cfg.scale);

@@ -53,10 +53,10 @@ impl SceneKind {
 }
 
 impl FromStr for SceneKind {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
+    type Err = crate::error::ParseError;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
         Self::ALL.into_iter().find(|k| k.as_str() == s).ok_or_else(|| {
-            format!("unknown scene '{s}' (expected one of: urban, parking-lot, featureless, checkerboard)")
+            crate::error::ParseError::new(format!("unknown scene '{s}' (expected one of: urban, parking-lot, featureless, checkerboard)"))
         })
     }
 }

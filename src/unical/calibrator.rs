@@ -17,6 +17,7 @@ use super::scene_sweeps;
 use super::surface_align::AlignmentLoss;
 use super::transient::{TransientStats, Witnesses, remove_transient};
 use crate::calib::{Rig, Sensor};
+use crate::error::RunError;
 use crate::geometry::Rigid;
 use crate::geometry::camera::CameraIntrinsics;
 use crate::log::{Drive, SensorStream, spread_evenly};
@@ -57,7 +58,7 @@ impl UnicalLidarStage {
         sweeps_per_lidar: usize,
         segments_nanos: &[(i64, i64)],
         config: DepthCalibConfig,
-    ) -> Result<Self, String> {
+    ) -> Result<Self, RunError> {
         Self::from_drive_covering(drive, rig, sweeps_per_lidar, segments_nanos, &[], config)
     }
 
@@ -71,7 +72,7 @@ impl UnicalLidarStage {
         segments_nanos: &[(i64, i64)],
         image_stamps_nanos: &[i64],
         config: DepthCalibConfig,
-    ) -> Result<Self, String> {
+    ) -> Result<Self, RunError> {
         let mut lidars = Vec::new();
         for lidar in rig.lidars() {
             let picked = scene_sweeps::pick(
@@ -96,7 +97,9 @@ impl UnicalLidarStage {
             });
         }
         if lidars.is_empty() {
-            return Err("no LiDAR sweeps inside the trajectory and the selected segments".into());
+            return Err(RunError::NotEnoughData(
+                "no LiDAR sweeps inside the trajectory and the selected segments".into(),
+            ));
         }
         let sources: Vec<(String, Rigid)> =
             lidars.iter().map(|l| (l.name.clone(), l.initial)).collect();
@@ -144,17 +147,17 @@ impl UnicalLidarStage {
         vehicle_from_camera: Rigid,
         stamp_nanos: i64,
         sweeps: &mut HashMap<(usize, usize), Vec<DVec3>>,
-    ) -> Result<Vec<bool>, String> {
+    ) -> Vec<bool> {
         let Some((witnesses, sources, _)) = &self.transient else {
-            return Ok(Vec::new());
+            return Vec::new();
         };
         let Ok(world_from_vehicle) = drive.trajectory.world_from_vehicle(stamp_nanos) else {
-            return Ok(Vec::new());
+            return Vec::new();
         };
         let camera_from_world = (world_from_vehicle * vehicle_from_camera).inverse();
         let (w, h) = (camera.width as usize, camera.height as usize);
         if w == 0 || h == 0 {
-            return Ok(Vec::new());
+            return Vec::new();
         }
         let mut mask = Vec::new();
         for (k, (name, vehicle_from_lidar)) in sources.iter().enumerate() {
@@ -194,7 +197,7 @@ impl UnicalLidarStage {
                 .collect();
             mark_traffic(&mut mask, &pixels, w, h);
         }
-        Ok(mask)
+        mask
     }
 
     /// Add `frames_per_camera` images of every camera (spread over the segments), downscaled by
@@ -205,7 +208,7 @@ impl UnicalLidarStage {
         frames_per_camera: usize,
         segments_nanos: &[(i64, i64)],
         scale: f64,
-    ) -> Result<Self, String> {
+    ) -> Result<Self, RunError> {
         self.with_cameras_reporting(
             drive,
             frames_per_camera,
@@ -225,12 +228,14 @@ impl UnicalLidarStage {
         segments_nanos: &[(i64, i64)],
         scale: f64,
         report: &(dyn Fn(&str, usize, usize) + Sync),
-    ) -> Result<Self, String> {
+    ) -> Result<Self, RunError> {
         if frames_per_camera == 0 {
             return Ok(self);
         }
         if !(scale > 0.0 && scale <= 1.0) {
-            return Err(format!("camera image scale {scale} is not in (0, 1]"));
+            return Err(RunError::Invalid(format!(
+                "camera image scale {scale} is not in (0, 1]"
+            )));
         }
         let with_keypoints = self.calib.config.alignment != AlignmentLoss::None;
         // Every camera with intrinsics and a stream, and the frames it contributes (counted
@@ -257,7 +262,7 @@ impl UnicalLidarStage {
                     cam.vehicle_from_sensor,
                     stamp_nanos + drive.camera_readout.middle_nanos(),
                     &mut transient_sweeps,
-                )?;
+                );
                 let keypoints = if with_keypoints {
                     training_keypoints(img.as_ref(), small.width)
                 } else {

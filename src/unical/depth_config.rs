@@ -320,11 +320,15 @@ pub struct CoarseToFine {
 impl CoarseToFine {
     /// `LEVELS,FRACTION` (levels open at the start ≥ 1, the fraction of the run by which all
     /// are open in (0, 1]) or `off` (`None`: every level from the start).
-    pub fn parse_setting(text: &str) -> Result<Option<Self>, String> {
+    pub fn parse_setting(text: &str) -> Result<Option<Self>, crate::error::ParseError> {
         if text.trim() == "off" {
             return Ok(None);
         }
-        let bad = || format!("expected LEVELS,FRACTION (e.g. 4,0.6) or off, got '{text}'");
+        let bad = || {
+            crate::error::ParseError::new(format!(
+                "expected LEVELS,FRACTION (e.g. 4,0.6) or off, got '{text}'"
+            ))
+        };
         let (a, b) = text.split_once(',').ok_or_else(bad)?;
         let start_levels: f32 = a.trim().parse().map_err(|_| bad())?;
         let end_fraction: f32 = b.trim().parse().map_err(|_| bad())?;

@@ -84,16 +84,17 @@ impl AlignmentLoss {
 }
 
 impl std::str::FromStr for AlignmentLoss {
-    type Err = String;
+    type Err = crate::error::ParseError;
 
-    fn from_str(text: &str) -> Result<Self, String> {
+    fn from_str(text: &str) -> Result<Self, Self::Err> {
         match text {
             "none" => Ok(AlignmentLoss::None),
             "ray-distance" => Ok(AlignmentLoss::ProjectedRayDistance),
             "surface" => Ok(AlignmentLoss::SurfaceAlignment),
             other => Err(format!(
                 "unknown --alignment '{other}' (expected none, ray-distance or surface)"
-            )),
+            )
+            .into()),
         }
     }
 }
