@@ -13,7 +13,7 @@ use rigcal::classical::lidar_translation::fit_pose;
 use rigcal::log::Drive;
 use rigcal::sim::synth::perturb_rig;
 
-fn main() -> Result<(), Box<dyn std::error::Error>> {
+fn main() -> Result<(), String> {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let (log, gt) = match (args.first(), args.get(1)) {
         (Some(l), Some(g)) => (l, g),
@@ -37,12 +37,13 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         .ok()
         .and_then(|s| s.parse().ok())
         .unwrap_or(DEFAULT_FRAMES);
-    let map = lidar_map(&drive, &truth)?;
+    let map = lidar_map(&drive, &truth).map_err(|e| e.to_string())?;
     let names: Vec<String> = truth.cameras().map(|c| c.name.clone()).collect();
     // The matches and the trajectory do not depend on the start: read each camera's once.
     let mut straight_pairs = std::collections::HashMap::new();
     for name in &names {
-        let found = camera_pairs(&drive, &truth, name, frames, &[], false, &|_, _, _| {})?;
+        let found = camera_pairs(&drive, &truth, name, frames, &[], false, &|_, _, _| {})
+            .map_err(|e| e.to_string())?;
         straight_pairs.insert(name.clone(), found);
     }
     for seed in 0..=seeds {

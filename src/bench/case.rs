@@ -149,8 +149,12 @@ pub fn ensure_drive(
                 *seed,
             );
             cfg.scale = *scale;
-            synthesize(&cfg, &mcap, &gt, progress)
-                .map_err(|e| format!("cannot simulate {name}: {e}"))?;
+            synthesize(&cfg, &mcap, &gt, progress).map_err(|source| {
+                super::BenchError::Simulate {
+                    name: name.to_string(),
+                    source,
+                }
+            })?;
             Ok((mcap, gt))
         }
     }

@@ -18,9 +18,12 @@ pub mod suite;
 /// a row of the report with its reason).
 #[derive(Debug, thiserror::Error)]
 pub enum BenchError {
-    /// A drive could not be simulated or read.
-    #[error(transparent)]
-    Run(#[from] crate::error::RunError),
+    /// A suite's drive could not be simulated.
+    #[error("cannot simulate {name}: {source}")]
+    Simulate {
+        name: String,
+        source: crate::sim::synth::SimError,
+    },
     /// A file or folder of the outputs, or a drive's, named in the message.
     #[error("{0}")]
     Output(String),

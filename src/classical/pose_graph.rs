@@ -163,6 +163,8 @@ pub struct PoseGraph {
 pub enum PoseGraphError {
     #[error("no sensor '{0}' in the pose graph")]
     UnknownSensor(String),
+    #[error("no sensor '{0}' to fix the pose graph's gauge")]
+    UnknownGauge(String),
     #[error("edge from '{0}' to itself")]
     SelfEdge(String),
     #[error("edge {parent} → {child} ({source_name}): information is not finite and non-negative")]
@@ -181,7 +183,7 @@ impl PoseGraph {
         let fixed = names
             .iter()
             .position(|n| n == fixed)
-            .ok_or_else(|| PoseGraphError::UnknownSensor(fixed.to_owned()))?;
+            .ok_or_else(|| PoseGraphError::UnknownGauge(fixed.to_owned()))?;
         let poses: Vec<Rigid> = rig.sensors.iter().map(|s| s.vehicle_from_sensor).collect();
         let prior = diagonal(PRIOR_SIGMA_DEG.to_radians(), PRIOR_SIGMA_M);
         let factors = poses

@@ -157,7 +157,7 @@ pub(crate) fn open_inputs(
     options: &crate::log::DriveOptions,
     perturbation: Option<(f64, f64)>,
 ) -> Result<(Drive, Rig, Vec<(i64, i64)>), CliError> {
-    let drive = Drive::open_with(args.log(), options).map_err(|e| e.to_string())?;
+    let drive = Drive::open_with(args.log(), options)?;
     let mut rig = drive.rig.clone();
     if let Some(init) = &args.init {
         let imported = crate::interop::import::load_initial_guess(init, &rig)
@@ -295,7 +295,7 @@ pub fn calibrate(
                 &segments,
                 drive.camera_readout,
             )
-            .map_err(|e| e.to_string())?,
+            .map_err(crate::error::RunError::from)?,
         ),
         "icp" => Box::new(IcpCalibrator::from_drive(
             &drive,
@@ -408,7 +408,7 @@ pub fn calibrate(
         doc.metrics.insert("report".into(), r.to_yaml());
     }
     record_skipped(&drive, &mut doc);
-    doc.save(args.out()).map_err(|e| e.to_string())?;
+    doc.save(args.out())?;
     if let Some(why) = calibrator.diverged() {
         return Err(CliError::Failed(format!(
             "{why}; that result is written to {}",

@@ -155,8 +155,8 @@ pub fn evaluate(
     if !(1..=MAX_FRAMES).contains(&args.frames) {
         return Err(format!("--frames must be 1–{MAX_FRAMES}, got {}", args.frames).into());
     }
-    let reference = load_reference(&args.ground_truth).map_err(|e| e.to_string())?;
-    let calibration = CalibrationFile::load_rig(&args.calibration).map_err(|e| e.to_string())?;
+    let reference = load_reference(&args.ground_truth)?;
+    let calibration = CalibrationFile::load_rig(&args.calibration)?;
     let common = |name: &str| calibration.sensor(name).is_some();
     let root = match &args.root {
         Some(r) if reference.sensor(r).is_some() && common(r) => r.clone(),
@@ -219,7 +219,7 @@ pub fn evaluate(
             camera_readout,
             ..crate::log::DriveOptions::default()
         };
-        let drive = Drive::open_with(log, &options).map_err(|e| e.to_string())?;
+        let drive = Drive::open_with(log, &options)?;
         if !calibration
             .sensors
             .iter()

@@ -56,7 +56,7 @@ pub fn resolve_config(args: &CalibrateArgs) -> Result<PipelineConfig, CliError> 
         config.lidars.register = false;
         config.cameras.hand_eye = crate::pipeline::config::HandEye::Never;
     }
-    config.check().map_err(|e| e.to_string())?;
+    config.check()?;
     Ok(config)
 }
 
@@ -84,7 +84,7 @@ pub fn calibrate_auto(
         segments_nanos: segments,
     };
     let bars = super::progress::PhasedProgress::default();
-    let plan = Plan::build(&drive, &initial, &request, &config).map_err(|e| e.to_string())?;
+    let plan = Plan::build(&drive, &initial, &request, &config)?;
     for line in &plan.decisions {
         eprintln!("plan: {line}");
     }

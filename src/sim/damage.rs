@@ -26,9 +26,13 @@ pub fn damaged_copy(from: &Path, to: &Path) -> Result<usize, WriterError> {
         .map_err(mcap(to))?;
     let mut seen = HashMap::<String, usize>::new();
     let mut damaged = 0;
-    let stream = mcap::MessageStream::new(&bytes).map_err(mcap(from))?;
+    let unreadable = |source: mcap::McapError| WriterError::Invalid {
+        path: from.to_path_buf(),
+        what: format!("not a readable MCAP: {source}"),
+    };
+    let stream = mcap::MessageStream::new(&bytes).map_err(unreadable)?;
     for message in stream {
-        let mut message = message.map_err(mcap(from))?;
+        let mut message = message.map_err(unreadable)?;
         let schema = message
             .channel
             .schema
