@@ -88,6 +88,7 @@ fn compare(
     runs: &[(&str, Vec<&str>, Vec<&str>, f64, f64)],
 ) {
     let start = rigcal::log::Drive::open(clean).unwrap().rig;
+    let truth = CalibrationFile::load_rig(&tmp.join("gt.yaml")).unwrap();
     for (name, args, moved, tol_deg, tol_cm) in runs {
         let started = std::time::Instant::now();
         let (a, _) = calibrate(clean, args, &tmp.join(format!("{name}-clean.yaml")));
@@ -110,8 +111,11 @@ fn compare(
             from_start > 0.05,
             "{name}: the clean run moved {from_start:.3}°"
         );
+        let ((ca, ta), (cb, tb)) = (apart(&truth, &ra, moved), apart(&truth, &rb, moved));
         eprintln!(
-            "{name}: {listed} frames skipped; damaged vs clean {deg:.3}° / {cm:.2} cm ({:.0} s for both)",
+            "{name}: {listed} frames skipped; damaged vs clean {deg:.3}° / {cm:.2} cm; \
+             from the truth: clean {ca:.3}° / {ta:.2} cm, damaged {cb:.3}° / {tb:.2} cm \
+             ({:.0} s for both)",
             started.elapsed().as_secs_f64()
         );
         assert!(

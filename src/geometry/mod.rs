@@ -5,6 +5,7 @@
 //! (built from unit quaternions) so `inverse()` of a rigid transform is exact up to rounding.
 
 pub mod camera;
+pub(crate) mod distortion;
 pub mod motion;
 pub mod pnp;
 pub mod projection;
