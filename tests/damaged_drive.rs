@@ -6,20 +6,35 @@
 //! the pipeline then calibrate it to within a tolerance of what they reach on the clean drive,
 //! and each run's output names what it skipped.
 //!
-//! `icp` and `edge` run in the suite. `unical` and the pipeline take minutes a run even on a
-//! short schedule in a debug build (40 steps: about 140 s), so their test is ignored by the
-//! suite and run in a release build, at the fast quality:
-//! `cargo test --release --test damaged_drive -- --ignored` (RELIABILITY.md has its figures).
+//! "Within a tolerance of the clean run" is judged twice per sensor: per axis of the sensor's
+//! own frame, the damaged run ends within the tolerance of the clean run, except along an axis
+//! the clean run's own report marks weak or not observed by this drive (a 6 s drive with one
+//! camera leaves some camera axes unpinned, and there any two runs differ); and its distance
+//! from the simulator's truth, after aligning the root LiDAR as `rigcal eval` does, is at most
+//! the clean run's plus the tolerance.
+//!
+//! `icp` and `edge` run in the suite. `unical` and the pipeline take minutes a run (in a
+//! release build about 4½ minutes each at the default quality), so their test is ignored by
+//! the suite and run by hand:
+//! `cargo test --release --test damaged_drive -- --ignored --nocapture` (RELIABILITY.md has
+//! its figures).
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
 use rigcal::calib::{CalibrationFile, Rig};
+use rigcal::geometry::Rigid;
+use rigcal::geometry::rigid::rig_errors;
+use rigcal::geometry::so3;
+use rigcal::pipeline::report::AXES;
 use rigcal::sim::rigs::{RigPreset, SimRig};
 use rigcal::sim::synth::{SynthConfig, synthesize};
 use rigcal::sim::trajectories::TrajectoryKind;
 use rigcal::sim::world::SceneKind;
 use tempfile::TempDir;
+
+/// The sensor `rigcal eval` aligns on: the rig's first LiDAR.
+const ROOT: &str = "pandar64";
 
 /// Both LiDARs and the front camera of the pandaset rig on a figure-8, 2° / 20 cm off.
 fn clean_drive(dir: &Path) -> PathBuf {
@@ -57,10 +72,49 @@ fn calibrate(log: &Path, args: &[&str], out: &Path) -> (CalibrationFile, String)
 /// The largest rotation (°) and translation (cm) between two rigs over `sensors`.
 fn apart(a: &Rig, b: &Rig, sensors: &[&str]) -> (f64, f64) {
     sensors.iter().fold((0.0, 0.0), |(r, t), name| {
-        let pose = |rig: &Rig| rig.sensor(name).unwrap().vehicle_from_sensor;
-        let (dr, dt) = pose(a).difference(pose(b));
+        let (dr, dt) = pose(a, name).difference(pose(b, name));
         (r.max(dr.to_degrees()), t.max(dt * 100.0))
     })
+}
+
+fn pose(rig: &Rig, name: &str) -> Rigid {
+    rig.sensor(name).unwrap().vehicle_from_sensor
+}
+
+/// How far `b` is from `a` per axis of the sensor's own frame in `a`: rotations (°) about its
+/// x, y, z, then translations (cm) along them, in the order of the report's axes.
+fn per_axis(a: Rigid, b: Rigid) -> [f64; 6] {
+    let a_from_b = a.inverse() * b;
+    let r = so3::log(a_from_b.rotation).to_array().map(f64::to_degrees);
+    let t = (a_from_b.translation * 100.0).to_array();
+    [r[0], r[1], r[2], t[0], t[1], t[2]]
+}
+
+/// The axes of `sensor` the run's report (in its output's metrics) marks weak or not
+/// observed; none without a report.
+fn unpinned_axes(out: &CalibrationFile, sensor: &str) -> Vec<String> {
+    let sensors = out
+        .metrics
+        .get("report")
+        .and_then(|r| r.get("sensors"))
+        .and_then(|s| s.as_sequence());
+    let Some(me) = sensors.and_then(|s| {
+        s.iter()
+            .find(|e| e.get("name").and_then(|n| n.as_str()) == Some(sensor))
+    }) else {
+        return Vec::new();
+    };
+    let axes = me.get("axes").and_then(|a| a.as_sequence());
+    axes.into_iter()
+        .flatten()
+        .filter(|a| {
+            matches!(
+                a.get("observed").and_then(|o| o.as_str()),
+                Some("weak" | "not-observed")
+            )
+        })
+        .filter_map(|a| a.get("axis").and_then(|n| n.as_str()).map(str::to_string))
+        .collect()
 }
 
 /// A clean drive and its damaged copy in `tmp`, checked to be damaged as meant.
@@ -80,7 +134,8 @@ fn drives(tmp: &Path) -> (PathBuf, PathBuf) {
 
 /// Each run (method, its arguments, the sensors it moves, tolerance in ° and cm) on both
 /// drives: the damaged run says what it skipped, lists it in its output, and ends within the
-/// tolerance of the clean run, which moved its sensors (so the comparison says something).
+/// tolerance of the clean run (as the module says), which moved its sensors (so the comparison
+/// says something).
 fn compare(
     tmp: &Path,
     clean: &Path,
@@ -105,23 +160,60 @@ fn compare(
             .map_or(0, |s| s.len());
         assert!(listed > 0, "{name}: no skipped_frames in the output");
         let (ra, rb) = (a.to_rig(&out).unwrap(), b.to_rig(&out).unwrap());
-        let (deg, cm) = apart(&ra, &rb, moved);
         let (from_start, _) = apart(&start, &ra, moved);
         assert!(
             from_start > 0.05,
             "{name}: the clean run moved {from_start:.3}°"
         );
-        let ((ca, ta), (cb, tb)) = (apart(&truth, &ra, moved), apart(&truth, &rb, moved));
+        let (deg, cm) = apart(&ra, &rb, moved);
         eprintln!(
-            "{name}: {listed} frames skipped; damaged vs clean {deg:.3}° / {cm:.2} cm; \
-             from the truth: clean {ca:.3}° / {ta:.2} cm, damaged {cb:.3}° / {tb:.2} cm \
-             ({:.0} s for both)",
+            "{name}: {listed} frames skipped; damaged vs clean {deg:.3}° / {cm:.2} cm ({:.0} s for both)",
             started.elapsed().as_secs_f64()
         );
-        assert!(
-            deg <= *tol_deg && cm <= *tol_cm,
-            "{name}: {deg:.3}° / {cm:.2} cm from the clean run"
-        );
+        for sensor in moved {
+            // Per axis, the damaged run ends where the clean run ends, except along an axis
+            // the clean run's own report says this drive does not pin down (there the two
+            // runs may differ as any two runs may, and the user was told).
+            let unpinned = unpinned_axes(&a, sensor);
+            let diff = per_axis(pose(&ra, sensor), pose(&rb, sensor));
+            for (k, axis) in AXES.iter().enumerate() {
+                let tol = if k < 3 { *tol_deg } else { *tol_cm };
+                let pinned = !unpinned.iter().any(|u| u == axis);
+                eprintln!(
+                    "  {sensor} {axis}: damaged - clean {:+.3}{}",
+                    diff[k],
+                    if pinned {
+                        ""
+                    } else {
+                        " (the clean run's report: not pinned)"
+                    }
+                );
+                assert!(
+                    !pinned || diff[k].abs() <= tol,
+                    "{name}: {sensor} {axis} {:+.3} from the clean run",
+                    diff[k]
+                );
+            }
+            // And the damage leaves it no further from the truth (the simulator's, after
+            // aligning the root LiDAR as `rigcal eval` does) than the clean run by more than
+            // the tolerance.
+            let from_truth = |rig: &Rig| {
+                rig_errors(&truth.extrinsics(), &rig.extrinsics(), ROOT)
+                    .unwrap()
+                    .into_iter()
+                    .find(|e| e.sensor == *sensor)
+                    .map(|e| (e.rotation_deg, e.translation_m * 100.0))
+                    .unwrap()
+            };
+            let ((ca, ta), (cb, tb)) = (from_truth(&ra), from_truth(&rb));
+            eprintln!(
+                "  {sensor} from the truth: clean {ca:.3}° / {ta:.2} cm, damaged {cb:.3}° / {tb:.2} cm"
+            );
+            assert!(
+                cb <= ca + tol_deg && tb <= ta + tol_cm,
+                "{name}: {sensor} {cb:.3}° / {tb:.2} cm from the truth, the clean run {ca:.3}° / {ta:.2} cm"
+            );
+        }
     }
 }
 
@@ -150,21 +242,15 @@ fn icp_and_edge_calibrate_a_damaged_drive_like_the_clean_one_and_say_what_they_s
 }
 
 #[test]
-#[ignore = "minutes a run: cargo test --release --test damaged_drive -- --ignored (its pipeline part fails: RELIABILITY.md)"]
+#[ignore = "minutes a run: cargo test --release --test damaged_drive -- --ignored --nocapture"]
 fn unical_and_the_pipeline_calibrate_a_damaged_drive_like_the_clean_one_and_say_what_they_skipped()
 {
     let tmp = temp();
     let (clean, damaged) = drives(tmp.path());
     let both = vec!["pandar_gt", "front_camera"];
     let runs = [
-        (
-            "unical",
-            vec!["--method", "unical", "--quality", "fast"],
-            both.clone(),
-            0.5,
-            5.0,
-        ),
-        ("pipeline", vec!["--quality", "fast"], both, 0.5, 5.0),
+        ("unical", vec!["--method", "unical"], both.clone(), 0.5, 5.0),
+        ("pipeline", vec![], both, 0.5, 5.0),
     ];
     compare(tmp.path(), &clean, &damaged, &runs);
 }
