@@ -3,8 +3,8 @@
 //! cloud of each LiDAR, from the first, cut to half its length, every fifth JPEG's start-of-image marker
 //! overwritten; the container itself intact). The open leaves the cut-short clouds out of its
 //! index; the JPEGs fail when a run decodes them and are skipped. `icp`, `edge`, `unical` and
-//! the pipeline then calibrate it to within a tolerance of what they reach on the clean drive,
-//! and each run's output names what it skipped.
+//! the pipeline then calibrate it to within a tolerance of what they reach on the clean drive
+//! (in the sense below), and each run's output names what it skipped.
 //!
 //! "Within a tolerance of the clean run" is judged twice per sensor: per axis of the sensor's
 //! own frame, the damaged run ends within the tolerance of the clean run, except along an axis
