@@ -54,32 +54,33 @@ fn detect() -> Level {
 
 /// `fn name(args) -> ret` running `inner::<WIDE>(args)` compiled for the best [`Level`] the CPU
 /// has (`inner` must be `#[inline(always)]`, as must everything it calls that should be
-/// compiled with the wider instruction sets).
+/// compiled with the wider instruction sets). Type parameters, if any, follow `WIDE`:
+/// `fn name<G: Bound>(args) -> ret => inner` runs `inner::<WIDE, G>(args)`.
 macro_rules! dispatch_wide {
-    ($(#[$attr:meta])* $vis:vis fn $name:ident($($arg:ident: $ty:ty),* $(,)?) -> $ret:ty => $inner:ident) => {
+    ($(#[$attr:meta])* $vis:vis fn $name:ident $(<$($g:ident: $bound:path),+>)? ($($arg:ident: $ty:ty),* $(,)?) -> $ret:ty => $inner:ident) => {
         $(#[$attr])*
-        $vis fn $name($($arg: $ty),*) -> $ret {
+        $vis fn $name $(<$($g: $bound),+>)? ($($arg: $ty),*) -> $ret {
             #[cfg(target_arch = "x86_64")]
             {
                 #[target_feature(enable = "avx512f,avx512dq,avx512vl,avx512bw,avx2,fma")]
-                fn avx512($($arg: $ty),*) -> $ret {
-                    $inner::<true>($($arg),*)
+                fn avx512 $(<$($g: $bound),+>)? ($($arg: $ty),*) -> $ret {
+                    $inner::<true $($(, $g)+)?>($($arg),*)
                 }
                 #[target_feature(enable = "avx2,fma,sse4.1")]
-                fn avx2($($arg: $ty),*) -> $ret {
-                    $inner::<true>($($arg),*)
+                fn avx2 $(<$($g: $bound),+>)? ($($arg: $ty),*) -> $ret {
+                    $inner::<true $($(, $g)+)?>($($arg),*)
                 }
                 match $crate::sim::wide::level() {
                     // SAFETY (both arms): `level` checked at run time that the CPU has every
                     // feature the copy is compiled with.
                     #[allow(unsafe_code)]
-                    $crate::sim::wide::Level::Avx512 => return unsafe { avx512($($arg),*) },
+                    $crate::sim::wide::Level::Avx512 => return unsafe { avx512 $(::<$($g),+>)? ($($arg),*) },
                     #[allow(unsafe_code)]
-                    $crate::sim::wide::Level::Avx2 => return unsafe { avx2($($arg),*) },
+                    $crate::sim::wide::Level::Avx2 => return unsafe { avx2 $(::<$($g),+>)? ($($arg),*) },
                     $crate::sim::wide::Level::Baseline => {}
                 }
             }
-            $inner::<false>($($arg),*)
+            $inner::<false $($(, $g)+)?>($($arg),*)
         }
     };
 }

@@ -14,9 +14,9 @@
 use glam::DVec3;
 
 use super::composite::Opacity;
-use super::field::{FieldSample, samples_backward};
+use super::field::{FieldSample, encode_and_decode, samples_backward};
 use super::hash_grid::{GradSink, HashGrid, HashGridConfig};
-use super::mlp::{Mlp, MlpGrad};
+use super::mlp::{Mlp, MlpGrad, Trace};
 
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -120,6 +120,18 @@ impl Background {
         }
     }
 
+    /// [`Background::query`] at many points, the decoder as one batch.
+    pub fn query_many(&self, points: &[DVec3]) -> Vec<FieldSample> {
+        let units = points
+            .iter()
+            .map(|p| {
+                let u = self.unit(*p);
+                [u.x as f32, u.y as f32, u.z as f32]
+            })
+            .collect();
+        encode_and_decode(&self.grid, &self.geo, units)
+    }
+
     /// Accumulate gradients for one sample at `x` given ∂L/∂s and ∂L/∂f; returns ∂L/∂x,
     /// through the grid's `spatial_levels` coarsest levels (`None`: all).
     #[allow(clippy::too_many_arguments)]
@@ -137,9 +149,22 @@ impl Background {
         d_out.push(d_sdf);
         d_out.extend_from_slice(d_feature);
         let d_h = self.geo.backward(&sample.trace, &d_out, mlp_grad);
+        self.grid_backward(x, sample, &d_h, grid_grad, spatial_levels)
+    }
+
+    /// The grid's part of [`Background::backward`], given ∂L/∂(encoding) `d_h`: the table's
+    /// gradients, and ∂L/∂x through the inverted-sphere map.
+    fn grid_backward(
+        &self,
+        x: DVec3,
+        sample: &FieldSample,
+        d_h: &[f32],
+        grid_grad: &mut impl GradSink,
+        spatial_levels: Option<f32>,
+    ) -> DVec3 {
         let g = self
             .grid
-            .backward_and_grad_x(sample.unit, &d_h, Some(grid_grad), spatial_levels);
+            .backward_and_grad_x(sample.unit, d_h, Some(grid_grad), spatial_levels);
         let d_unit = DVec3::new(g[0] as f64, g[1] as f64, g[2] as f64);
         // Jᵀ·d_unit = ∇_x (d_unit · unit(x)), by central differences.
         let h = 1e-6 * (x - self.centre).length().max(1.0);
@@ -174,9 +199,19 @@ impl Background {
             opacity,
             (d_alpha, d_features),
             dim,
-            |i, s, d_s, d_f| {
-                let x = origin + dir * taus_m[i] as f64;
-                self.backward(x, s, d_s, d_f, grid_grad, mlp_grad, spatial_levels)
+            |d_out| {
+                let traces: Vec<&Trace> = samples.iter().map(|s| &s.trace).collect();
+                let d_h = self.geo.backward_many(&traces, d_out, mlp_grad);
+                let width = self.grid.output_dim().max(1);
+                samples
+                    .iter()
+                    .zip(d_h.chunks_exact(width))
+                    .zip(taus_m)
+                    .map(|((s, d_h), tau)| {
+                        let x = origin + dir * *tau as f64;
+                        self.grid_backward(x, s, d_h, grid_grad, spatial_levels)
+                    })
+                    .collect()
             },
         )
     }

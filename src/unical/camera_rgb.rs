@@ -26,6 +26,9 @@ use crate::geometry::Rigid;
 
 /// Samples stop once this little light gets through.
 const MIN_TRANSMITTANCE: f32 = 1e-3;
+/// Samples per batch when a camera ray is marched (the last batch may run past the point where
+/// the light runs out: those samples are dropped).
+const MARCH_CHUNK: usize = 16;
 /// Size of the view-direction encoding.
 pub const SH_DIM: usize = 16;
 
@@ -147,7 +150,7 @@ pub(super) fn sigmoid(x: f32) -> f32 {
 /// [`MIN_TRANSMITTANCE`], carried over between calls); appends their opacities to `alphas` and
 /// where their weights sit to `at`. Camera and surface-alignment rays both march this way.
 pub(super) fn march(
-    query: &dyn Fn(DVec3) -> FieldSample,
+    query: &dyn Fn(&[DVec3]) -> Vec<FieldSample>,
     (o, d): (DVec3, DVec3),
     taus_m: &[f32],
     opacity: Opacity,
@@ -155,15 +158,22 @@ pub(super) fn march(
     transmittance: &mut f32,
 ) -> Vec<FieldSample> {
     let (mut samples, mut sdfs) = (Vec::new(), Vec::new());
-    for tau in taus_m {
+    // Samples are evaluated MARCH_CHUNK at a time (one batch through the decoder); those past
+    // the point where the light runs out are dropped, as if never drawn.
+    'march: for taus in taus_m.chunks(MARCH_CHUNK) {
         if *transmittance < MIN_TRANSMITTANCE {
             break;
         }
-        let s = query(o + d * *tau as f64);
-        sdfs.push(s.sdf());
-        samples.push(s);
-        if let Some(a) = opacity.settled(&sdfs) {
-            *transmittance *= 1.0 - a;
+        let points: Vec<DVec3> = taus.iter().map(|t| o + d * *t as f64).collect();
+        for s in query(&points) {
+            if *transmittance < MIN_TRANSMITTANCE {
+                break 'march;
+            }
+            sdfs.push(s.sdf());
+            samples.push(s);
+            if let Some(a) = opacity.settled(&sdfs) {
+                *transmittance *= 1.0 - a;
+            }
         }
     }
     let (a, t) = opacity.alphas(&sdfs, taus_m);
@@ -228,15 +238,16 @@ fn colour_forward(model: CameraModel, pose: &PoseParams, ray: &ColourRay) -> Col
     let dim = field.geo.output_dim().saturating_sub(1);
     let (o, d) = pose.ray(ray.world_from_vehicle, ray.dir_in_sensor);
     let (mut alphas, mut at, mut transmittance) = (Vec::new(), Vec::new(), 1.0f32);
-    let mut march_along = |query: &dyn Fn(DVec3) -> FieldSample, taus: &[f32], opacity: Opacity| {
-        let out = (&mut alphas, &mut at);
-        march(query, (o, d), taus, opacity, out, &mut transmittance)
-    };
-    let samples = march_along(&|x| field.query(x), &ray.taus_m, model.opacity);
+    let mut march_along =
+        |query: &dyn Fn(&[DVec3]) -> Vec<FieldSample>, taus: &[f32], opacity: Opacity| {
+            let out = (&mut alphas, &mut at);
+            march(query, (o, d), taus, opacity, out, &mut transmittance)
+        };
+    let samples = march_along(&|x| field.query_many(x), &ray.taus_m, model.opacity);
     let in_box = samples.len();
     let far_samples = match background {
         Some(bg) => march_along(
-            &|x| bg.query(x),
+            &|x| bg.query_many(x),
             &ray.background_taus_m,
             model.background_opacity(),
         ),

@@ -104,6 +104,43 @@ impl SceneField {
         }
     }
 
+    /// Evaluate the field at many world points at once (the MLP as one batch: [`Mlp::forward_many`]).
+    pub fn query_many(&self, points: &[DVec3]) -> Vec<FieldSample> {
+        let units = points.iter().map(|p| self.unit(*p)).collect();
+        encode_and_decode(&self.grid, &self.geo, units)
+    }
+
+    /// The field at `o + τ d` for every `τ` of `taus_m` ([`SceneField::query_many`]).
+    pub fn query_ray(&self, o: DVec3, d: DVec3, taus_m: &[f32]) -> Vec<FieldSample> {
+        let points: Vec<DVec3> = taus_m.iter().map(|t| o + d * *t as f64).collect();
+        self.query_many(&points)
+    }
+
+    /// [`SceneField::backward_spatial`] of many samples at once: `d_out` holds each sample's
+    /// `(∂L/∂s, ∂L/∂f)` as a row; returns each sample's ∂L/∂x (world).
+    pub fn backward_many(
+        &self,
+        samples: &[FieldSample],
+        d_out: &[f32],
+        grid_grad: &mut impl GradSink,
+        mlp_grad: &mut MlpGrad,
+        spatial_levels: Option<f32>,
+    ) -> Vec<DVec3> {
+        let traces: Vec<&Trace> = samples.iter().map(|s| &s.trace).collect();
+        let d_h = self.geo.backward_many(&traces, d_out, mlp_grad);
+        let dim = self.grid.output_dim().max(1);
+        samples
+            .iter()
+            .zip(d_h.chunks_exact(dim))
+            .map(|(s, d)| {
+                let g =
+                    self.grid
+                        .backward_and_grad_x(s.unit, d, Some(&mut *grid_grad), spatial_levels);
+                DVec3::new(g[0] as f64, g[1] as f64, g[2] as f64) / self.box_size
+            })
+            .collect()
+    }
+
     /// Accumulate gradients for one sample given ∂L/∂s and ∂L/∂f; returns ∂L/∂x (world).
     pub fn backward(
         &self,
@@ -158,35 +195,57 @@ impl SceneField {
             opacity,
             (d_alpha, d_features),
             dim,
-            |_, s, d_s, d_f| {
-                self.backward_spatial(s, (d_s, d_f), grid_grad, mlp_grad, spatial_levels)
-            },
+            |d_out| self.backward_many(samples, d_out, grid_grad, mlp_grad, spatial_levels),
         )
     }
 }
 
+/// Encode points already in the unit cube and run the decoder on all of them as one batch.
+pub(crate) fn encode_and_decode(
+    grid: &HashGrid,
+    geo: &Mlp,
+    units: Vec<[f32; 3]>,
+) -> Vec<FieldSample> {
+    let dim = grid.output_dim();
+    let mut inputs = vec![0.0; units.len() * dim];
+    for (u, h) in units.iter().zip(inputs.chunks_exact_mut(dim.max(1))) {
+        grid.encode(*u, h);
+    }
+    let traces = geo.forward_many(units.len(), &inputs);
+    units
+        .into_iter()
+        .zip(traces)
+        .map(|(unit, trace)| FieldSample { unit, trace })
+        .collect()
+}
+
 /// The part of a ray's backward pass every field shares: `∂L/∂s_i` from `∂L/∂α` through the
-/// opacity model, then per sample `point_backward(i, sample, ∂L/∂s_i, ∂L/∂f_i)`, which returns
-/// `∂L/∂x_i`; sums `(∂L/∂o, ∂L/∂d, ∂L/∂β)` over `x_i = o + τ_i d`.
+/// opacity model, each sample's `(∂L/∂s_i, ∂L/∂f_i)` as a row of one matrix, then
+/// `points_backward(rows)`, which returns every `∂L/∂x_i`; sums `(∂L/∂o, ∂L/∂d, ∂L/∂β)` over
+/// `x_i = o + τ_i d`.
 pub fn samples_backward(
     samples: &[FieldSample],
     taus_m: &[f32],
     opacity: Opacity,
     (d_alpha, d_features): (&[f32], &[f32]),
     feature_dim: usize,
-    mut point_backward: impl FnMut(usize, &FieldSample, f32, &[f32]) -> DVec3,
+    points_backward: impl FnOnce(&[f32]) -> Vec<DVec3>,
 ) -> (DVec3, DVec3, f64) {
-    let zeros = vec![0.0; feature_dim];
     let sdfs: Vec<f32> = samples.iter().map(|s| s.sdf()).collect();
     let (d_sdf, d_beta) = opacity.backward(&sdfs, d_alpha);
+    let width = 1 + feature_dim;
+    let mut d_out = vec![0.0; samples.len() * width];
+    for (i, row) in d_out.chunks_exact_mut(width).enumerate() {
+        row[0] = d_sdf[i];
+        if let Some(d_f) = d_features.get(i * feature_dim..(i + 1) * feature_dim) {
+            row[1..].copy_from_slice(d_f);
+        }
+    }
+    let d_x = points_backward(&d_out);
     let (mut d_o, mut d_d) = (DVec3::ZERO, DVec3::ZERO);
-    for (i, (s, tau)) in samples.iter().zip(taus_m).enumerate() {
-        let d_f = d_features
-            .get(i * feature_dim..(i + 1) * feature_dim)
-            .unwrap_or(&zeros);
-        let d_x = point_backward(i, s, d_sdf[i], d_f);
-        d_o += d_x;
-        d_d += d_x * *tau as f64;
+    for (d_x, tau) in d_x.iter().zip(taus_m) {
+        d_o += *d_x;
+        d_d += *d_x * *tau as f64;
     }
     (d_o, d_d, d_beta)
 }

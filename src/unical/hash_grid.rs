@@ -12,6 +12,10 @@
 //! Backward: d(loss)/d(entry) = Σ weight·d(loss)/d(feature), collected as a sparse list of
 //! touched entries (a step touches a tiny fraction of the table; method.md §18). Spatial gradient:
 //! the derivative of the trilinear weights times `scale_l`, used for pose gradients and Eikonal.
+//! Both passes are compiled for AVX-512 and AVX2 as well and run as the CPU allows
+//! ([`crate::sim::wide`]).
+
+use crate::sim::wide::dispatch_wide;
 
 /// Features per entry.
 pub const F: usize = 2;
@@ -291,7 +295,7 @@ impl HashGrid {
     /// The weight of level `l` in the spatial gradient ∂L/∂x when only `levels` of them are to
     /// count (`None`: all): the same cosine ramp as [`HashGrid::set_active_levels`], so level
     /// `l` counts fully once `levels ≥ l + 1` and not at all while `levels ≤ l`.
-    #[inline]
+    #[inline(always)]
     pub fn spatial_weight(levels: Option<f32>, l: usize) -> f32 {
         match levels {
             None => 1.0,
@@ -303,7 +307,7 @@ impl HashGrid {
     }
 
     /// Level `l`'s gradient scaled by its weight, `None` when nothing flows through it.
-    #[inline]
+    #[inline(always)]
     fn level_grad(&self, l: usize, d_out: &[f32]) -> Option<[f32; F]> {
         let w = self.level_weights[l];
         let g = &d_out[l * F..(l + 1) * F];
@@ -348,6 +352,7 @@ impl HashGrid {
         index % level.size
     }
 
+    #[inline(always)]
     fn corners(&self, level: &Level, x: [f32; 3]) -> Corners {
         let mut cell = [0u32; 3];
         let mut frac = [0f32; 3];
@@ -408,33 +413,7 @@ impl HashGrid {
     /// any is read, so the table reads (random, into tens of megabytes) are independent loads
     /// the processor overlaps instead of each waiting behind the next level's arithmetic.
     pub fn encode(&self, x: [f32; 3], out: &mut [f32]) {
-        for (chunk, levels) in self.levels.chunks(LEVEL_CHUNK).enumerate() {
-            let first = chunk * LEVEL_CHUNK;
-            let mut corners = [Corners::default(); LEVEL_CHUNK];
-            for (j, level) in levels.iter().enumerate() {
-                if self.level_weights[first + j] != 0.0 {
-                    corners[j] = self.corners(level, x);
-                }
-            }
-            for (j, c) in corners[..levels.len()].iter().enumerate() {
-                let l = first + j;
-                let w = self.level_weights[l];
-                if w == 0.0 {
-                    out[l * F..(l + 1) * F].fill(0.0);
-                    continue;
-                }
-                let mut acc = [0f32; F];
-                for k in 0..8 {
-                    let base = c.entry[k] as usize * F;
-                    for f in 0..F {
-                        acc[f] += c.weight[k] * self.params[base + f];
-                    }
-                }
-                for f in 0..F {
-                    out[l * F + f] = w * acc[f];
-                }
-            }
-        }
+        encode_wide(self, x, out)
     }
 
     /// Accumulate d(loss)/d(entries) for one point given d(loss)/d(encoding).
@@ -465,66 +444,135 @@ impl HashGrid {
     /// `spatial_levels` limits the spatial gradient to the coarsest levels
     /// ([`HashGrid::spatial_weight`]; `None`: all) while the table gradient takes every open
     /// level: a pose then follows the scene's coarse shape while the scene learns its detail.
-    pub fn backward_and_grad_x(
+    pub fn backward_and_grad_x<G: GradSink>(
         &self,
         x: [f32; 3],
         d_out: &[f32],
-        mut grad: Option<&mut impl GradSink>,
+        grad: Option<&mut G>,
         spatial_levels: Option<f32>,
     ) -> [f32; 3] {
-        let mut gx = [0f32; 3];
-        for (chunk, levels) in self.levels.chunks(LEVEL_CHUNK).enumerate() {
-            let first = chunk * LEVEL_CHUNK;
-            let mut work = [(Corners::default(), [0f32; F], 0f32); LEVEL_CHUNK];
-            let mut n = 0;
-            for (j, level) in levels.iter().enumerate() {
-                if let Some(g) = self.level_grad(first + j, d_out) {
-                    let spatial = Self::spatial_weight(spatial_levels, first + j);
-                    work[n] = (self.corners(level, x), g, level.scale * spatial);
-                    n += 1;
+        backward_wide(self, x, d_out, grad, spatial_levels)
+    }
+}
+
+dispatch_wide! {
+    fn encode_wide(grid: &HashGrid, x: [f32; 3], out: &mut [f32]) -> () => encode_inner
+}
+
+dispatch_wide! {
+    fn backward_wide<G: GradSink>(
+        grid: &HashGrid,
+        x: [f32; 3],
+        d_out: &[f32],
+        grad: Option<&mut G>,
+        spatial_levels: Option<f32>,
+    ) -> [f32; 3] => backward_inner
+}
+
+#[inline(always)]
+fn encode_inner<const WIDE: bool>(grid: &HashGrid, x: [f32; 3], out: &mut [f32]) {
+    for (chunk, levels) in grid.levels.chunks(LEVEL_CHUNK).enumerate() {
+        let first = chunk * LEVEL_CHUNK;
+        let mut corners = [Corners::default(); LEVEL_CHUNK];
+        for (j, level) in levels.iter().enumerate() {
+            if grid.level_weights[first + j] != 0.0 {
+                corners[j] = grid.corners(level, x);
+            }
+        }
+        for (j, c) in corners[..levels.len()].iter().enumerate() {
+            let l = first + j;
+            let w = grid.level_weights[l];
+            if w == 0.0 {
+                out[l * F..(l + 1) * F].fill(0.0);
+                continue;
+            }
+            let mut acc = [0f32; F];
+            for k in 0..8 {
+                let base = c.entry[k] as usize * F;
+                for f in 0..F {
+                    acc[f] += c.weight[k] * grid.params[base + f];
                 }
             }
-            // The table-gradient scatter of every level, then the spatial gradient's reads:
-            // two runs of independent memory accesses.
-            if let Some(grad) = grad.as_deref_mut() {
-                for (c, g, _) in &work[..n] {
-                    for k in 0..8 {
-                        let mut e = [0f32; F];
-                        for f in 0..F {
-                            e[f] = c.weight[k] * g[f];
-                        }
-                        grad.add(c.entry[k], e);
-                    }
-                }
+            for f in 0..F {
+                out[l * F + f] = w * acc[f];
             }
-            for (c, g, scale) in &work[..n] {
-                if *scale == 0.0 {
-                    continue;
-                }
+        }
+    }
+}
+
+#[inline(always)]
+fn backward_inner<const WIDE: bool, G: GradSink>(
+    grid: &HashGrid,
+    x: [f32; 3],
+    d_out: &[f32],
+    mut grad: Option<&mut G>,
+    spatial_levels: Option<f32>,
+) -> [f32; 3] {
+    let mut gx = [0f32; 3];
+    for (chunk, levels) in grid.levels.chunks(LEVEL_CHUNK).enumerate() {
+        let first = chunk * LEVEL_CHUNK;
+        let mut work = [(Corners::default(), [0f32; F], 0f32); LEVEL_CHUNK];
+        let mut n = 0;
+        for (j, level) in levels.iter().enumerate() {
+            if let Some(g) = grid.level_grad(first + j, d_out) {
+                let spatial = HashGrid::spatial_weight(spatial_levels, first + j);
+                work[n] = (grid.corners(level, x), g, level.scale * spatial);
+                n += 1;
+            }
+        }
+        // The table-gradient scatter of every level, then the spatial gradient's reads:
+        // two runs of independent memory accesses.
+        if let Some(grad) = grad.as_deref_mut() {
+            for (c, g, _) in &work[..n] {
                 for k in 0..8 {
-                    let base = c.entry[k] as usize * F;
-                    let mut dot = 0.0;
+                    let mut e = [0f32; F];
                     for f in 0..F {
-                        dot += g[f] * self.params[base + f];
+                        e[f] = c.weight[k] * g[f];
                     }
-                    for d in 0..3 {
-                        // ∂w/∂x_d = ±(product of the other two factors)·scale
-                        let mut dw = *scale;
-                        for e in 0..3 {
-                            let bit = (k >> e) & 1;
-                            if e == d {
-                                dw *= if bit == 1 { 1.0 } else { -1.0 };
-                            } else {
-                                dw *= if bit == 1 { c.frac[e] } else { 1.0 - c.frac[e] };
-                            }
-                        }
-                        gx[d] += dw * dot;
-                    }
+                    grad.add(c.entry[k], e);
                 }
             }
         }
-        gx
+        for (c, g, scale) in &work[..n] {
+            if *scale == 0.0 {
+                continue;
+            }
+            let mut v = [0f32; 8];
+            for (k, v) in v.iter_mut().enumerate() {
+                let base = c.entry[k] as usize * F;
+                for f in 0..F {
+                    *v += g[f] * grid.params[base + f];
+                }
+            }
+            let d = trilinear_gradient(&v, c.frac);
+            for (gx, d) in gx.iter_mut().zip(d) {
+                *gx += scale * d;
+            }
+        }
     }
+    gx
+}
+
+/// ∂/∂frac of the trilinear blend of the corner values `v` (corner `k`: bit 0 the x step,
+/// bit 1 y, bit 2 z): along each axis, the four edges' differences weighted by the bilinear
+/// weights across the other two.
+#[inline(always)]
+fn trilinear_gradient(v: &[f32; 8], [fx, fy, fz]: [f32; 3]) -> [f32; 3] {
+    let (ox, oy, oz) = (1.0 - fx, 1.0 - fy, 1.0 - fz);
+    [
+        oy * oz * (v[1] - v[0])
+            + fy * oz * (v[3] - v[2])
+            + oy * fz * (v[5] - v[4])
+            + fy * fz * (v[7] - v[6]),
+        ox * oz * (v[2] - v[0])
+            + fx * oz * (v[3] - v[1])
+            + ox * fz * (v[6] - v[4])
+            + fx * fz * (v[7] - v[5]),
+        ox * oy * (v[4] - v[0])
+            + fx * oy * (v[5] - v[1])
+            + ox * fy * (v[6] - v[2])
+            + fx * fy * (v[7] - v[3]),
+    ]
 }
 
 #[cfg(test)]

@@ -26,7 +26,7 @@ use super::mlp::MlpGrad;
 use super::pose::{PoseGrad, PoseParams};
 use super::pose_newton::{NewtonConfig, PoseRow, plane_row};
 use super::regulariser::{
-    NEAR_HIT_M, eikonal, free_space_suppression, smoothed_gradient, weight_suppression,
+    NEAR_HIT_M, eikonal_many, free_space_suppression, smoothed_gradient, weight_suppression,
 };
 use crate::geometry::Rigid;
 
@@ -95,6 +95,9 @@ pub struct LidarModel<'a> {
     /// The opacity model and β.
     pub opacity: Opacity,
     pub decoder: Option<&'a IntensityDecoder>,
+    /// How many of the hash grid's coarsest levels the pose gradient sees (`None`: all;
+    /// `Some(0.0)`: none, for a held sensor, which saves the spatial gradient's table reads).
+    pub pose_levels: Option<f32>,
 }
 
 /// The composite (depth, accumulation, weights) of one LiDAR ray, forward only (diagnostics).
@@ -105,10 +108,10 @@ pub fn render_composite(
     ray: &DepthRay,
 ) -> Composite {
     let (o, d) = pose.ray(ray.world_from_vehicle, ray.dir_in_sensor);
-    let sdfs: Vec<f32> = ray
-        .taus_m
+    let sdfs: Vec<f32> = field
+        .query_ray(o, d, &ray.taus_m)
         .iter()
-        .map(|t| field.query(o + d * *t as f64).sdf())
+        .map(|s| s.sdf())
         .collect();
     let (alphas, at) = opacity.alphas(&sdfs, &ray.taus_m);
     composite(&alphas, &at, &[], 0)
@@ -149,11 +152,7 @@ pub fn lidar_step(
             continue;
         }
         let (o, d) = pose.ray(ray.world_from_vehicle, ray.dir_in_sensor);
-        let samples: Vec<_> = ray
-            .taus_m
-            .iter()
-            .map(|t| field.query(o + d * *t as f64))
-            .collect();
+        let samples = field.query_ray(o, d, &ray.taus_m);
         let sdfs: Vec<f32> = samples.iter().map(|s| s.sdf()).collect();
         // Where each weight sits: `at` (the samples, or the sections' midpoints).
         let (alphas, at) = model.opacity.alphas(&sdfs, &ray.taus_m);
@@ -211,12 +210,13 @@ pub fn lidar_step(
             let (suppression, d_w) = weight_suppression(&c.weights, &at, ray.range_m, reg_weight);
             out.regulariser_loss += suppression / n;
             d_weights = d_w;
-            for tau in &ray.taus_m {
-                if (tau - ray.range_m).abs() < NEAR_HIT_M {
-                    let x = o + d * *tau as f64;
-                    out.regulariser_loss += eikonal(field, x, reg_weight, grid, &mut out.mlp) / n;
-                }
-            }
+            let near: Vec<DVec3> = ray
+                .taus_m
+                .iter()
+                .filter(|tau| (*tau - ray.range_m).abs() < NEAR_HIT_M)
+                .map(|tau| o + d * *tau as f64)
+                .collect();
+            out.regulariser_loss += eikonal_many(field, &near, reg_weight, grid, &mut out.mlp) / n;
         }
         let up = Upstream {
             depth: d_depth,
@@ -232,7 +232,7 @@ pub fn lidar_step(
             (&upstream.0, &upstream.1),
             grid,
             &mut out.mlp,
-            None,
+            model.pose_levels,
         );
         out.beta_grad += d_beta;
         out.pose.add(&pose.ray_backward(
@@ -341,6 +341,7 @@ mod tests {
                 beta,
             },
             decoder: Some(decoder),
+            pose_levels: None,
         };
         let step = lidar_step(
             model(beta),
@@ -429,6 +430,7 @@ mod tests {
                     beta: 3.0,
                 },
                 decoder: Some(dec),
+                pose_levels: None,
             };
             lidar_step(model, &pose, &map, &w, &rays, &mut SparseGrad::default())
         };
@@ -489,6 +491,7 @@ mod tests {
                 beta: 3.0,
             },
             decoder: None,
+            pose_levels: None,
         };
         for ray in &rays {
             let step = lidar_step(
@@ -517,6 +520,7 @@ mod tests {
                 beta: 3.0,
             },
             decoder: Some(&decoder),
+            pose_levels: None,
         };
         let w = LidarWeights {
             depth: 1.0,

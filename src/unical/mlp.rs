@@ -2,6 +2,12 @@
 //! output activations: sigmoid for colour, none for the SDF). Forward keeps the activations a
 //! backward pass needs; backward accumulates parameter gradients (per thread, merged per step)
 //! and returns d(loss)/d(input). f32 throughout: these are the hot arrays (method.md §18).
+//! The `_many` forms run a batch of samples through each layer as one small matrix product
+//! ([`super::gemm`]), which is how the hot paths call them.
+
+use std::sync::Arc;
+
+use super::gemm::{Shape, gemm_acc};
 
 /// One layer: `y = W x + b`, W row-major `out × in`.
 #[derive(Clone, Debug, PartialEq)]
@@ -25,19 +31,40 @@ pub struct MlpGrad {
     pub bias: Vec<Vec<f32>>,
 }
 
-/// Activations of one forward pass, all in one buffer (one allocation per sample on the hot
-/// path): the input (`input_len` values), then each layer's output in turn (after ReLU for
-/// hidden layers); the network's widths say where each one starts (`Mlp::activation`).
-#[derive(Clone, Debug, Default)]
+/// Activations of one forward pass, all in one row: the input (`input_len` values), then each
+/// layer's output in turn (after ReLU for hidden layers); the network's widths say where each
+/// one starts (`Mlp::activation`). A batch's rows share one buffer ([`Mlp::forward_many`]:
+/// one allocation per batch, not per sample).
+#[derive(Clone, Debug)]
 pub struct Trace {
-    data: Vec<f32>,
+    data: Arc<[f32]>,
+    /// Where this pass's row starts in `data`, and its length.
+    start: usize,
+    len: usize,
     input_len: usize,
     output_len: usize,
 }
 
+impl Default for Trace {
+    fn default() -> Self {
+        Self {
+            data: Arc::from(Vec::new()),
+            start: 0,
+            len: 0,
+            input_len: 0,
+            output_len: 0,
+        }
+    }
+}
+
 impl Trace {
+    fn values(&self) -> &[f32] {
+        &self.data[self.start..self.start + self.len]
+    }
+
     pub fn output(&self) -> &[f32] {
-        &self.data[self.data.len() - self.output_len..]
+        let v = self.values();
+        &v[v.len() - self.output_len..]
     }
 }
 
@@ -94,14 +121,14 @@ impl Mlp {
     /// Activation `k` of `trace` (0: the input, k: layer k−1's output).
     fn activation<'a>(&self, trace: &'a Trace, k: usize) -> &'a [f32] {
         if k == 0 {
-            return &trace.data[..trace.input_len];
+            return &trace.values()[..trace.input_len];
         }
         let start = trace.input_len
             + self.layers[..k - 1]
                 .iter()
                 .map(|l| l.outputs)
                 .sum::<usize>();
-        &trace.data[start..start + self.layers[k - 1].outputs]
+        &trace.values()[start..start + self.layers[k - 1].outputs]
     }
 
     /// Forward pass keeping the activations.
@@ -130,8 +157,11 @@ impl Mlp {
             }
             (start, end) = (end, end + layer.outputs);
         }
+        let len = data.len();
         Trace {
-            data,
+            data: Arc::from(data),
+            start: 0,
+            len,
             input_len,
             output_len: if self.layers.is_empty() {
                 input_len
@@ -177,6 +207,118 @@ impl Mlp {
                 }
             }
             std::mem::swap(&mut delta, &mut d_in);
+        }
+        delta
+    }
+}
+
+impl Mlp {
+    /// Forward passes of `n` inputs at once (`inputs` row-major, `n × input_dim`): each layer
+    /// one matrix product ([`super::gemm`]). The traces are those [`Mlp::forward`] gives, but
+    /// for rounding.
+    pub fn forward_many(&self, n: usize, inputs: &[f32]) -> Vec<Trace> {
+        let input_len = self.input_dim();
+        let widths: Vec<usize> = self.layers.iter().map(|l| l.outputs).collect();
+        let mut acts: Vec<Vec<f32>> = Vec::with_capacity(self.layers.len() + 1);
+        acts.push(inputs[..n * input_len].to_vec());
+        let last = self.layers.len().saturating_sub(1);
+        let mut transposed = Vec::new();
+        for (k, layer) in self.layers.iter().enumerate() {
+            let (i_n, o_n) = (layer.inputs, layer.outputs);
+            transposed.clear();
+            transposed.resize(i_n * o_n, 0.0);
+            for (o, row) in layer.weights.chunks_exact(i_n).enumerate() {
+                for (i, w) in row.iter().enumerate() {
+                    transposed[i * o_n + o] = *w;
+                }
+            }
+            let mut y = Vec::with_capacity(n * o_n);
+            for _ in 0..n {
+                y.extend_from_slice(&layer.bias);
+            }
+            gemm_acc(Shape::row_major(n, i_n, o_n), &acts[k], &transposed, &mut y);
+            if k < last {
+                y.iter_mut().for_each(|v| *v = v.max(0.0));
+            }
+            acts.push(y);
+        }
+        let total = input_len + widths.iter().sum::<usize>();
+        let mut data = Vec::with_capacity(n * total);
+        for s in 0..n {
+            for (k, a) in acts.iter().enumerate() {
+                let w = if k == 0 { input_len } else { widths[k - 1] };
+                data.extend_from_slice(&a[s * w..(s + 1) * w]);
+            }
+        }
+        let data: Arc<[f32]> = Arc::from(data);
+        let output_len = if self.layers.is_empty() {
+            input_len
+        } else {
+            self.output_dim()
+        };
+        (0..n)
+            .map(|s| Trace {
+                data: Arc::clone(&data),
+                start: s * total,
+                len: total,
+                input_len,
+                output_len,
+            })
+            .collect()
+    }
+
+    /// Backward passes of several forward passes at once (`d_outputs` row-major,
+    /// `traces.len() × output_dim`): accumulates the parameter gradients into `grad` and
+    /// returns d(loss)/d(input), row-major `traces.len() × input_dim`. Each layer's weight
+    /// gradient and input gradient are one matrix product each.
+    pub fn backward_many(
+        &self,
+        traces: &[&Trace],
+        d_outputs: &[f32],
+        grad: &mut MlpGrad,
+    ) -> Vec<f32> {
+        let n = traces.len();
+        let mut delta = d_outputs[..n * self.output_dim()].to_vec();
+        let last = self.layers.len().saturating_sub(1);
+        let mut x = Vec::new();
+        for k in (0..self.layers.len()).rev() {
+            let layer = &self.layers[k];
+            let (i_n, o_n) = (layer.inputs, layer.outputs);
+            if k < last {
+                // ReLU: no gradient where the unit was off.
+                for (s, t) in traces.iter().enumerate() {
+                    let a = self.activation(t, k + 1);
+                    for (d, a) in delta[s * o_n..(s + 1) * o_n].iter_mut().zip(a) {
+                        if *a <= 0.0 {
+                            *d = 0.0;
+                        }
+                    }
+                }
+            }
+            for row in delta.chunks_exact(o_n) {
+                for (b, d) in grad.bias[k].iter_mut().zip(row) {
+                    *b += d;
+                }
+            }
+            x.clear();
+            for t in traces {
+                x.extend_from_slice(&self.activation(t, k)[..i_n]);
+            }
+            // ∂L/∂W += δᵀ·X, ∂L/∂x = δ·W.
+            gemm_acc(
+                Shape::transposed(o_n, n, i_n),
+                &delta,
+                &x,
+                &mut grad.weights[k],
+            );
+            let mut d_in = vec![0.0; n * i_n];
+            gemm_acc(
+                Shape::row_major(n, o_n, i_n),
+                &delta,
+                &layer.weights,
+                &mut d_in,
+            );
+            delta = d_in;
         }
         delta
     }
@@ -282,6 +424,44 @@ mod tests {
                 "x[{i}] {fd} vs {}",
                 d_in[i]
             );
+        }
+    }
+
+    /// A batch through `forward_many` and `backward_many` gives each sample's trace and input
+    /// gradient, and the sum of the parameter gradients, of one pass at a time.
+    #[test]
+    fn batched_passes_match_one_at_a_time() {
+        let mut m = Mlp::new(&[6, 20, 9, 5], 3);
+        for l in &mut m.layers {
+            for (i, b) in l.bias.iter_mut().enumerate() {
+                *b = 0.1 * (i as f32 % 3.0) - 0.1;
+            }
+        }
+        let n = 11;
+        let inputs: Vec<f32> = (0..n * 6)
+            .map(|i| ((i as f32) * 0.618).fract() - 0.4)
+            .collect();
+        let d_out: Vec<f32> = (0..n * 5)
+            .map(|i| ((i as f32) * 0.377).fract() - 0.5)
+            .collect();
+        let traces = m.forward_many(n, &inputs);
+        let mut one_grad = m.zero_grad();
+        let mut one_d_in = Vec::new();
+        for s in 0..n {
+            let t = m.forward(&inputs[s * 6..(s + 1) * 6]);
+            for (a, b) in t.values().iter().zip(traces[s].values()) {
+                assert!((a - b).abs() < 1e-5, "sample {s}: {a} vs {b}");
+            }
+            one_d_in.extend(m.backward(&t, &d_out[s * 5..(s + 1) * 5], &mut one_grad));
+        }
+        let mut grad = m.zero_grad();
+        let refs: Vec<&Trace> = traces.iter().collect();
+        let d_in = m.backward_many(&refs, &d_out, &mut grad);
+        let close = |a: &[f32], b: &[f32]| a.iter().zip(b).all(|(x, y)| (x - y).abs() < 1e-4);
+        assert!(close(&d_in, &one_d_in));
+        for k in 0..m.layers.len() {
+            assert!(close(&grad.weights[k], &one_grad.weights[k]), "W{k}");
+            assert!(close(&grad.bias[k], &one_grad.bias[k]), "b{k}");
         }
     }
 

@@ -43,6 +43,7 @@ pub mod coverage;
 pub mod depth_calib;
 pub mod depth_config;
 pub mod field;
+pub mod gemm;
 pub mod hash_grid;
 pub mod hash_load;
 pub mod intensity;

@@ -49,19 +49,8 @@ fn gradient_at_step(sdf: [f64; 4], step_m: f64) -> DVec3 {
 /// finest cell to the next; on a simulated street scene its direction is a median 49° off the
 /// true surface normal, against 9° for a 10 cm stencil and 6.5° for 20 cm (docs/experiments/unical-lidar-terms.md).
 pub fn smoothed_gradient(field: &SceneField, x: DVec3, step_m: f64) -> DVec3 {
-    gradient_at_step(
-        TETRAHEDRON.map(|v| field.query(x + v * step_m).sdf() as f64),
-        step_m,
-    )
-}
-
-/// SDF gradient at `x` by the tetrahedral stencil, with the four samples it used.
-fn stencil(field: &SceneField, x: DVec3) -> (DVec3, [super::field::FieldSample; 4]) {
-    let samples = TETRAHEDRON.map(|v| field.query(x + v * STENCIL_M));
-    (
-        stencil_gradient(samples.each_ref().map(|s| s.sdf() as f64)),
-        samples,
-    )
+    let samples = field.query_many(&TETRAHEDRON.map(|v| x + v * step_m));
+    gradient_at_step(std::array::from_fn(|k| samples[k].sdf() as f64), step_m)
 }
 
 /// The Eikonal penalty `(‖∇s(x)‖ − 1)²` at `x`; when `weight` is non-zero, accumulates
@@ -73,16 +62,44 @@ pub fn eikonal(
     grid_grad: &mut impl GradSink,
     mlp_grad: &mut MlpGrad,
 ) -> f64 {
-    let (g, samples) = stencil(field, x);
-    let norm = g.length();
-    let loss = (norm - 1.0) * (norm - 1.0);
-    if weight != 0.0 && norm > 1e-9 {
-        let d_g = g * (2.0 * (norm - 1.0) / norm);
-        let zeros = vec![0.0; field.geo.output_dim().saturating_sub(1)];
-        for (v, s) in TETRAHEDRON.iter().zip(&samples) {
-            let d_s = weight as f64 * d_g.dot(*v) / (4.0 * STENCIL_M);
-            field.backward(s, d_s as f32, &zeros, grid_grad, mlp_grad);
+    eikonal_many(field, &[x], weight, grid_grad, mlp_grad)
+}
+
+/// [`eikonal`] summed over the points `xs`, their stencils' samples evaluated as one batch.
+pub fn eikonal_many(
+    field: &SceneField,
+    xs: &[DVec3],
+    weight: f32,
+    grid_grad: &mut impl GradSink,
+    mlp_grad: &mut MlpGrad,
+) -> f64 {
+    if xs.is_empty() {
+        return 0.0;
+    }
+    let points: Vec<DVec3> = xs
+        .iter()
+        .flat_map(|x| TETRAHEDRON.map(|v| *x + v * STENCIL_M))
+        .collect();
+    let samples = field.query_many(&points);
+    let width = field.geo.output_dim().max(1);
+    let mut d_out = vec![0.0; samples.len() * width];
+    let mut loss = 0.0;
+    for (stencil, d_rows) in samples
+        .chunks_exact(4)
+        .zip(d_out.chunks_exact_mut(4 * width))
+    {
+        let g = stencil_gradient(std::array::from_fn(|k| stencil[k].sdf() as f64));
+        let norm = g.length();
+        loss += (norm - 1.0) * (norm - 1.0);
+        if weight != 0.0 && norm > 1e-9 {
+            let d_g = g * (2.0 * (norm - 1.0) / norm);
+            for (v, row) in TETRAHEDRON.iter().zip(d_rows.chunks_exact_mut(width)) {
+                row[0] = (weight as f64 * d_g.dot(*v) / (4.0 * STENCIL_M)) as f32;
+            }
         }
+    }
+    if weight != 0.0 {
+        field.backward_many(&samples, &d_out, grid_grad, mlp_grad, None);
     }
     loss
 }

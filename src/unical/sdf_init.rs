@@ -23,7 +23,7 @@ use glam::DVec3;
 use super::field::SceneField;
 use super::hash_grid::GradSink;
 use super::mlp::MlpGrad;
-use super::regulariser::eikonal;
+use super::regulariser::eikonal_many;
 
 /// The distance field is truncated here (the scene field starts at +0.5 m everywhere).
 pub const TRUNCATION_M: f64 = 0.5;
@@ -169,23 +169,43 @@ pub fn sdf_fit_step(
 ) -> f64 {
     let n = rays.len().max(1) as f64;
     let w = weight as f64 / n;
-    let zeros = vec![0.0; field.geo.output_dim().saturating_sub(1)];
+    let width = field.geo.output_dim().max(1);
     let mut loss = 0.0;
-    for ray in rays {
-        let hit = ray.origin + ray.dir * ray.range_m;
-        let fronts = ray.fronts.map(|(u, target)| (ray.front(u), target));
-        let targets = [(hit, 0.0), (ray.behind(), ray.behind_sdf_m)];
-        for (x, target) in targets.into_iter().chain(fronts) {
-            let sample = field.query(x);
+    // Blocks of rays, each one batch through the field (their targets, then their stencils).
+    for block in rays.chunks(SDF_FIT_BLOCK) {
+        let (mut points, mut targets) = (Vec::new(), Vec::new());
+        for ray in block {
+            let hit = ray.origin + ray.dir * ray.range_m;
+            let fronts = ray.fronts.map(|(u, target)| (ray.front(u), target));
+            for (x, target) in [(hit, 0.0), (ray.behind(), ray.behind_sdf_m)]
+                .into_iter()
+                .chain(fronts)
+            {
+                points.push(x);
+                targets.push(target);
+            }
+        }
+        let samples = field.query_many(&points);
+        let mut d_out = vec![0.0; samples.len() * width];
+        for ((sample, target), row) in samples
+            .iter()
+            .zip(&targets)
+            .zip(d_out.chunks_exact_mut(width))
+        {
             let r = sample.sdf() as f64 - target;
             loss += r * r / n;
-            field.backward(&sample, (2.0 * r * w) as f32, &zeros, grid, mlp);
+            row[0] = (2.0 * r * w) as f32;
         }
+        field.backward_many(&samples, &d_out, grid, mlp, None);
+        let hits: Vec<DVec3> = block.iter().map(|r| r.origin + r.dir * r.range_m).collect();
         let eik_weight = (EIKONAL_WEIGHT * w) as f32;
-        loss += EIKONAL_WEIGHT * eikonal(field, hit, eik_weight, grid, mlp) / n;
+        loss += EIKONAL_WEIGHT * eikonal_many(field, &hits, eik_weight, grid, mlp) / n;
     }
     loss
 }
+
+/// Rays per batch of [`sdf_fit_step`].
+const SDF_FIT_BLOCK: usize = 16;
 
 #[cfg(test)]
 mod tests {

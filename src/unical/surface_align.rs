@@ -141,7 +141,7 @@ fn render(field: &SceneField, opacity: Opacity, pose: &PoseParams, ray: &AlignRa
     let (o, d) = pose.ray(ray.world_from_vehicle, ray.dir_in_sensor);
     let (mut alphas, mut at, mut transmittance) = (Vec::new(), Vec::new(), 1.0f32);
     let samples = march(
-        &|x| field.query(x),
+        &|x| field.query_many(x),
         (o, d),
         &ray.taus_m,
         opacity,

@@ -137,6 +137,7 @@ impl DepthCalibration {
             field: &self.field,
             opacity: self.opacity(),
             decoder: self.intensity_norm[sensor].map(|_| &self.decoder),
+            pose_levels: None,
         };
         let weights = self.config.lidar_weights();
         let mut sink: Option<crate::unical::hash_grid::SparseGrad> = None;

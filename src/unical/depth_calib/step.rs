@@ -94,6 +94,8 @@ impl DepthCalibration {
                 field: &self.field,
                 opacity: self.opacity(),
                 decoder: self.intensity_norm[s].map(|_| &self.decoder),
+                // A held LiDAR's pose gradient would be thrown away: skip it.
+                pose_levels: self.is_frozen(&self.lidars[s].name).then_some(0.0),
             };
             let (pose, map) = (&self.poses[s], &self.intensity_maps[s]);
             // Registration phase: a LiDAR other than the anchor clears free space in front of
