@@ -1,4 +1,5 @@
-//! Run-time CPU dispatch for the simulator's hot loops.
+//! Run-time CPU dispatch for the hot loops of the simulator and of UniCal's field
+//! ([`crate::unical::gemm`], [`crate::unical::hash_grid`]).
 //!
 //! The crate is built for baseline x86-64 (SSE2), which has no rounding instruction and no
 //! 64-bit vector multiply, so the floors and SplitMix64 hashes behind every procedural texture
