@@ -4,10 +4,11 @@
 //!
 //! How it works. `C (m×p) += A (m×k) · B (k×p)` with B and C row-major and A read through two
 //! strides, so that `Aᵀ` costs no copy (the weight gradient reads the output gradient
-//! transposed). Blocks of [`ROWS`] rows of C by [`LANES`] columns are held in registers while
-//! `k` runs: each step loads one row segment of B and broadcasts one element of A per row, so a
-//! loaded vector feeds [`ROWS`] fused multiply-adds. Ragged edges (fewer rows, fewer columns)
-//! take the same loop with shorter bounds. The wide copies use fused multiply-adds, the
+//! transposed). Blocks of six rows of C by sixteen columns are held in registers while `k` runs:
+//! each step loads one row segment of B and broadcasts one element of A per row, so a loaded
+//! vector feeds six fused multiply-adds, enough independent chains to hide their latency. Rows
+//! left over after the last whole block go one at a time, columns past the last whole sixteen
+//! through a plain loop. The wide copies use fused multiply-adds, the
 //! baseline copy a multiply and an add: results differ in the last bits between instruction
 //! sets but not between runs on one machine.
 
