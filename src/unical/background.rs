@@ -14,9 +14,9 @@
 use glam::DVec3;
 
 use super::composite::Opacity;
-use super::field::{FieldSample, encode_and_decode, samples_backward};
+use super::field::{FieldSample, decode_backward, encode_and_decode, samples_backward};
 use super::hash_grid::{GradSink, HashGrid, HashGridConfig};
-use super::mlp::{Mlp, MlpGrad, Trace};
+use super::mlp::{Mlp, MlpGrad};
 
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -200,8 +200,7 @@ impl Background {
             (d_alpha, d_features),
             dim,
             |d_out| {
-                let traces: Vec<&Trace> = samples.iter().map(|s| &s.trace).collect();
-                let d_h = self.geo.backward_many(&traces, d_out, mlp_grad);
+                let d_h = decode_backward(&self.geo, samples, d_out, mlp_grad);
                 let width = self.grid.output_dim().max(1);
                 samples
                     .iter()

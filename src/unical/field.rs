@@ -126,8 +126,7 @@ impl SceneField {
         mlp_grad: &mut MlpGrad,
         spatial_levels: Option<f32>,
     ) -> Vec<DVec3> {
-        let traces: Vec<&Trace> = samples.iter().map(|s| &s.trace).collect();
-        let d_h = self.geo.backward_many(&traces, d_out, mlp_grad);
+        let d_h = decode_backward(&self.geo, samples, d_out, mlp_grad);
         let dim = self.grid.output_dim().max(1);
         samples
             .iter()
@@ -217,6 +216,19 @@ pub(crate) fn encode_and_decode(
         .zip(traces)
         .map(|(unit, trace)| FieldSample { unit, trace })
         .collect()
+}
+
+/// The decoder's part of a batch's backward pass ([`encode_and_decode`]'s second half, reversed):
+/// `d_out` holds each sample's ∂L/∂(decoder output) as a row; accumulates the decoder's gradients
+/// and returns each sample's ∂L/∂(encoding), row by row.
+pub(crate) fn decode_backward(
+    geo: &Mlp,
+    samples: &[FieldSample],
+    d_out: &[f32],
+    mlp_grad: &mut MlpGrad,
+) -> Vec<f32> {
+    let traces: Vec<&Trace> = samples.iter().map(|s| &s.trace).collect();
+    geo.backward_many(&traces, d_out, mlp_grad)
 }
 
 /// The part of a ray's backward pass every field shares: `∂L/∂s_i` from `∂L/∂α` through the

@@ -67,13 +67,7 @@ fn fma<const WIDE: bool>(x: f32, y: f32, z: f32) -> f32 {
 
 #[inline(always)]
 fn gemm_inner<const WIDE: bool>(shape: Shape, a: &[f32], b: &[f32], c: &mut [f32]) {
-    let Shape {
-        m,
-        k,
-        p,
-        a_row,
-        a_col,
-    } = shape;
+    let Shape { m, k, p, .. } = shape;
     if m == 0 || p == 0 || k == 0 {
         return;
     }
@@ -85,8 +79,6 @@ fn gemm_inner<const WIDE: bool>(shape: Shape, a: &[f32], b: &[f32], c: &mut [f32
     for r0 in whole..m {
         rows_of_c::<WIDE, 1>(shape, a, b, r0, &mut c[r0 * p..(r0 + 1) * p]);
     }
-    // A's layout only changes how a row block's elements are read.
-    let _ = (a_row, a_col);
 }
 
 /// Rows `r0..r0 + R` of C (`c_rows`), every column.
