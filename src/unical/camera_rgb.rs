@@ -677,7 +677,7 @@ mod tests {
             for &k in order.iter().take(3) {
                 let at = |delta: f32| {
                     let mut bg = background.clone();
-                    bg.geo.layers[layer].weights[k] += delta;
+                    bg.geo.layers[layer].weights_mut()[k] += delta;
                     let m = CameraModel {
                         background: Some(&bg),
                         ..model

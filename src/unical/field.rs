@@ -310,7 +310,8 @@ mod tests {
     fn set_flat(m: &mut Mlp, p: &[f32]) {
         let mut k = 0;
         for l in &mut m.layers {
-            for v in l.weights.iter_mut().chain(l.bias.iter_mut()) {
+            let (weights, bias) = l.params_mut();
+            for v in weights.iter_mut().chain(bias.iter_mut()) {
                 *v = p[k];
                 k += 1;
             }
@@ -320,7 +321,7 @@ mod tests {
     fn get_flat(m: &Mlp) -> Vec<f32> {
         m.layers
             .iter()
-            .flat_map(|l| l.weights.iter().chain(l.bias.iter()).copied())
+            .flat_map(|l| l.weights().iter().chain(l.bias.iter()).copied())
             .collect()
     }
 

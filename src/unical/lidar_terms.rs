@@ -441,8 +441,8 @@ mod tests {
         for layer in 0..field.geo.layers.len() {
             for k in [1, 4, 9] {
                 let (mut up, mut down) = (field.clone(), field.clone());
-                up.geo.layers[layer].weights[k] += eps;
-                down.geo.layers[layer].weights[k] -= eps;
+                up.geo.layers[layer].weights_mut()[k] += eps;
+                down.geo.layers[layer].weights_mut()[k] -= eps;
                 let fd = (total(&run(&up, &decoder), &w) - total(&run(&down, &decoder), &w))
                     / (2.0 * eps as f64);
                 let an = step.mlp.weights[layer][k] as f64;
@@ -456,8 +456,8 @@ mod tests {
         for layer in 0..decoder.mlp.layers.len() {
             for k in [0, 2, 6] {
                 let (mut up, mut down) = (decoder.clone(), decoder.clone());
-                up.mlp.layers[layer].weights[k] += eps;
-                down.mlp.layers[layer].weights[k] -= eps;
+                up.mlp.layers[layer].weights_mut()[k] += eps;
+                down.mlp.layers[layer].weights_mut()[k] -= eps;
                 let fd = (total(&run(&field, &up), &w) - total(&run(&field, &down), &w))
                     / (2.0 * eps as f64);
                 let an = step.decoder.weights[layer][k] as f64;

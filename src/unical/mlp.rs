@@ -5,17 +5,72 @@
 //! The `_many` forms run a batch of samples through each layer as one small matrix product
 //! ([`super::gemm`]), which is how the hot paths call them.
 
-use std::sync::Arc;
+use std::sync::{Arc, OnceLock};
 
 use super::gemm::{Shape, gemm_acc};
 
 /// One layer: `y = W x + b`, W row-major `out × in`.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug)]
 pub struct Layer {
     pub inputs: usize,
     pub outputs: usize,
-    pub weights: Vec<f32>,
+    weights: Vec<f32>,
     pub bias: Vec<f32>,
+    /// W transposed (`in × out`, the layout a batched forward pass multiplies by), made on first
+    /// use and dropped whenever the weights are borrowed mutably ([`Layer::weights_mut`]).
+    transposed: OnceLock<Vec<f32>>,
+}
+
+impl PartialEq for Layer {
+    fn eq(&self, other: &Self) -> bool {
+        (self.inputs, self.outputs) == (other.inputs, other.outputs)
+            && self.weights == other.weights
+            && self.bias == other.bias
+    }
+}
+
+impl Layer {
+    /// A layer from W (row-major `outputs × inputs`) and b.
+    pub fn new(inputs: usize, outputs: usize, weights: Vec<f32>, bias: Vec<f32>) -> Self {
+        Self {
+            inputs,
+            outputs,
+            weights,
+            bias,
+            transposed: OnceLock::new(),
+        }
+    }
+
+    /// W, row-major `out × in`.
+    pub fn weights(&self) -> &[f32] {
+        &self.weights
+    }
+
+    /// W to change (the transposed copy is made again on next use).
+    pub fn weights_mut(&mut self) -> &mut [f32] {
+        self.transposed = OnceLock::new();
+        &mut self.weights
+    }
+
+    /// W and b to change together (as [`Layer::weights_mut`]).
+    pub fn params_mut(&mut self) -> (&mut [f32], &mut [f32]) {
+        self.transposed = OnceLock::new();
+        (&mut self.weights, &mut self.bias)
+    }
+
+    /// Wᵀ, row-major `in × out`.
+    fn transposed(&self) -> &[f32] {
+        self.transposed.get_or_init(|| {
+            let (i_n, o_n) = (self.inputs, self.outputs);
+            let mut t = vec![0.0; i_n * o_n];
+            for (o, row) in self.weights.chunks_exact(i_n).enumerate() {
+                for (i, w) in row.iter().enumerate() {
+                    t[i * o_n + o] = *w;
+                }
+            }
+            t
+        })
+    }
 }
 
 #[derive(Clone, Debug, PartialEq)]
@@ -84,12 +139,12 @@ impl Mlp {
             .windows(2)
             .map(|w| {
                 let bound = (6.0 / w[0] as f32).sqrt();
-                Layer {
-                    inputs: w[0],
-                    outputs: w[1],
-                    weights: (0..w[0] * w[1]).map(|_| uniform() * bound).collect(),
-                    bias: vec![0.0; w[1]],
-                }
+                Layer::new(
+                    w[0],
+                    w[1],
+                    (0..w[0] * w[1]).map(|_| uniform() * bound).collect(),
+                    vec![0.0; w[1]],
+                )
             })
             .collect();
         Self { layers }
@@ -222,21 +277,18 @@ impl Mlp {
         let mut acts: Vec<Vec<f32>> = Vec::with_capacity(self.layers.len() + 1);
         acts.push(inputs[..n * input_len].to_vec());
         let last = self.layers.len().saturating_sub(1);
-        let mut transposed = Vec::new();
         for (k, layer) in self.layers.iter().enumerate() {
             let (i_n, o_n) = (layer.inputs, layer.outputs);
-            transposed.clear();
-            transposed.resize(i_n * o_n, 0.0);
-            for (o, row) in layer.weights.chunks_exact(i_n).enumerate() {
-                for (i, w) in row.iter().enumerate() {
-                    transposed[i * o_n + o] = *w;
-                }
-            }
             let mut y = Vec::with_capacity(n * o_n);
             for _ in 0..n {
                 y.extend_from_slice(&layer.bias);
             }
-            gemm_acc(Shape::row_major(n, i_n, o_n), &acts[k], &transposed, &mut y);
+            gemm_acc(
+                Shape::row_major(n, i_n, o_n),
+                &acts[k],
+                layer.transposed(),
+                &mut y,
+            );
             if k < last {
                 y.iter_mut().for_each(|v| *v = v.max(0.0));
             }
@@ -386,12 +438,12 @@ mod tests {
         let eps = 1e-3;
         for k in 0..m.layers.len() {
             for i in (0..m.layers[k].weights.len()).step_by(5) {
-                let p0 = m.layers[k].weights[i];
-                m.layers[k].weights[i] = p0 + eps;
+                let p0 = m.layers[k].weights()[i];
+                m.layers[k].weights_mut()[i] = p0 + eps;
                 let up = loss(&m, &x, &w);
-                m.layers[k].weights[i] = p0 - eps;
+                m.layers[k].weights_mut()[i] = p0 - eps;
                 let down = loss(&m, &x, &w);
-                m.layers[k].weights[i] = p0;
+                m.layers[k].weights_mut()[i] = p0;
                 let fd = (up - down) / (2.0 * eps);
                 assert!(
                     (fd - grad.weights[k][i]).abs() < 2e-3 * (1.0 + fd.abs()),
@@ -462,6 +514,24 @@ mod tests {
         for k in 0..m.layers.len() {
             assert!(close(&grad.weights[k], &one_grad.weights[k]), "W{k}");
             assert!(close(&grad.bias[k], &one_grad.bias[k]), "b{k}");
+        }
+    }
+
+    /// The batched pass multiplies by a cached Wᵀ: a change through `weights_mut` (as an
+    /// optimiser step or a finite-difference probe makes) is seen by the next pass.
+    #[test]
+    fn batched_pass_sees_changed_weights() {
+        let mut m = Mlp::new(&[5, 16, 3], 4);
+        let inputs: Vec<f32> = (0..2 * 5).map(|i| (i as f32 * 0.37).sin()).collect();
+        let before = m.forward_many(2, &inputs)[1].output().to_vec();
+        for w in m.layers[0].weights_mut() {
+            *w *= 1.5;
+        }
+        let after = m.forward_many(2, &inputs)[1].output().to_vec();
+        let fresh = m.clone().forward(&inputs[5..]).output().to_vec();
+        assert_ne!(before, after);
+        for (a, f) in after.iter().zip(&fresh) {
+            assert!((a - f).abs() < 1e-5, "{a} vs {f}");
         }
     }
 

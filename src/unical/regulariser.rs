@@ -228,8 +228,8 @@ mod tests {
             for &k in order.iter().take(4).chain(order.last()) {
                 let an = mlp_grad.weights[layer][k] as f64;
                 let (mut up, mut down) = (f.clone(), f.clone());
-                up.geo.layers[layer].weights[k] += eps;
-                down.geo.layers[layer].weights[k] -= eps;
+                up.geo.layers[layer].weights_mut()[k] += eps;
+                down.geo.layers[layer].weights_mut()[k] -= eps;
                 let fd = (total(&up) - total(&down)) / (2.0 * eps as f64);
                 assert!(
                     (fd - an).abs() < 0.02 * (fd.abs() + an.abs()) + 1e-3,

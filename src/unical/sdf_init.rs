@@ -240,8 +240,8 @@ mod tests {
             order.sort_by(|a, b| grads[*b].abs().total_cmp(&grads[*a].abs()));
             for &k in order.iter().take(3) {
                 let (mut up, mut down) = (field.clone(), field.clone());
-                up.geo.layers[layer].weights[k] += 1e-3;
-                down.geo.layers[layer].weights[k] -= 1e-3;
+                up.geo.layers[layer].weights_mut()[k] += 1e-3;
+                down.geo.layers[layer].weights_mut()[k] -= 1e-3;
                 let fd = (total(&up) - total(&down)) / 2e-3;
                 let an = grads[k] as f64;
                 assert!(

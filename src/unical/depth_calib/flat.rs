@@ -26,14 +26,15 @@ pub(super) fn next(rng: &mut u64) -> u64 {
 pub(super) fn mlp_flat(m: &crate::unical::mlp::Mlp) -> Vec<f32> {
     m.layers
         .iter()
-        .flat_map(|l| l.weights.iter().chain(l.bias.iter()).copied())
+        .flat_map(|l| l.weights().iter().chain(l.bias.iter()).copied())
         .collect()
 }
 
 pub(super) fn mlp_set(m: &mut crate::unical::mlp::Mlp, p: &[f32]) {
     let mut k = 0;
     for l in &mut m.layers {
-        for v in l.weights.iter_mut().chain(l.bias.iter_mut()) {
+        let (weights, bias) = l.params_mut();
+        for v in weights.iter_mut().chain(bias.iter_mut()) {
             *v = p[k];
             k += 1;
         }
