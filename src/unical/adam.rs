@@ -103,8 +103,8 @@ impl SparseAdam {
     pub fn new(len: usize, config: AdamConfig) -> Self {
         Self {
             config,
-            m: vec![0.0; len],
-            v: vec![0.0; len],
+            m: super::table_memory::zeroed(len),
+            v: super::table_memory::zeroed(len),
             step: 0,
         }
     }

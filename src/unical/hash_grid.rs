@@ -150,7 +150,7 @@ pub const ACC_BLOCK: usize = 64;
 impl GradAccumulator {
     pub fn new(entries: usize) -> Self {
         Self {
-            grad: vec![0.0; entries * F],
+            grad: super::table_memory::zeroed(entries * F),
             dirty: vec![false; entries.div_ceil(ACC_BLOCK)],
         }
     }
@@ -263,17 +263,16 @@ impl HashGrid {
             offset += size;
         }
         let mut state = seed ^ 0x9E37_79B9_7F4A_7C15;
-        let params = (0..offset * F)
-            .map(|_| {
-                // splitmix64 → U(−1e-4, 1e-4)
-                state = state.wrapping_add(0x9E37_79B9_7F4A_7C15);
-                let mut z = state;
-                z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-                z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-                z ^= z >> 31;
-                ((z >> 40) as f32 / (1u64 << 24) as f32 * 2.0 - 1.0) * 1e-4
-            })
-            .collect();
+        let mut params = super::table_memory::zeroed(offset * F);
+        for p in &mut params {
+            // splitmix64 → U(−1e-4, 1e-4)
+            state = state.wrapping_add(0x9E37_79B9_7F4A_7C15);
+            let mut z = state;
+            z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+            z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+            z ^= z >> 31;
+            *p = ((z >> 40) as f32 / (1u64 << 24) as f32 * 2.0 - 1.0) * 1e-4;
+        }
         Self {
             level_weights: vec![1.0; levels.len()],
             config,

@@ -6,6 +6,7 @@
 //!   spatial gradient.
 //! - [`mlp`]: small fully connected networks (ReLU hidden layers) with fused backward.
 //! - [`adam`]: dense and sparse Adam, learning-rate decay (§12).
+//! - [`table_memory`]: the large tables (hash grid, gradients, Adam's moments) on 2 MB pages.
 //! - [`field`]: the scene field (Eq. 1): hash encoding + geometry MLP → SDF and feature.
 //! - [`pose`]: extrinsics as 6D rotation + translation (§11) and the ray → pose backward pass.
 //! - [`occupancy`]: the 0.5 m occupancy grid from aggregated LiDAR and 10 cm ray sampling (§7).
@@ -61,4 +62,5 @@ pub mod scene_bounds;
 pub mod scene_sweeps;
 pub mod sdf_init;
 pub mod surface_align;
+pub mod table_memory;
 pub mod transient;
