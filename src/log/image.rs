@@ -28,17 +28,23 @@ pub fn decode_raw(img: &RawImage<'_>) -> DecodeResult<RgbImage> {
             "image of {w}×{h} pixels has none"
         )));
     }
+    let row_bytes = w * bpp; // ≤ 4 × u32::MAX: no overflow on 64-bit
     let step = if img.step == 0 {
-        w * bpp
+        row_bytes
     } else {
         img.step as usize
     };
-    if step < w * bpp {
+    if step < row_bytes {
         return Err(DecodeError::new(format!(
             "step {step} is smaller than width {w} × {bpp} bytes"
         )));
     }
-    let needed = (h - 1) * step + w * bpp;
+    // A corrupt header can claim more bytes than a usize holds; such an image is as short of
+    // data as any other.
+    let needed = (h - 1)
+        .checked_mul(step)
+        .and_then(|n| n.checked_add(row_bytes))
+        .unwrap_or(usize::MAX);
     if img.data.len() < needed {
         return Err(DecodeError::new(format!(
             "image data has {} bytes, {w}×{h} {enc} needs {needed}",
@@ -47,7 +53,7 @@ pub fn decode_raw(img: &RawImage<'_>) -> DecodeResult<RgbImage> {
     }
     let mut out = RgbImage::new(img.width, img.height);
     for y in 0..h {
-        let row = &img.data[y * step..y * step + w * bpp];
+        let row = &img.data[y * step..y * step + row_bytes];
         for x in 0..w {
             let p = &row[x * bpp..x * bpp + bpp];
             let rgb = match enc.as_str() {
@@ -135,5 +141,22 @@ mod tests {
         let cut = jpeg[..jpeg.len() - 40].to_vec();
         let err = decode_compressed(&message(cut)).unwrap_err().to_string();
         assert!(err.contains("end-of-image marker"), "{err}");
+    }
+
+    #[test]
+    fn a_header_claiming_more_bytes_than_memory_is_an_error() {
+        // Found by the ros2 fuzz target: (height − 1) × step + width × 4 overflowed a u64.
+        let image = RawImage {
+            stamp_nanos: 0,
+            frame_id: "camera".into(),
+            width: u32::MAX,
+            height: u32::MAX,
+            encoding: "rgba8".into(),
+            big_endian: false,
+            step: 0, // the packed step, 4 × width
+            data: vec![0u8; 64].into(),
+        };
+        let err = decode_raw(&image).unwrap_err().to_string();
+        assert!(err.contains("needs"), "{err}");
     }
 }
