@@ -4,7 +4,9 @@
 //! which `rigcal calibrate --method edge|mi|target` runs), and a camera whose edges align worse
 //! than at the start goes back to the start with the verdict "failed". Built to fail: the
 //! initial guess is the truth and the "result" is it turned by 2°, as a method that ran off
-//! would leave it; and built to pass: the start 2° off and the result the truth.
+//! would leave it; and built to pass: the start 2° off and the result the truth. The same
+//! for a LiDAR that UniCal moved with the scene (`--method unical`, no registration first),
+//! checked by its point-to-plane residual against the reference LiDAR.
 
 use glam::DVec3;
 use rigcal::calib::Rig;
@@ -137,4 +139,62 @@ fn the_check_keeps_off_the_frames_a_method_fitted_unless_the_log_has_no_others()
     let (pairs, held_out) = held_out_pairs(&drive, pair, 4, &[], &every).unwrap();
     assert!(!held_out);
     assert_eq!(pairs.len(), 4);
+}
+
+#[test]
+fn a_lidar_unical_left_registering_worse_goes_back_to_its_start_relative_to_the_reference() {
+    use rigcal::pipeline::run::LidarEvidence;
+    use rigcal::pipeline::{PipelineConfig, Plan, PlanRequest};
+    let tmp = tempfile::tempdir().unwrap();
+    let (drive, truth) = front_camera_drive(tmp.path(), 85, (4.0, 1.0));
+    let mut config = PipelineConfig::default();
+    config.lidars.register = false;
+    config.cameras.hand_eye = rigcal::pipeline::config::HandEye::Never;
+    let request = PlanRequest {
+        sensors: vec!["pandar64".into(), "pandar_gt".into()],
+        ..PlanRequest::default()
+    };
+    let plan = Plan::build(&drive, &truth, &request, &config).unwrap();
+    let moved = |rig: &Rig, name: &str, deg: f64, cm: f64| {
+        let mut out = rig.clone();
+        let s = out.sensor_mut(name).unwrap();
+        s.vehicle_from_sensor = s.vehicle_from_sensor.perturbed_right(
+            DVec3::new(0.2, -0.4, 1.0).normalize_or_zero() * deg.to_radians(),
+            DVec3::new(0.6, 0.8, 0.0) * cm / 100.0,
+        );
+        out
+    };
+    let pose = |rig: &Rig, name: &str| rig.sensor(name).unwrap().vehicle_from_sensor;
+    let gt = |report: &Report| {
+        report
+            .sensors
+            .iter()
+            .find(|s| s.name == "pandar_gt")
+            .unwrap()
+            .clone()
+    };
+
+    // UniCal ran off: the start is right; the result turns the reference 0.5° and leaves the
+    // PandarGT 1° / 20 cm away from it.
+    let result = moved(&moved(&truth, "pandar64", 0.5, 0.0), "pandar_gt", 1.0, 20.0);
+    let (report, written) =
+        Report::build(&drive, &truth, &result, &plan, &LidarEvidence::default());
+    let lidar = gt(&report);
+    assert_eq!(lidar.verdict, Verdict::Failed, "{}", report.to_text());
+    assert!(lidar.why.contains("registering worse"), "{}", lidar.why);
+    let check = &lidar.checks[0];
+    assert!(check.after > check.before, "{check:?}");
+    // The reference keeps UniCal's pose; the PandarGT sits where the start put it against it.
+    assert_eq!(pose(&written, "pandar64"), pose(&result, "pandar64"));
+    let relative = |rig: &Rig| pose(rig, "pandar64").inverse() * pose(rig, "pandar_gt");
+    let (deg, m) = relative(&truth).difference(relative(&written));
+    assert!(deg < 1e-9 && m < 1e-9, "{deg} rad, {m} m");
+
+    // UniCal did its job: the start 1° / 20 cm off, the result the truth.
+    let start = moved(&truth, "pandar_gt", 1.0, 20.0);
+    let (report, written) = Report::build(&drive, &start, &truth, &plan, &LidarEvidence::default());
+    let lidar = gt(&report);
+    assert_eq!(lidar.verdict, Verdict::CheckIt, "{}", report.to_text());
+    assert!(lidar.why.contains("at least as well"), "{}", lidar.why);
+    assert_eq!(pose(&written, "pandar_gt"), pose(&truth, "pandar_gt"));
 }

@@ -211,10 +211,15 @@ impl Report {
                     &mut report,
                 );
             } else if !plan.config.lidars.register {
-                // UniCal moved the LiDARs itself (`--method unical`): nothing else checked them.
-                report.verdict = Verdict::CheckIt;
-                report.why =
-                    "moved by UniCal with the scene; no independent check of its axes".into();
+                // UniCal moved the LiDARs itself (`--method unical`).
+                end = unical_lidar_report(
+                    drive,
+                    (initial, result),
+                    &s.name,
+                    &reference,
+                    (start, end),
+                    &mut report,
+                );
             } else if s.name == reference {
                 reference_report(lidars, &mut report);
             } else {
@@ -583,6 +588,64 @@ fn reference_report(lidars: &LidarEvidence, report: &mut SensorReport) {
                 .for_each(|a| a.observed = Observed::NotObserved);
         }
     }
+}
+
+/// A LiDAR UniCal moved with the scene (`--method unical`, no registration first): the
+/// reference gets no independent check; any other is checked by its point-to-plane residual
+/// against the reference under the initial guess and under the result. Where it registers
+/// worse, its pose relative to the reference goes back to the initial guess's (the reference
+/// keeps UniCal's pose), with the verdict "failed". Returns the pose to write.
+fn unical_lidar_report(
+    drive: &Drive,
+    (initial, result): (&Rig, &Rig),
+    lidar: &str,
+    reference: &str,
+    (start, end): (Rigid, Rigid),
+    report: &mut SensorReport,
+) -> Rigid {
+    report.verdict = Verdict::CheckIt;
+    report.why = "moved by UniCal with the scene; no independent check of its axes".into();
+    if lidar == reference {
+        return end;
+    }
+    let residuals = crate::eval::registration::pair_registration_errors(
+        drive,
+        &[initial, result],
+        lidar,
+        reference,
+        3,
+        4,
+    );
+    let (Ok(v), Some(reference_start), Some(reference_end)) = (
+        &residuals,
+        initial.sensor(reference),
+        result.sensor(reference),
+    ) else {
+        return end;
+    };
+    let (Some(b), Some(a)) = (&v[0], &v[1]) else {
+        return end;
+    };
+    report.checks.push(Check {
+        what: format!("point-to-plane against {reference}"),
+        before: b.mean_cm,
+        after: a.mean_cm,
+        unit: "cm",
+    });
+    if a.mean_cm > b.mean_cm * (1.0 + WORSE_FRACTION) + WORSE_PLANE_CM {
+        report.verdict = Verdict::Failed;
+        report.why = format!(
+            "UniCal left it registering worse against {reference} than the initial guess ({:.2} cm against {:.2} cm): its pose relative to {reference} is the initial guess's",
+            a.mean_cm, b.mean_cm
+        );
+        let reference_from_lidar = reference_start.vehicle_from_sensor.inverse() * start;
+        return reference_end.vehicle_from_sensor * reference_from_lidar;
+    }
+    report.why = format!(
+        "moved by UniCal with the scene; it registers against {reference} at least as well as at the initial guess ({:.2} cm against {:.2} cm), its axes not checked one by one",
+        a.mean_cm, b.mean_cm
+    );
+    end
 }
 
 #[allow(clippy::too_many_arguments)]
