@@ -111,10 +111,21 @@ fn main() -> Result<(), String> {
                 continue;
             };
             let end = fitted.sensor(&o.name).map(|s| s.vehicle_from_sensor);
+            // The rotation error about the camera's own axes (degrees).
+            let axes_deg =
+                rigcal::geometry::so3::log(t.rotation.inverse() * fit.vehicle_from_camera.rotation)
+                    * 180.0
+                    / std::f64::consts::PI;
             println!(
-                "  {:20} hand-eye {}  | LiDAR map {}  pairs {}/{} unobserved {:?}{}",
+                "  {:20} hand-eye {} (camera axes {:+.3} {:+.3} {:+.3}°, σ {:.3} {:.3} {:.3}°)  | LiDAR map {}  pairs {}/{} unobserved {:?}{}",
                 o.name,
                 row(fit.vehicle_from_camera),
+                axes_deg.x,
+                axes_deg.y,
+                axes_deg.z,
+                fit.rotation_sigma_deg.x,
+                fit.rotation_sigma_deg.y,
+                fit.rotation_sigma_deg.z,
                 end.map(row).unwrap_or_default(),
                 fit.pairs_used,
                 fit.pairs_given,

@@ -86,6 +86,9 @@ pub struct HandEyeFit {
     /// Translation directions of the vehicle frame the pairs did not observe (left at the
     /// start): some of "x", "y", "z".
     pub unobserved: Vec<&'static str>,
+    /// The rotation's 1-σ about the camera's own x, y, z (degrees), cluster-robust over the
+    /// pairs (infinite when the fit had no matches to refine on).
+    pub rotation_sigma_deg: DVec3,
 }
 
 /// Why a camera could not be fitted.
@@ -403,13 +406,14 @@ pub fn solve(pairs: &[MotionPair], start: Rigid) -> Result<HandEyeFit, HandEyeEr
         });
     }
     let (closed_form, closed_information) = fit_once(&kept, start);
-    let (fit, observed) = if kept.iter().all(|p| p.rays.is_empty()) {
+    let (fit, observed, rotation_sigma) = if kept.iter().all(|p| p.rays.is_empty()) {
         let observed: [bool; 3] =
             std::array::from_fn(|i| closed_information[i][i] >= OBSERVED_INFORMATION);
-        (closed_form, observed)
+        (closed_form, observed, DVec3::INFINITY)
     } else {
-        let (fit, relative) = refine(&kept, closed_form, start.translation);
-        keep_observed(fit, relative, start.translation)
+        let (fit, relative, sigma) = refine(&kept, closed_form, start.translation);
+        let (fit, observed) = keep_observed(fit, relative, start.translation);
+        (fit, observed, sigma)
     };
     let (mut rotation_res, mut direction_res): (Vec<f64>, Vec<f64>) =
         kept.iter().map(|p| residuals(p, fit)).unzip();
@@ -426,6 +430,7 @@ pub fn solve(pairs: &[MotionPair], start: Rigid) -> Result<HandEyeFit, HandEyeEr
         rotation_residual_deg: median(&mut rotation_res),
         direction_residual_deg: median(&mut direction_res),
         unobserved,
+        rotation_sigma_deg: rotation_sigma * 180.0 / std::f64::consts::PI,
     })
 }
 
@@ -458,8 +463,13 @@ const REFINE_PRIOR_PER_M: f64 = 1.0e-4;
 /// Gauss–Newton (Levenberg damped, Cauchy-weighted) on every pair's matched rays: the
 /// extrinsic whose predicted camera motions `X⁻¹ V X` put every match on its epipolar line,
 /// no essential matrix in between (a scene that is mostly one plane leaves those ill-posed,
-/// not this). Returns the fit and the translation's information relative to the prior's.
-fn refine(pairs: &[MotionPair], start: Rigid, prior_translation: DVec3) -> (Rigid, [[f64; 3]; 3]) {
+/// not this). Returns the fit, the translation's information relative to the prior's, and the
+/// rotation's 1-σ about the camera's own axes (rad).
+fn refine(
+    pairs: &[MotionPair],
+    start: Rigid,
+    prior_translation: DVec3,
+) -> (Rigid, [[f64; 3]; 3], DVec3) {
     let matches: usize = pairs.iter().map(|p| p.rays.len()).sum();
     let prior = REFINE_PRIOR_PER_M * (matches.max(1) as f64).sqrt();
     let apply = |x: Rigid, d: &[f64; 6]| {
@@ -570,7 +580,69 @@ fn refine(pairs: &[MotionPair], start: Rigid, prior_translation: DVec3) -> (Rigi
             break;
         }
     }
-    (x, information)
+    // The rotation's spread, cluster-robust over pairs: a pair's matches share its motion's
+    // errors (the trajectory's, the stamps'), so the pairs, not the matches, are the
+    // independent draws. Σ = H⁻¹ (Σ_p g_p g_pᵀ) H⁻¹ with g_p the pair's weighted gradient.
+    let columns: Vec<Vec<f64>> = (0..6)
+        .map(|k| {
+            let mut d = [0.0; 6];
+            d[k] = STEP;
+            residuals(apply(x, &d))
+                .iter()
+                .zip(&r)
+                .map(|(moved, here)| (moved - here) / STEP)
+                .collect()
+        })
+        .collect();
+    let mut h = [[0.0f64; 6]; 6];
+    let mut meat = [[0.0f64; 6]; 6];
+    let mut i = 0;
+    for p in pairs {
+        let mut g = [0.0f64; 6];
+        for _ in 0..p.rays.len() {
+            let e = r[i];
+            let w = 1.0 / (1.0 + (e / ROBUST_SCALE).powi(2));
+            for a in 0..6 {
+                g[a] += w * columns[a][i] * e;
+                for b in 0..6 {
+                    h[a][b] += w * columns[a][i] * columns[b][i];
+                }
+            }
+            i += 1;
+        }
+        for a in 0..6 {
+            for b in 0..6 {
+                meat[a][b] += g[a] * g[b];
+            }
+        }
+    }
+    for (k, row) in h.iter_mut().enumerate().skip(3) {
+        row[k] += prior * prior;
+    }
+    let flat: Vec<f64> = h.iter().flatten().copied().collect();
+    let rotation_sigma = (|| {
+        // H⁻¹ column by column, then the rotation block of H⁻¹ M H⁻¹.
+        let mut inverse = [[0.0f64; 6]; 6];
+        for k in 0..6 {
+            let mut e = vec![0.0; 6];
+            e[k] = 1.0;
+            let col = spd::solve(&flat, &e)?;
+            for a in 0..6 {
+                inverse[a][k] = col[a];
+            }
+        }
+        Some(DVec3::from_array(std::array::from_fn(|a| {
+            let mut v = 0.0;
+            for k in 0..6 {
+                for l in 0..6 {
+                    v += inverse[a][k] * meat[k][l] * inverse[l][a];
+                }
+            }
+            v.max(0.0).sqrt()
+        })))
+    })()
+    .unwrap_or(DVec3::INFINITY);
+    (x, information, rotation_sigma)
 }
 
 /// The translation's information relative to the prior's above which an eigen-direction of it

@@ -187,8 +187,32 @@ pub fn fit_translation(
     world_from_vehicle: &[Option<Rigid>],
     start: Rigid,
 ) -> Result<MapFit, MapFitError> {
-    fit(map, pairs, world_from_vehicle, start, false)
+    fit(map, pairs, world_from_vehicle, start, &[])
 }
+
+/// Register the translation of `start` and its rotation about the camera's own axes `axes`
+/// (0 = x, 1 = y, 2 = z), the rest of its rotation kept: for a camera whose hand-eye fit
+/// observes those turns poorly (a side camera's tilt, mostly). A weak freed turn is named
+/// `"rot x"` (and so on) in [`MapFit::unobserved`].
+pub fn fit_translation_and_turns(
+    map: &LidarMap,
+    pairs: &[MotionPair],
+    world_from_vehicle: &[Option<Rigid>],
+    start: Rigid,
+    axes: &[usize],
+) -> Result<MapFit, MapFitError> {
+    let free: Vec<(DVec3, &'static str)> = axes
+        .iter()
+        .filter_map(|&k| {
+            let name = *CAMERA_TURNS.get(k)?;
+            Some((start.rotation * DVec3::AXES[k], name))
+        })
+        .collect();
+    fit(map, pairs, world_from_vehicle, start, &free)
+}
+
+/// Names of turns about the camera's own axes.
+const CAMERA_TURNS: [&str; 3] = ["rot x", "rot y", "rot z"];
 
 /// Register the whole extrinsic of `start` to `map`: its translation and its rotation about
 /// the camera's centre (module docs), for a camera no hand-eye fit could turn.
@@ -198,7 +222,8 @@ pub fn fit_pose(
     world_from_vehicle: &[Option<Rigid>],
     start: Rigid,
 ) -> Result<MapFit, MapFitError> {
-    fit(map, pairs, world_from_vehicle, start, true)
+    let free = [(DVec3::X, "roll"), (DVec3::Y, "pitch"), (DVec3::Z, "yaw")];
+    fit(map, pairs, world_from_vehicle, start, &free)
 }
 
 /// A rotation's unknowns are scaled by this lever (m), so that each of the six counts, as a
@@ -207,25 +232,27 @@ pub fn fit_pose(
 /// same for all six.
 const LEVER_M: f64 = 5.0;
 
-/// Names of the six unknowns: translations along the vehicle's axes, then rotations about them.
-const UNKNOWNS: [&str; 6] = ["x", "y", "z", "roll", "pitch", "yaw"];
+/// Names of the translation unknowns: along the vehicle's axes.
+const TRANSLATIONS: [&str; 3] = ["x", "y", "z"];
 
-/// The Gauss–Newton loop behind [`fit_translation`] and [`fit_pose`] (`rotate` frees the
-/// rotation): the unknowns are the translation step `Δ` and the rotation `ω` about the camera's
-/// centre (vehicle frame, `R ← exp(ω) R`), scaled by [`LEVER_M`].
+/// The Gauss–Newton loop behind [`fit_translation`], [`fit_translation_and_turns`] and
+/// [`fit_pose`]: the unknowns are the translation step `Δ` and the rotation `ω` about the
+/// camera's centre (vehicle frame, `R ← exp(ω) R`), scaled by [`LEVER_M`], `ω` only within the
+/// span of the orthonormal directions `free` (vehicle frame, each named for the report).
 fn fit(
     map: &LidarMap,
     pairs: &[MotionPair],
     world_from_vehicle: &[Option<Rigid>],
     start: Rigid,
-    rotate: bool,
+    free: &[(DVec3, &'static str)],
 ) -> Result<MapFit, MapFitError> {
+    let rotate = |turn: DVec3| -> DVec3 { free.iter().map(|(d, _)| *d * d.dot(turn)).sum() };
     let mut camera = start;
     let mut last = (0, 0.0, [[0.0; 6]; 6]);
     for &radius in &LEVELS_M {
         for _ in 0..ITERATIONS_PER_LEVEL {
             let points = triangulate(pairs, world_from_vehicle, camera);
-            let (h, information, g, used, median) = normal_equations(map, &points, radius, rotate);
+            let (h, information, g, used, median) = normal_equations(map, &points, radius, &rotate);
             last = (used, median, information);
             if used < MIN_POINTS {
                 break;
@@ -256,10 +283,19 @@ fn fit(
         let along: f64 = (0..6).map(|k| w[k] * total[k]).sum();
         (0..6).for_each(|k| total[k] -= w[k] * along);
     }
-    let unobserved = (0..if rotate { 6 } else { 3 })
+    // A held turn is a weak direction too (its rows are zero); only freed ones are named.
+    let mut unobserved: Vec<&'static str> = (0..3)
         .filter(|&k| weak.iter().any(|w| w[k].abs() > 0.7))
-        .map(|k| UNKNOWNS[k])
+        .map(|k| TRANSLATIONS[k])
         .collect();
+    for (d, name) in free {
+        if weak
+            .iter()
+            .any(|w| DVec3::new(w[3], w[4], w[5]).dot(*d).abs() > 0.7)
+        {
+            unobserved.push(name);
+        }
+    }
     Ok(MapFit {
         vehicle_from_camera: Rigid::new(
             so3::exp(DVec3::new(total[3], total[4], total[5]) / LEVER_M) * start.rotation,
@@ -276,12 +312,13 @@ type Mat6 = [[f64; 6]; 6];
 /// Huber-weighted point-to-plane normal equations `(H, g)` over `points` with map neighbours
 /// within `radius_m`, the unweighted information `Σ J Jᵀ` (what decides which directions are
 /// observed: Huber weights would count a start a metre off as unobserved), the number used and
-/// their median |residual|. Without `rotate` the rotation's rows are zero.
+/// their median |residual|. `rotate` projects a turn onto the freed ones (the held turns' rows
+/// are zero).
 fn normal_equations(
     map: &LidarMap,
     points: &[Triangulated],
     radius_m: f64,
-    rotate: bool,
+    rotate: &(dyn Fn(DVec3) -> DVec3 + Sync),
 ) -> (Mat6, Mat6, [f64; 6], usize, f64) {
     let terms: Vec<([f64; 6], f64)> = points
         .par_iter()
@@ -290,11 +327,7 @@ fn normal_equations(
             // d P / dΔ = R_W and d P / dω = −R_W [o]×, so d r / dΔ = (R_Wᵀ n)ᵀ and
             // d r / dω = (o × R_Wᵀ n)ᵀ.
             let m = t.world_rotation.transpose() * n;
-            let turn = if rotate {
-                t.from_camera.cross(m) / LEVER_M
-            } else {
-                DVec3::ZERO
-            };
+            let turn = rotate(t.from_camera.cross(m) / LEVER_M);
             Some(([m.x, m.y, m.z, turn.x, turn.y, turn.z], n.dot(t.world - q)))
         })
         .collect();
@@ -525,6 +558,37 @@ mod tests {
             );
             assert!(fit.unobserved.is_empty(), "{fit:?}");
         }
+    }
+
+    #[test]
+    fn a_freed_turn_comes_back_with_the_height_and_the_held_turns_stay() {
+        // The height-tilt valley: a side camera tilted up 0.5° about its own x and 5 cm low.
+        // Freed about its x only, it comes back in both; a 0.3° turn about its own y, held,
+        // is kept exactly.
+        let (map, poses, camera) = (street(), drive(), left_camera());
+        let pairs = pairs(camera, &poses, &map);
+        let lidar = LidarMap::new(map);
+        let held = so3::exp(DVec3::Y * 0.3f64.to_radians());
+        let tilted = camera.rotation * so3::exp(DVec3::X * 0.5f64.to_radians()) * held;
+        let start = Rigid::new(tilted, camera.translation - DVec3::Z * 0.05);
+        let fit = fit_translation_and_turns(&lidar, &pairs, &known(&poses), start, &[0]).unwrap();
+        let end = fit.vehicle_from_camera;
+        let left = so3::log(camera.rotation.inverse() * end.rotation);
+        // The held turn (a yaw) is made up for along the drive and sideways; the height is not.
+        let height_error = end.translation.z - camera.translation.z;
+        assert!(
+            left.x.abs().to_degrees() < 0.03 && height_error.abs() < 0.01,
+            "{left} {height_error} ({fit:?})"
+        );
+        // What is left of the rotation is the held turn about y (first order).
+        assert!(
+            (left.y.to_degrees() - 0.3).abs() < 0.01 && left.z.abs().to_degrees() < 0.01,
+            "{left}"
+        );
+        assert!(fit.unobserved.is_empty(), "{fit:?}");
+        // With nothing freed the tilt stays, and the height trades against it.
+        let kept = fit_translation(&lidar, &pairs, &known(&poses), start).unwrap();
+        assert_eq!(kept.vehicle_from_camera.rotation, start.rotation);
     }
 
     #[test]
