@@ -180,3 +180,41 @@ fn a_straight_drive_or_too_few_pairs_is_refused() {
         .collect();
     assert_eq!(check_turns(&turning), Ok(()));
 }
+
+/// [`s_drive`] with its turns scaled by `turning`.
+fn s_drive_turning(turning: f64) -> Vec<Rigid> {
+    let (mut position, mut heading) = (DVec3::ZERO, 0.0f64);
+    (0..24)
+        .map(|k| {
+            heading += turning * 0.35 * (k as f64 * 0.3).sin() * 0.5;
+            position += DVec3::new(heading.cos(), heading.sin(), 0.0) * 2.5;
+            Rigid::new(DQuat::from_rotation_z(heading), position)
+        })
+        .collect()
+}
+
+#[test]
+fn the_rotations_sigma_grows_as_the_turns_that_observe_it_shrink() {
+    // The camera's tilt (about its own x, the vehicle's forward) is seen only through the
+    // turns' axes: a drive that turns a quarter as much leaves it less certain, and each
+    // axis's error stays within a few of its σ.
+    let truth = left_camera();
+    let mut sigmas = Vec::new();
+    for turning in [1.0, 0.25] {
+        let pairs = pairs_of(truth, &s_drive_turning(turning), 0.05);
+        let fit = solve(&pairs, truth).unwrap();
+        let error = so3::log(truth.rotation.inverse() * fit.vehicle_from_camera.rotation);
+        let sigma = fit.rotation_sigma_deg;
+        assert!(sigma.is_finite() && sigma.min_element() > 0.0, "{sigma}");
+        for k in 0..3 {
+            assert!(
+                error[k].abs().to_degrees() <= 4.0 * sigma[k] + 0.005,
+                "turning {turning}: axis {k} off {:.4}° with σ {:.4}°",
+                error[k].to_degrees(),
+                sigma[k]
+            );
+        }
+        sigmas.push(sigma);
+    }
+    assert!(sigmas[1].x > 2.0 * sigmas[0].x, "{sigmas:?}");
+}
