@@ -134,8 +134,8 @@ pub struct CameraOutcome {
     pub name: String,
     /// The fit, or why the camera kept its start.
     pub fit: Result<HandEyeFit, String>,
-    /// The translation then measured against the LiDAR map ([`super::lidar_translation`]),
-    /// or why not; `None` without a map or a fit.
+    /// The translation (and the turns [`weak_turns`] names) then measured against the LiDAR
+    /// map ([`super::lidar_translation`]), or why not; `None` without a map or a fit.
     pub translation: Option<Result<MapFit, String>>,
     /// How far the fits moved the camera (rad, m); zero when it was kept.
     pub moved: (f64, f64),
@@ -212,18 +212,22 @@ impl CameraOutcome {
 /// turn of every camera had σ ≤ 0.07° (docs/experiments/pipeline.md).
 pub const WEAK_TURN_DEG: f64 = 0.1;
 
-/// The camera axes (0 = x, 1 = y, 2 = z) about which `fit`'s rotation is weakly observed.
+/// The camera axes (0 = x, 1 = y, 2 = z) about which `fit`'s rotation is weakly observed. An
+/// infinite σ (a fit without matches to measure it on) is unknown, not weak: none is freed.
 pub fn weak_turns(fit: &HandEyeFit) -> Vec<usize> {
     (0..3)
-        .filter(|&k| fit.rotation_sigma_deg[k] > WEAK_TURN_DEG)
+        .filter(|&k| {
+            let sigma = fit.rotation_sigma_deg[k];
+            sigma.is_finite() && sigma > WEAK_TURN_DEG
+        })
         .collect()
 }
 
 /// Fit each camera of `names` in `rig` to its own motion (the hand-eye of [`fit_camera`],
-/// `frames` images each), then, with a `map`, its translation to the LiDAR map; one camera
-/// after the other (each fit is parallel inside). Returns the rig with every fitted camera
-/// moved, and each camera's outcome; a camera that cannot be fitted keeps its start. `report`
-/// gets phase names prefixed with the camera's.
+/// `frames` images each), then, with a `map`, its translation and its [`weak_turns`] to the
+/// LiDAR map; one camera after the other (each fit is parallel inside). Returns the rig with
+/// every fitted camera moved, and each camera's outcome; a camera that cannot be fitted keeps
+/// its start. `report` gets phase names prefixed with the camera's.
 pub fn fit_rig_cameras(
     drive: &Drive,
     rig: &Rig,

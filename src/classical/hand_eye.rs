@@ -581,8 +581,10 @@ fn refine(
         }
     }
     // The rotation's spread, cluster-robust over pairs: a pair's matches share its motion's
-    // errors (the trajectory's, the stamps'), so the pairs, not the matches, are the
-    // independent draws. Σ = H⁻¹ (Σ_p g_p g_pᵀ) H⁻¹ with g_p the pair's weighted gradient.
+    // errors (the trajectory's, the stamps'), so the pairs, not the matches, are taken as the
+    // independent draws. Σ = H⁻¹ (Σ_p g_p g_pᵀ) H⁻¹ with g_p the pair's weighted gradient and
+    // H the reweighted Gauss–Newton matrix. Pairs that share an image are not independent
+    // either, so this σ is if anything low; it ranks the axes, it does not bound them.
     let columns: Vec<Vec<f64>> = (0..6)
         .map(|k| {
             let mut d = [0.0; 6];
