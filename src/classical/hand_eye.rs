@@ -504,20 +504,23 @@ fn refine(
     let mut current = cost(&r, x);
     let mut lambda = 1e-3;
     let mut information = [[0.0; 3]; 3];
+    // Numeric Jacobian at `x` (residuals `r` there): six columns of residual differences.
     const STEP: f64 = 1e-6;
-    for _ in 0..30 {
-        // Numeric Jacobian: six columns of residual differences.
-        let columns: Vec<Vec<f64>> = (0..6)
+    let jacobian = |x: Rigid, r: &[f64]| -> Vec<Vec<f64>> {
+        (0..6)
             .map(|k| {
                 let mut d = [0.0; 6];
                 d[k] = STEP;
                 residuals(apply(x, &d))
                     .iter()
-                    .zip(&r)
+                    .zip(r)
                     .map(|(moved, here)| (moved - here) / STEP)
                     .collect()
             })
-            .collect();
+            .collect()
+    };
+    for _ in 0..30 {
+        let columns = jacobian(x, &r);
         let mut jtj = [[0.0f64; 6]; 6];
         let mut jtr = [0.0f64; 6];
         for (i, e) in r.iter().enumerate() {
@@ -585,17 +588,7 @@ fn refine(
     // independent draws. Σ = H⁻¹ (Σ_p g_p g_pᵀ) H⁻¹ with g_p the pair's weighted gradient and
     // H the reweighted Gauss–Newton matrix. Pairs that share an image are not independent
     // either, so this σ is if anything low; it ranks the axes, it does not bound them.
-    let columns: Vec<Vec<f64>> = (0..6)
-        .map(|k| {
-            let mut d = [0.0; 6];
-            d[k] = STEP;
-            residuals(apply(x, &d))
-                .iter()
-                .zip(&r)
-                .map(|(moved, here)| (moved - here) / STEP)
-                .collect()
-        })
-        .collect();
+    let columns = jacobian(x, &r);
     let mut h = [[0.0f64; 6]; 6];
     let mut meat = [[0.0f64; 6]; 6];
     let mut i = 0;
