@@ -13,7 +13,7 @@ use glam::{DVec2, DVec3};
 use rayon::prelude::*;
 
 use super::hand_eye::{HandEyeFit, MotionPair, candidate_pairs, check_turns, motion_pairs, solve};
-use super::lidar_translation::{LidarMap, MapFit, fit_translation, fit_translation_and_turns};
+use super::lidar_translation::{LidarMap, MapFit, fit_translation_and_turns};
 use crate::calib::Rig;
 use crate::geometry::Rigid;
 use crate::log::{Drive, spread_evenly};
@@ -254,28 +254,16 @@ pub fn fit_rig_cameras(
             Err(e) => Err(e.to_string()),
         };
         let translation = match (&found, &fit, map) {
-            (Ok(found), Ok(fit), Some(map)) => {
-                let weak = weak_turns(fit);
-                Some(
-                    if weak.is_empty() {
-                        fit_translation(
-                            map,
-                            &found.pairs,
-                            &found.world_from_vehicle,
-                            fit.vehicle_from_camera,
-                        )
-                    } else {
-                        fit_translation_and_turns(
-                            map,
-                            &found.pairs,
-                            &found.world_from_vehicle,
-                            fit.vehicle_from_camera,
-                            &weak,
-                        )
-                    }
-                    .map_err(|e| e.to_string()),
+            (Ok(found), Ok(fit), Some(map)) => Some(
+                fit_translation_and_turns(
+                    map,
+                    &found.pairs,
+                    &found.world_from_vehicle,
+                    fit.vehicle_from_camera,
+                    &weak_turns(fit),
                 )
-            }
+                .map_err(|e| e.to_string()),
+            ),
             _ => None,
         };
         let mut moved = (0.0, 0.0);

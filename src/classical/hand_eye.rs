@@ -614,29 +614,18 @@ fn refine(
     for (k, row) in h.iter_mut().enumerate().skip(3) {
         row[k] += prior * prior;
     }
-    let flat: Vec<f64> = h.iter().flatten().copied().collect();
-    let rotation_sigma = (|| {
-        // H⁻¹ column by column, then the rotation block of H⁻¹ M H⁻¹.
-        let mut inverse = [[0.0f64; 6]; 6];
-        for k in 0..6 {
-            let mut e = vec![0.0; 6];
-            e[k] = 1.0;
-            let col = spd::solve(&flat, &e)?;
-            for a in 0..6 {
-                inverse[a][k] = col[a];
-            }
+    // Σ = H⁻¹ M H⁻¹ on the directions H observes; a turn it does not is infinite.
+    let (inverse, unobserved, _) = spd::observed_inverse(h, 1e-12);
+    let rotation_sigma = DVec3::from_array(std::array::from_fn(|a| {
+        if unobserved[a] {
+            return f64::INFINITY;
         }
-        Some(DVec3::from_array(std::array::from_fn(|a| {
-            let mut v = 0.0;
-            for k in 0..6 {
-                for l in 0..6 {
-                    v += inverse[a][k] * meat[k][l] * inverse[l][a];
-                }
-            }
-            v.max(0.0).sqrt()
-        })))
-    })()
-    .unwrap_or(DVec3::INFINITY);
+        let v: f64 = (0..6)
+            .flat_map(|k| (0..6).map(move |l| (k, l)))
+            .map(|(k, l)| inverse[a][k] * meat[k][l] * inverse[l][a])
+            .sum();
+        v.max(0.0).sqrt()
+    }));
     (x, information, rotation_sigma)
 }
 

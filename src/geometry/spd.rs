@@ -94,6 +94,33 @@ pub fn symmetric_eigen<const N: usize>(mut a: [[f64; N]; N]) -> ([f64; N], [[f64
     (values, v)
 }
 
+/// The inverse of a symmetric 6 × 6 information `h` on its observed directions (eigenvalues
+/// above `floor` times the largest), the axes an unobserved direction touches (a component
+/// over 0.3), and the largest eigenvalue.
+pub fn observed_inverse(h: [[f64; 6]; 6], floor: f64) -> ([[f64; 6]; 6], [bool; 6], f64) {
+    let (values, vectors) = symmetric_eigen(h);
+    let largest = values.iter().cloned().fold(0.0f64, f64::max);
+    let mut unobserved = [false; 6];
+    let mut inv = [[0.0; 6]; 6];
+    for e in 0..6 {
+        let v: [f64; 6] = std::array::from_fn(|r| vectors[r][e]);
+        if largest > 0.0 && values[e] > floor * largest {
+            for r in 0..6 {
+                for c in 0..6 {
+                    inv[r][c] += v[r] * v[c] / values[e];
+                }
+            }
+        } else {
+            for (axis, x) in v.iter().enumerate() {
+                if x.abs() > 0.3 {
+                    unobserved[axis] = true;
+                }
+            }
+        }
+    }
+    (inv, unobserved, largest)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -187,7 +187,7 @@ fn sandwich_sigmas(h: [[f64; 6]; 6], b: [[f64; 6]; 6], frames: usize) -> [f64; 6
         std::array::from_fn(|r| std::array::from_fn(|c| h[r][c] / (s[r] * s[c])));
     let bs: [[f64; 6]; 6] =
         std::array::from_fn(|r| std::array::from_fn(|c| b[r][c] / (s[r] * s[c])));
-    let (inv, unobserved, largest) = observed_inverse(hs, 1e-4);
+    let (inv, unobserved, largest) = crate::geometry::spd::observed_inverse(hs, 1e-4);
     // With one frame the scatter is unknown: the Hessian's own scale stands in.
     let cov = if frames > 1 {
         mul(mul(inv, bs), inv)
@@ -201,33 +201,6 @@ fn sandwich_sigmas(h: [[f64; 6]; 6], b: [[f64; 6]; 6], frames: usize) -> [f64; 6
             cov[axis][axis].max(0.0).sqrt() / s[axis]
         }
     })
-}
-
-/// The inverse of a symmetric 6 × 6 information `h` on its observed directions (eigenvalues
-/// above `floor` times the largest), the axes an unobserved direction touches (a component
-/// over 0.3), and the largest eigenvalue.
-pub(crate) fn observed_inverse(h: [[f64; 6]; 6], floor: f64) -> ([[f64; 6]; 6], [bool; 6], f64) {
-    let (values, vectors) = crate::geometry::spd::symmetric_eigen(h);
-    let largest = values.iter().cloned().fold(0.0f64, f64::max);
-    let mut unobserved = [false; 6];
-    let mut inv = [[0.0; 6]; 6];
-    for e in 0..6 {
-        let v: [f64; 6] = std::array::from_fn(|r| vectors[r][e]);
-        if largest > 0.0 && values[e] > floor * largest {
-            for r in 0..6 {
-                for c in 0..6 {
-                    inv[r][c] += v[r] * v[c] / values[e];
-                }
-            }
-        } else {
-            for (axis, x) in v.iter().enumerate() {
-                if x.abs() > 0.3 {
-                    unobserved[axis] = true;
-                }
-            }
-        }
-    }
-    (inv, unobserved, largest)
 }
 
 fn mul(a: [[f64; 6]; 6], b: [[f64; 6]; 6]) -> [[f64; 6]; 6] {

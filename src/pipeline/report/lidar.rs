@@ -183,7 +183,7 @@ fn lidar_sigmas(info: &[f64; 36], vehicle_from_lidar: Rigid) -> [f64; 6] {
     put(&mut j, lower, 3, 0);
     put(&mut j, rt, 3, 3);
     let h: [[f64; 6]; 6] = std::array::from_fn(|a| std::array::from_fn(|b| info[a * 6 + b]));
-    let (cov, unobserved, largest) = crate::pipeline::edge_check::observed_inverse(h, 1e-9);
+    let (cov, unobserved, largest) = crate::geometry::spd::observed_inverse(h, 1e-9);
     // Σ_s = J Σ_v Jᵀ.
     let jc: [[f64; 6]; 6] =
         std::array::from_fn(|a| std::array::from_fn(|b| (0..6).map(|k| j[a][k] * cov[k][b]).sum()));
