@@ -205,6 +205,16 @@ pub struct DepthCalibConfig {
 /// move their translations ([`DepthCalibConfig::after_hand_eye`]).
 pub const HAND_EYE_RELEASE: usize = 30;
 
+/// The cameras' rate after a hand-eye start, as a fraction of the preset's
+/// ([`DepthCalibConfig::after_hand_eye`]). Adam's step has the rate's size whatever the
+/// gradient's, so a camera started close wanders by about its rate each step until the rate
+/// decays, and stops wherever that walk leaves it: at half the preset's rate (0.005 per step on
+/// the 6-D rotation's entries, about 0.3°) every camera of a figure-8 drive jumped 0.1–0.25° in
+/// its first 25 steps from starts within 0.02°, and side cameras ended turned up by up to 0.22°;
+/// at a tenth they move to the truth without it (docs/experiments/pipeline.md, "Where the
+/// cameras' upward tilt comes from").
+pub const HAND_EYE_RATE: f32 = 0.1;
+
 impl Default for DepthCalibConfig {
     /// CPU preset: a few thousand rays per step (method.md §18), paper learning rates for the
     /// scene, a larger pose rate than the paper's 1e-4 because the run is far shorter.
@@ -380,13 +390,12 @@ impl DepthCalibConfig {
 
     /// The camera schedule after a hand-eye start ([`crate::classical::hand_eye`]) for the
     /// cameras it `fitted` (unchanged when it fitted none): their rotations start within a few
-    /// tenths of a degree, so they move at half the CPU preset's rate and at most
+    /// tenths of a degree, so they move at [`HAND_EYE_RATE`] of the CPU preset's rate and at most
     /// `rotation_bound_deg` from the fit ([`Self::camera_rotation_bounds_deg`]); their
-    /// translations start as far off as before in the directions the drive did not observe
-    /// (height, mostly sideways), so they keep the preset's rate (twice the halved one) and
-    /// decay only to 5 % of it, moving late in the run when the rotations have settled. On the
-    /// simulator's three drives this meets every threshold of issue 5 where neither the preset
-    /// nor either change alone did (docs/experiments/hand-eye-start.md, "A hand-eye start"). Their translations
+    /// translations may start further off in the directions the drive did not observe (height,
+    /// mostly sideways; the LiDAR map measures them in the pipeline), so they step twice as far
+    /// as the rotations and decay only to 5 % of that, moving late in the run when the
+    /// rotations have settled (docs/experiments/hand-eye-start.md, "A hand-eye start"). Their translations
     /// start moving early, at [`HAND_EYE_RELEASE`], on the correspondence term alone (the
     /// rotations wait for the warm-up: [`Self::alignment_release_rotates`]), so the first
     /// extrinsic update comes 1–2 s into the run instead of 28–34 s. Every pose then waits
@@ -401,7 +410,7 @@ impl DepthCalibConfig {
             return self;
         }
         Self {
-            lr_camera_pose: self.lr_camera_pose * 0.5,
+            lr_camera_pose: self.lr_camera_pose * HAND_EYE_RATE,
             camera_translation_rate: self.camera_translation_rate * 2.0,
             camera_translation_final_fraction: Some(0.05),
             alignment_release: Some(HAND_EYE_RELEASE),
