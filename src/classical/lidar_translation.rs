@@ -403,18 +403,9 @@ fn solve_observed(h: Mat6, information: Mat6, b: [f64; 6]) -> [f64; 6] {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::classical::test_fixtures::left_camera;
     use crate::geometry::so3;
     use glam::DQuat;
-
-    /// A side camera looking left (optical z along the vehicle's +y), 1.2 m forward, 0.8 m
-    /// left, 1.7 m up.
-    fn left_camera() -> Rigid {
-        let vehicle_from_optical = DMat3::from_cols(DVec3::X, -DVec3::Z, DVec3::Y);
-        Rigid::new(
-            so3::quat_from_matrix_orthonormalized(vehicle_from_optical),
-            DVec3::new(1.2, 0.8, 1.7),
-        )
-    }
 
     /// A street sampled every 10 cm: the ground (z = 0), a façade 8 m left of the drive
     /// (y = 8) and pillars in front of it every 5 m (1 m wide, 1 m deep, 6 m high), whose

@@ -22,6 +22,8 @@ pub mod pose_graph;
 pub mod pose_graph_calibrator;
 pub mod target;
 pub mod target_calibrator;
+#[cfg(test)]
+mod test_fixtures;
 pub mod trajectory_icp;
 pub mod trajectory_sweeps;
 

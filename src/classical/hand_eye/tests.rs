@@ -2,19 +2,11 @@
 
 use super::*;
 
+use crate::classical::test_fixtures::left_camera;
+
 /// A deterministic value in [−1, 1).
 fn noise(k: usize, j: usize) -> f64 {
-    crate::sim::noise::hash3(k as i32, j as i32, 3, 0x4E) as f64 * 2.0 - 1.0
-}
-
-/// A side camera (looking left, optical z along the vehicle's +y) 1.2 m forward, 0.8 m
-/// left and 1.7 m up.
-fn left_camera() -> Rigid {
-    let vehicle_from_optical = DMat3::from_cols(DVec3::X, -DVec3::Z, DVec3::Y);
-    Rigid::new(
-        so3::quat_from_matrix_orthonormalized(vehicle_from_optical),
-        DVec3::new(1.2, 0.8, 1.7),
-    )
+    crate::classical::test_fixtures::noise(k, j, 0x4E)
 }
 
 /// World poses of a vehicle on an S-shaped drive at 5 m/s, every 0.5 s.
