@@ -18,3 +18,20 @@ pub fn left_camera() -> Rigid {
         DVec3::new(1.2, 0.8, 1.7),
     )
 }
+
+/// `truth` turned 10° about an axis and moved 1 m along a direction, both drawn from `seed`
+/// (`noise` with `salt`).
+pub fn ten_degrees_and_a_metre_off(truth: Rigid, seed: usize, salt: u64) -> Rigid {
+    let draw = |j: usize| {
+        DVec3::new(
+            noise(seed, j, salt),
+            noise(seed, j + 1, salt),
+            noise(seed, j + 2, salt),
+        )
+        .normalize_or_zero()
+    };
+    Rigid::new(
+        so3::exp(draw(10) * 10f64.to_radians()) * truth.rotation,
+        truth.translation + draw(13),
+    )
+}

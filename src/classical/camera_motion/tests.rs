@@ -97,14 +97,7 @@ fn every_start_ends_at_the_truth_after_rounds_of_hand_eye_and_map_where_one_fit_
     let map = LidarMap::new(points.clone());
     let (mut ends, mut first_fits) = (Vec::new(), Vec::new());
     for seed in 0..3 {
-        let axis =
-            DVec3::new(noise(seed, 10), noise(seed, 11), noise(seed, 12)).normalize_or_zero();
-        let shift =
-            DVec3::new(noise(seed, 13), noise(seed, 14), noise(seed, 15)).normalize_or_zero();
-        let start = Rigid::new(
-            so3::exp(axis * 10f64.to_radians()) * truth.rotation,
-            truth.translation + shift,
-        );
+        let start = crate::classical::test_fixtures::ten_degrees_and_a_metre_off(truth, seed, 0x3C);
         let pairs = found(truth, start, &poses, &points);
         // One hand-eye fit holds the height at the start's, a metre off, and pulls the rest of
         // the translation toward it (its prior): the lever arm's error biases the rotation

@@ -107,14 +107,7 @@ fn a_camera_ten_degrees_and_a_metre_off_comes_back_except_its_height_from_noisy_
             so3::exp(DVec3::new(0.2, -0.1, 0.3 * (k as f64 + 1.0))) * p.camera_rotation;
     }
     for seed in 0..4 {
-        let axis =
-            DVec3::new(noise(seed, 10), noise(seed, 11), noise(seed, 12)).normalize_or_zero();
-        let shift =
-            DVec3::new(noise(seed, 13), noise(seed, 14), noise(seed, 15)).normalize_or_zero();
-        let start = Rigid::new(
-            so3::exp(axis * 10f64.to_radians()) * truth.rotation,
-            truth.translation + shift,
-        );
+        let start = crate::classical::test_fixtures::ten_degrees_and_a_metre_off(truth, seed, 0x4E);
         let fit = solve(&pairs, start).unwrap();
         let found = fit.vehicle_from_camera;
         let rotation_deg = so3::angle_rad(found.rotation.inverse() * truth.rotation).to_degrees();
