@@ -140,7 +140,7 @@ pub struct CameraOutcome {
     /// How far the fits moved the camera (rad, m); zero when it was kept.
     pub moved: (f64, f64),
     /// Rounds of hand-eye fit and map fit ([`fit_with_map`]); 0 when no fit was made.
-    pub passes: usize,
+    pub rounds: usize,
 }
 
 impl CameraOutcome {
@@ -195,10 +195,10 @@ impl CameraOutcome {
             ),
             Some(Err(e)) => format!("; translation against the LiDAR map not measured: {e}"),
         };
-        let rounds = if self.passes > 1 {
+        let rounds = if self.rounds > 1 {
             format!(
                 "; fitted {} times, each from the map's translation of the round before",
-                self.passes
+                self.rounds
             )
         } else {
             String::new()
@@ -259,7 +259,7 @@ pub fn fit_rig_cameras(
             true,
             &|phase, d, t| report(&format!("{name}: {phase}"), d, t),
         );
-        let (fit, translation, passes) = match &found {
+        let (fit, translation, rounds) = match &found {
             Ok(found) => fit_with_map(found, map),
             Err(e) => (Err(e.to_string()), None, 0),
         };
@@ -277,7 +277,7 @@ pub fn fit_rig_cameras(
             fit,
             translation,
             moved,
-            passes,
+            rounds,
         });
     }
     (out, outcomes)
