@@ -1,10 +1,10 @@
 //! Tests of [`super`] (camera_motion): the rounds of hand-eye and map fit.
 
 use super::*;
+use crate::classical::hand_eye::{MAX_BASELINE_M, MIN_BASELINE_M};
+use crate::classical::test_fixtures::left_camera;
 use crate::geometry::so3;
 use glam::DQuat;
-
-use crate::classical::test_fixtures::left_camera;
 
 /// A deterministic value in [−1, 1).
 fn noise(k: usize, j: usize) -> f64 {
@@ -58,7 +58,7 @@ fn found(camera: Rigid, start: Rigid, poses: &[Rigid], map: &[DVec3]) -> CameraP
         for j in i + 1..poses.len() {
             let motion = poses[i].inverse() * poses[j];
             let baseline = motion.translation.length();
-            if !(1.0..=8.0).contains(&baseline) {
+            if !(MIN_BASELINE_M..=MAX_BASELINE_M).contains(&baseline) {
                 continue;
             }
             let (ci, cj) = ((poses[i] * camera).inverse(), (poses[j] * camera).inverse());
