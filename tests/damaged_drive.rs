@@ -6,15 +6,22 @@
 //! the pipeline then calibrate it to within a tolerance of what they reach on the clean drive
 //! (in the sense below), and each run's output names what it skipped.
 //!
-//! "Within a tolerance of the clean run" is judged twice per sensor: per axis of the sensor's
-//! own frame, the damaged run ends within the tolerance of the clean run, except along an axis
-//! the clean run's own report marks weak or not observed by this drive (a 6 s drive with one
-//! camera leaves some camera axes unpinned, and there any two runs differ); and its distance
+//! "Within a tolerance of the clean run" is judged three times: over the sensors it moves, the
+//! largest rotation and translation between the damaged and the clean run; per sensor and per
+//! axis of the sensor's own frame, the same, except along an axis the clean run's own report
+//! marks weak or not observed by this drive; and per sensor its distance
 //! from the simulator's truth, after aligning the root LiDAR as `rigcal eval` does, is at most
-//! the clean run's plus the tolerance.
+//! the clean run's plus the tolerance. And the clean run must calibrate: a sensor that starts
+//! off by more than the tolerance ends nearer the truth in rotation and no further in
+//! translation.
+//!
+//! UniCal alone does not register LiDARs 20 cm apart within its default run (the pipeline
+//! registers them by ICP first), so its runs start from the truth with only the camera
+//! 2° / 20 cm off. The pipeline runs on a longer drive with more images (8 s, 4 a second)
+//! than the others (6 s, 2 a second), so that the camera's position is better observed.
 //!
 //! `icp` and `edge` run in the suite. `unical` and the pipeline take minutes a run (in a
-//! release build about 4½ minutes each at the default quality), so their test is ignored by
+//! release build about 5 minutes a run at the default quality), so their tests are ignored by
 //! the suite and run by hand:
 //! `cargo test --release --test damaged_drive -- --ignored --nocapture` (RELIABILITY.md has
 //! its figures).
@@ -36,18 +43,34 @@ use tempfile::TempDir;
 /// The sensor `rigcal eval` aligns on: the rig's first LiDAR.
 const ROOT: &str = "pandar64";
 
-/// Both LiDARs and the front camera of the pandaset rig on a figure-8, 2° / 20 cm off.
-fn clean_drive(dir: &Path) -> PathBuf {
+/// Both LiDARs and the front camera of the pandaset rig on a figure-8 of `seconds` with
+/// `camera_hz` images a second, 2° / 20 cm off.
+fn clean_drive(dir: &Path, seconds: f64, camera_hz: f64) -> PathBuf {
     let mut rig = SimRig::preset(RigPreset::Pandaset);
     rig.cameras.retain(|c| c.name == "front_camera");
-    let mut cfg = SynthConfig::new(SceneKind::Urban, rig, TrajectoryKind::Figure8, 6.0, 71);
+    let mut cfg = SynthConfig::new(SceneKind::Urban, rig, TrajectoryKind::Figure8, seconds, 71);
     cfg.scale = 0.25;
-    cfg.camera_rate_hz = 2.0;
+    cfg.camera_rate_hz = camera_hz;
     cfg.perturb_deg = 2.0;
     cfg.perturb_cm = 20.0;
     let (log, gt) = (dir.join("clean.mcap"), dir.join("gt.yaml"));
     synthesize(&cfg, &log, &gt, &mut |_, _| {}).unwrap();
     log
+}
+
+/// The truth with the front camera turned 2° and moved 20 cm (fixed directions), written as a
+/// native calibration file in `dir`: an initial guess with the LiDARs right.
+fn camera_off_guess(dir: &Path) -> PathBuf {
+    let mut rig = CalibrationFile::load_rig(&dir.join("gt.yaml")).unwrap();
+    let camera = rig.sensor_mut("front_camera").unwrap();
+    let axis = glam::DVec3::new(1.0, -2.0, 2.0) / 3.0;
+    let along = glam::DVec3::new(-2.0, 1.0, 2.0) / 3.0;
+    camera.vehicle_from_sensor = camera
+        .vehicle_from_sensor
+        .perturbed_right(axis * 2f64.to_radians(), along * 0.2);
+    let path = dir.join("camera-off.yaml");
+    CalibrationFile::from_rig(&rig).save(&path).unwrap();
+    path
 }
 
 fn damage(from: &Path, to: &Path) -> usize {
@@ -117,9 +140,10 @@ fn unpinned_axes(out: &CalibrationFile, sensor: &str) -> Vec<String> {
         .collect()
 }
 
-/// A clean drive and its damaged copy in `tmp`, checked to be damaged as meant.
-fn drives(tmp: &Path) -> (PathBuf, PathBuf) {
-    let clean = clean_drive(tmp);
+/// A clean drive (as [`clean_drive`]) and its damaged copy in `tmp`, checked to be damaged
+/// as meant.
+fn drives(tmp: &Path, seconds: f64, camera_hz: f64) -> (PathBuf, PathBuf) {
+    let clean = clean_drive(tmp, seconds, camera_hz);
     let damaged = tmp.join("damaged.mcap");
     let count = damage(&clean, &damaged);
     assert!(count >= 10, "{count} messages damaged");
@@ -128,7 +152,8 @@ fn drives(tmp: &Path) -> (PathBuf, PathBuf) {
     // The cut-short clouds are found by the open and left out of its index; the garbled
     // JPEGs pass it and fail when a run decodes them.
     let clouds = opened.stream("pandar_gt").unwrap().frames.len();
-    assert!(clouds < 60, "{clouds} of 60 clouds indexed");
+    let all = (seconds * 10.0).round() as usize;
+    assert!(clouds < all, "{clouds} of {all} clouds indexed");
     (clean, damaged)
 }
 
@@ -142,9 +167,14 @@ fn compare(
     damaged: &Path,
     runs: &[(&str, Vec<&str>, Vec<&str>, f64, f64)],
 ) {
-    let start = rigcal::log::Drive::open(clean).unwrap().rig;
+    let from_log = rigcal::log::Drive::open(clean).unwrap().rig;
     let truth = CalibrationFile::load_rig(&tmp.join("gt.yaml")).unwrap();
     for (name, args, moved, tol_deg, tol_cm) in runs {
+        // The run's initial guess: its `--init` file, else the log's own.
+        let start = match args.iter().position(|a| *a == "--init") {
+            Some(k) => CalibrationFile::load_rig(Path::new(args[k + 1])).unwrap(),
+            None => from_log.clone(),
+        };
         let started = std::time::Instant::now();
         let (a, _) = calibrate(clean, args, &tmp.join(format!("{name}-clean.yaml")));
         let out = tmp.join(format!("{name}-damaged.yaml"));
@@ -169,6 +199,11 @@ fn compare(
         eprintln!(
             "{name}: {listed} frames skipped; damaged vs clean {deg:.3}° / {cm:.2} cm ({:.0} s for both)",
             started.elapsed().as_secs_f64()
+        );
+        // In total, the damaged run ends within the tolerance of the clean run.
+        assert!(
+            deg <= *tol_deg && cm <= *tol_cm,
+            "{name}: damaged vs clean {deg:.3}° / {cm:.2} cm"
         );
         for sensor in moved {
             // Per axis, the damaged run ends where the clean run ends, except along an axis
@@ -205,10 +240,21 @@ fn compare(
                     .map(|e| (e.rotation_deg, e.translation_m * 100.0))
                     .unwrap()
             };
-            let ((ca, ta), (cb, tb)) = (from_truth(&ra), from_truth(&rb));
+            let ((sa, st), (ca, ta), (cb, tb)) =
+                (from_truth(&start), from_truth(&ra), from_truth(&rb));
             eprintln!(
-                "  {sensor} from the truth: clean {ca:.3}° / {ta:.2} cm, damaged {cb:.3}° / {tb:.2} cm"
+                "  {sensor} from the truth: start {sa:.3}° / {st:.2} cm, clean {ca:.3}° / {ta:.2} cm, damaged {cb:.3}° / {tb:.2} cm"
             );
+            // The clean run calibrates: a sensor that starts off by more than the tolerance
+            // ends nearer the truth in rotation and no further in translation (else the
+            // comparison would be between two runs that did not calibrate; edge alignment
+            // keeps the translation).
+            if sa > *tol_deg || st > *tol_cm {
+                assert!(
+                    ca < sa && ta <= st + 1e-6,
+                    "{name}: the clean run took {sensor} from {sa:.3}° / {st:.2} cm to {ca:.3}° / {ta:.2} cm"
+                );
+            }
             assert!(
                 cb <= ca + tol_deg && tb <= ta + tol_cm,
                 "{name}: {sensor} {cb:.3}° / {tb:.2} cm from the truth, the clean run {ca:.3}° / {ta:.2} cm"
@@ -227,7 +273,7 @@ fn temp() -> TempDir {
 #[test]
 fn icp_and_edge_calibrate_a_damaged_drive_like_the_clean_one_and_say_what_they_skipped() {
     let tmp = temp();
-    let (clean, damaged) = drives(tmp.path());
+    let (clean, damaged) = drives(tmp.path(), 6.0, 2.0);
     let runs = [
         ("icp", vec!["--method", "icp"], vec!["pandar_gt"], 0.1, 1.0),
         (
@@ -243,14 +289,33 @@ fn icp_and_edge_calibrate_a_damaged_drive_like_the_clean_one_and_say_what_they_s
 
 #[test]
 #[ignore = "minutes a run: cargo test --release --test damaged_drive -- --ignored --nocapture"]
-fn unical_and_the_pipeline_calibrate_a_damaged_drive_like_the_clean_one_and_say_what_they_skipped()
-{
+fn unical_calibrates_a_damaged_drive_like_the_clean_one_and_says_what_it_skipped() {
     let tmp = temp();
-    let (clean, damaged) = drives(tmp.path());
-    let both = vec!["pandar_gt", "front_camera"];
-    let runs = [
-        ("unical", vec!["--method", "unical"], both.clone(), 0.5, 5.0),
-        ("pipeline", vec![], both, 0.5, 5.0),
-    ];
+    let (clean, damaged) = drives(tmp.path(), 6.0, 2.0);
+    // UniCal alone does not register LiDARs 20 cm apart in a run of this length (they move
+    // with the young scene; the pipeline registers them by ICP first), so its run starts
+    // the LiDARs at the truth and only the camera 2° / 20 cm off, a start it calibrates from.
+    let guess = camera_off_guess(tmp.path());
+    let args = vec!["--method", "unical", "--init", guess.to_str().unwrap()];
+    let runs = [("unical", args, vec!["pandar_gt", "front_camera"], 0.5, 5.0)];
+    compare(tmp.path(), &clean, &damaged, &runs);
+}
+
+#[test]
+#[ignore = "minutes a run: cargo test --release --test damaged_drive -- --ignored --nocapture"]
+fn the_pipeline_calibrates_a_damaged_drive_like_the_clean_one_and_says_what_it_skipped() {
+    let tmp = temp();
+    // 8 s and 4 images a second: on the 6 s drive of 12 images the camera's sideways position
+    // is weakly observed (1-σ 5 cm by the clean run's report), and the damaged run, whose
+    // hand-eye start the garbled images of the turns refuse, ended 7.4 cm from the clean
+    // run along it (nearer the truth; RELIABILITY.md).
+    let (clean, damaged) = drives(tmp.path(), 8.0, 4.0);
+    let runs = [(
+        "pipeline",
+        vec![],
+        vec!["pandar_gt", "front_camera"],
+        0.5,
+        5.0,
+    )];
     compare(tmp.path(), &clean, &damaged, &runs);
 }
