@@ -65,7 +65,7 @@ a = {p["sensor"]: p for p in json.load(open(start))["poses"]}
 b = {p["sensor"]: p for p in json.load(open(end))["poses"]}
 doc = yaml.safe_load(open(out))
 report = {r["name"]: r for r in (doc.get("metrics", {}).get("report") or {}).get("sensors", [])}
-cams = [n for n in b if n in report]
+cams = [n for n in b if n in report and report[n].get("kind") == "camera"]
 print(json.dumps({
     "data": d, "method": m, "seed": int(s), "secs": float(t1) - float(t0),
     "cameras": [{
