@@ -9,7 +9,8 @@
 //! "Within a tolerance of the clean run" is judged three times: over the sensors it moves, the
 //! largest rotation and translation between the damaged and the clean run; per sensor and per
 //! axis of the sensor's own frame, the same, except along an axis the clean run's own report
-//! marks weak or not observed by this drive; and per sensor its distance
+//! marks weak or not observed by this drive (implied by the first; its printout says along
+//! which axes two runs differ); and per sensor its distance
 //! from the simulator's truth, after aligning the root LiDAR as `rigcal eval` does, is at most
 //! the clean run's plus the tolerance. And the clean run must calibrate: a sensor that starts
 //! off by more than the tolerance ends nearer the truth in rotation and no further in
