@@ -32,6 +32,9 @@ use crate::geometry::{Rigid, so3};
 const REACH_MARGIN_M: f64 = 2.0;
 /// How many independent residuals an ICP result's information counts its points as.
 pub const EFFECTIVE_POINTS: f64 = 200.0;
+/// Points per parallel part of a sum over points; the parts are added in order, so a sum is
+/// the same whatever the threads did.
+pub const SUM_CHUNK: usize = 1024;
 /// Radius of the neighbourhood a target normal is fitted to (m).
 pub(crate) const NORMAL_RADIUS_M: f64 = 0.4;
 /// Ranges this small are scanned linearly instead of descended (any order of a range is valid:
@@ -486,52 +489,56 @@ impl IcpProblem {
         let hints = &self.hints[level];
         let (target, normals) = (&self.target, &self.normals);
         // Per point: (H upper 6×6 as 36, g 6, weighted squared residual sum, count).
-        source
-            .par_iter()
-            .zip(hints.par_iter())
-            .fold(
-                || ([0.0f64; 36], [0.0f64; 6], 0.0f64, 0usize),
-                |(mut h, mut g, mut sq, mut n), (s, hint)| {
-                    let v = x.transform_point(s.in_sensor);
-                    let w = s.world_from_vehicle.transform_point(v);
-                    if let Some(i) = tree.nearest_hinted(w, max_d, hint) {
-                        let (q, normal) = (target[i as usize], normals[i as usize]);
-                        if min_cos > 0.0 {
-                            let ray = (w - s.world_from_vehicle.transform_point(x.translation))
-                                .normalize_or_zero();
-                            if ray.dot(normal).abs() < min_cos {
-                                return (h, g, sq, n);
+        // Fixed chunks summed in order: rayon's `fold` groups by how work was stolen, so its
+        // sums (and every run after them) would differ in the last bits from run to run.
+        let parts: Vec<_> = source
+            .par_chunks(SUM_CHUNK)
+            .zip(hints.par_chunks(SUM_CHUNK))
+            .map(|(source, hints)| {
+                source.iter().zip(hints).fold(
+                    ([0.0f64; 36], [0.0f64; 6], 0.0f64, 0usize),
+                    |(mut h, mut g, mut sq, mut n), (s, hint)| {
+                        let v = x.transform_point(s.in_sensor);
+                        let w = s.world_from_vehicle.transform_point(v);
+                        if let Some(i) = tree.nearest_hinted(w, max_d, hint) {
+                            let (q, normal) = (target[i as usize], normals[i as usize]);
+                            if min_cos > 0.0 {
+                                let ray = (w - s.world_from_vehicle.transform_point(x.translation))
+                                    .normalize_or_zero();
+                                if ray.dot(normal).abs() < min_cos {
+                                    return (h, g, sq, n);
+                                }
                             }
-                        }
-                        let r = normal.dot(w - q);
-                        let m = s.world_from_vehicle.rotation.inverse() * normal;
-                        let a = v.cross(m);
-                        let j = [a.x, a.y, a.z, m.x, m.y, m.z];
-                        let weight = if r.abs() <= huber {
-                            1.0
-                        } else {
-                            huber / r.abs()
-                        };
-                        for (row, jr) in j.iter().enumerate() {
-                            g[row] += weight * jr * r;
-                            for (col, jc) in j.iter().enumerate() {
-                                h[row * 6 + col] += weight * jr * jc;
+                            let r = normal.dot(w - q);
+                            let m = s.world_from_vehicle.rotation.inverse() * normal;
+                            let a = v.cross(m);
+                            let j = [a.x, a.y, a.z, m.x, m.y, m.z];
+                            let weight = if r.abs() <= huber {
+                                1.0
+                            } else {
+                                huber / r.abs()
+                            };
+                            for (row, jr) in j.iter().enumerate() {
+                                g[row] += weight * jr * r;
+                                for (col, jc) in j.iter().enumerate() {
+                                    h[row * 6 + col] += weight * jr * jc;
+                                }
                             }
+                            sq += r * r;
+                            n += 1;
                         }
-                        sq += r * r;
-                        n += 1;
-                    }
-                    (h, g, sq, n)
-                },
-            )
-            .reduce(
-                || ([0.0f64; 36], [0.0f64; 6], 0.0f64, 0usize),
-                |mut a, b| {
-                    a.0.iter_mut().zip(b.0).for_each(|(x, y)| *x += y);
-                    a.1.iter_mut().zip(b.1).for_each(|(x, y)| *x += y);
-                    (a.0, a.1, a.2 + b.2, a.3 + b.3)
-                },
-            )
+                        (h, g, sq, n)
+                    },
+                )
+            })
+            .collect();
+        parts
+            .into_iter()
+            .fold(([0.0f64; 36], [0.0f64; 6], 0.0f64, 0usize), |mut a, b| {
+                a.0.iter_mut().zip(b.0).for_each(|(x, y)| *x += y);
+                a.1.iter_mut().zip(b.1).for_each(|(x, y)| *x += y);
+                (a.0, a.1, a.2 + b.2, a.3 + b.3)
+            })
     }
 
     /// Information of the result for a pose graph, in the update's tangent (left perturbation

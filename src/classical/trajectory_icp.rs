@@ -132,45 +132,48 @@ impl TrajectoryIcp {
             let target = &self.targets[1 - set];
             let positions: Vec<DVec3> = target.par_iter().map(world).collect();
             let tree = KdTree::new(&positions);
-            let part = self.sources[level][set]
-                .par_iter()
-                .fold(zero, |acc, a| {
-                    let wa = world(a);
-                    let Some(i) = tree.nearest(wa, max_d) else {
-                        return acc;
-                    };
-                    let (b, wb) = (&target[i as usize], positions[i as usize]);
-                    let (count, sum, outer) = tree.moments(wb, NORMAL_RADIUS_M);
-                    let Some(n) =
-                        plane_normal_from_moments(count, sum, outer, self.config.max_flatness)
-                    else {
-                        return acc;
-                    };
-                    let r = n.dot(wa - wb);
-                    let (va, vb) = (
-                        x.transform_point(a.in_sensor),
-                        x.transform_point(b.in_sensor),
-                    );
-                    let ma = a.world_from_vehicle.rotation.inverse() * n;
-                    let mb = b.world_from_vehicle.rotation.inverse() * n;
-                    let (rot, trans) = (va.cross(ma) - vb.cross(mb), ma - mb);
-                    let j = [rot.x, rot.y, rot.z, trans.x, trans.y, trans.z];
-                    let w = if r.abs() <= huber {
-                        1.0
-                    } else {
-                        huber / r.abs()
-                    };
-                    let (mut h, mut g, sq, k) = acc;
-                    for (row, jr) in j.iter().enumerate() {
-                        g[row] += w * jr * r;
-                        for (col, jc) in j.iter().enumerate() {
-                            h[row * 6 + col] += w * jr * jc;
+            // Fixed chunks summed in order (deterministic; rayon's `fold` groups by stealing).
+            let parts: Vec<_> = self.sources[level][set]
+                .par_chunks(crate::classical::icp::SUM_CHUNK)
+                .map(|chunk| {
+                    chunk.iter().fold(zero(), |acc, a| {
+                        let wa = world(a);
+                        let Some(i) = tree.nearest(wa, max_d) else {
+                            return acc;
+                        };
+                        let (b, wb) = (&target[i as usize], positions[i as usize]);
+                        let (count, sum, outer) = tree.moments(wb, NORMAL_RADIUS_M);
+                        let Some(n) =
+                            plane_normal_from_moments(count, sum, outer, self.config.max_flatness)
+                        else {
+                            return acc;
+                        };
+                        let r = n.dot(wa - wb);
+                        let (va, vb) = (
+                            x.transform_point(a.in_sensor),
+                            x.transform_point(b.in_sensor),
+                        );
+                        let ma = a.world_from_vehicle.rotation.inverse() * n;
+                        let mb = b.world_from_vehicle.rotation.inverse() * n;
+                        let (rot, trans) = (va.cross(ma) - vb.cross(mb), ma - mb);
+                        let j = [rot.x, rot.y, rot.z, trans.x, trans.y, trans.z];
+                        let w = if r.abs() <= huber {
+                            1.0
+                        } else {
+                            huber / r.abs()
+                        };
+                        let (mut h, mut g, sq, k) = acc;
+                        for (row, jr) in j.iter().enumerate() {
+                            g[row] += w * jr * r;
+                            for (col, jc) in j.iter().enumerate() {
+                                h[row * 6 + col] += w * jr * jc;
+                            }
                         }
-                    }
-                    (h, g, sq + r * r, k + 1)
+                        (h, g, sq + r * r, k + 1)
+                    })
                 })
-                .reduce(zero, add);
-            total = add(total, part);
+                .collect();
+            total = parts.into_iter().fold(total, add);
         }
         total
     }

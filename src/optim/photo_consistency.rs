@@ -519,7 +519,11 @@ impl PhotoProblem {
                     .sum();
                 ((dev / n as f32) as f64, 1usize)
             })
-            .reduce(|| (0.0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
+            // Collected and added in order: rayon's `reduce` groups by how work was stolen, so
+            // its sum would differ in the last bits from run to run.
+            .collect::<Vec<_>>()
+            .into_iter()
+            .fold((0.0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
         if count == 0 {
             f64::INFINITY
         } else {

@@ -8,6 +8,7 @@
 use rayon::prelude::*;
 
 use super::hash_grid::{ACC_BLOCK, F, GradAccumulator, SparseGrad};
+use crate::sim::wide::dispatch_wide;
 
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct AdamConfig {
@@ -167,21 +168,57 @@ impl SparseAdam {
                 if !any {
                     return;
                 }
-                for i in 0..p.len() {
-                    let mut gf = 0.0f32;
-                    for (g, _) in parts.iter_mut() {
-                        if let Some(gi) = g.get_mut(i) {
-                            gf += std::mem::take(gi);
-                        }
-                    }
-                    if gf == 0.0 {
-                        continue;
-                    }
-                    m[i] = c.beta1 * m[i] + (1.0 - c.beta1) * gf;
-                    v[i] = c.beta2 * v[i] + (1.0 - c.beta2) * gf * gf;
-                    p[i] -= lr * (m[i] / bc1) / ((v[i] / bc2).sqrt() + c.epsilon);
-                }
+                adam_block_wide(p, m, v, parts, c, [lr, bc1, bc2]);
             });
+    }
+}
+
+dispatch_wide! {
+    fn adam_block_wide(
+        p: &mut [f32],
+        m: &mut [f32],
+        v: &mut [f32],
+        parts: &mut [(&mut [f32], &mut bool)],
+        c: AdamConfig,
+        lr_bc: [f32; 3],
+    ) -> () => adam_block
+}
+
+/// One block of [`SparseAdam::step_accumulated`]: the accumulators' sums (each cleared as it
+/// is read), then Adam's update of every entry whose sum is not zero. Branch-free (an entry
+/// with no gradient keeps its values by a select), so it vectorises; each entry's arithmetic
+/// is the scalar update's, operation for operation, so the results are the same to the bit.
+#[inline(always)]
+fn adam_block<const WIDE: bool>(
+    p: &mut [f32],
+    m: &mut [f32],
+    v: &mut [f32],
+    parts: &mut [(&mut [f32], &mut bool)],
+    c: AdamConfig,
+    [lr, bc1, bc2]: [f32; 3],
+) {
+    let mut sums = [0.0f32; ACC_BLOCK * F];
+    let len = p.len().min(sums.len());
+    let sums = &mut sums[..len];
+    for (part, _) in parts.iter_mut() {
+        let k = part.len().min(len);
+        for (sum, g) in sums[..k].iter_mut().zip(part[..k].iter_mut()) {
+            *sum += std::mem::take(g);
+        }
+    }
+    for (((p, m), v), &g) in p
+        .iter_mut()
+        .zip(m.iter_mut())
+        .zip(v.iter_mut())
+        .zip(sums.iter())
+    {
+        let m_new = c.beta1 * *m + (1.0 - c.beta1) * g;
+        let v_new = c.beta2 * *v + (1.0 - c.beta2) * g * g;
+        let p_new = *p - lr * (m_new / bc1) / ((v_new / bc2).sqrt() + c.epsilon);
+        let untouched = g == 0.0;
+        *m = if untouched { *m } else { m_new };
+        *v = if untouched { *v } else { v_new };
+        *p = if untouched { *p } else { p_new };
     }
 }
 

@@ -231,3 +231,33 @@ fn the_kd_tree_finds_the_nearest_point_like_brute_force() {
         }
     }
 }
+
+/// The normal equations are the same to the bit on one thread and on four: their sums are
+/// grouped by fixed chunks, not by how the threads shared the work (rayon's `fold` grouped
+/// them by work stealing, so a whole pipeline run differed from run to run).
+#[test]
+fn the_normal_equations_do_not_depend_on_the_threads() {
+    let truth = Rigid::new(
+        DQuat::from_euler(glam::EulerRot::ZYX, 0.4, 0.02, -0.01),
+        DVec3::new(1.2, -0.3, 1.8),
+    );
+    let start = Rigid::new(
+        so3::exp(DVec3::new(0.01, -0.02, 0.015)),
+        DVec3::new(0.1, 0.05, -0.08),
+    );
+    let p = problem(truth, start);
+    let finest = p.config.levels.len() - 1;
+    let on = |threads: usize| {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap()
+            .install(|| p.normal_equations(finest))
+    };
+    // Several chunks, so that the grouping matters.
+    assert!(p.sources[finest].len() > 2 * SUM_CHUNK, "{}", p.sources[finest].len());
+    let one = on(1);
+    for _ in 0..3 {
+        assert_eq!(on(4), one);
+    }
+}
