@@ -255,7 +255,11 @@ fn the_normal_equations_do_not_depend_on_the_threads() {
             .install(|| p.normal_equations(finest))
     };
     // Several chunks, so that the grouping matters.
-    assert!(p.sources[finest].len() > 2 * SUM_CHUNK, "{}", p.sources[finest].len());
+    assert!(
+        p.sources[finest].len() > 2 * SUM_CHUNK,
+        "{}",
+        p.sources[finest].len()
+    );
     let one = on(1);
     for _ in 0..3 {
         assert_eq!(on(4), one);
