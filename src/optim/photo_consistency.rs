@@ -485,45 +485,45 @@ impl PhotoProblem {
     /// [`Self::cost`] with the images projected through `intrinsics` instead of the problem's.
     fn cost_with(&self, intrinsics: &CameraIntrinsics, vehicle_from_camera: Rigid) -> f64 {
         let camera_from_vehicle = vehicle_from_camera.inverse();
-        let (sum, count) = (0..self.points_in_world.len())
+        let point = |p: usize| {
+            let range = self.view_offsets[p] as usize..self.view_offsets[p + 1] as usize;
+            let mut values = [0f32; MAX_IMAGES];
+            let mut n = 0;
+            for &image in &self.view_images[range] {
+                let image = image as usize;
+                let Some((_, px)) = self.images[image].project(
+                    intrinsics,
+                    camera_from_vehicle,
+                    self.points_in_world[p],
+                ) else {
+                    continue;
+                };
+                if let Some(v) = self.images[image].sample(px)
+                    && n < values.len()
+                {
+                    values[n] = v;
+                    n += 1;
+                }
+            }
+            if n < 2 {
+                return (0.0, 0usize);
+            }
+            let values = &values[..n];
+            let mean = values.iter().sum::<f32>() / n as f32;
+            let dev: f32 = values
+                .iter()
+                .map(|v| ((v - mean) * (v - mean)).min(self.truncation))
+                .sum();
+            ((dev / n as f32) as f64, 1usize)
+        };
+        let add = |a: (f64, usize), b: (f64, usize)| (a.0 + b.0, a.1 + b.1);
+        // Fixed chunks added in order: rayon's `reduce` groups by how work was stolen, so its
+        // sum would differ in the last bits from run to run.
+        let parts: Vec<_> = (0..self.points_in_world.len())
             .into_par_iter()
-            .with_min_len(4096)
-            .map(|p| {
-                let range = self.view_offsets[p] as usize..self.view_offsets[p + 1] as usize;
-                let mut values = [0f32; MAX_IMAGES];
-                let mut n = 0;
-                for &image in &self.view_images[range] {
-                    let image = image as usize;
-                    let Some((_, px)) = self.images[image].project(
-                        intrinsics,
-                        camera_from_vehicle,
-                        self.points_in_world[p],
-                    ) else {
-                        continue;
-                    };
-                    if let Some(v) = self.images[image].sample(px)
-                        && n < values.len()
-                    {
-                        values[n] = v;
-                        n += 1;
-                    }
-                }
-                if n < 2 {
-                    return (0.0, 0usize);
-                }
-                let values = &values[..n];
-                let mean = values.iter().sum::<f32>() / n as f32;
-                let dev: f32 = values
-                    .iter()
-                    .map(|v| ((v - mean) * (v - mean)).min(self.truncation))
-                    .sum();
-                ((dev / n as f32) as f64, 1usize)
-            })
-            // Collected and added in order: rayon's `reduce` groups by how work was stolen, so
-            // its sum would differ in the last bits from run to run.
-            .collect::<Vec<_>>()
-            .into_iter()
-            .fold((0.0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
+            .fold_chunks(4096, || (0.0, 0), |acc, p| add(acc, point(p)))
+            .collect();
+        let (sum, count) = parts.into_iter().fold((0.0, 0), add);
         if count == 0 {
             f64::INFINITY
         } else {
