@@ -12,6 +12,7 @@ use glam::DVec3;
 use rigcal::calib::Rig;
 use rigcal::log::{Drive, spread_evenly};
 use rigcal::optim::edge_align::{held_out_pairs, images_nearest};
+use rigcal::pipeline::mi_check::MiCheck;
 use rigcal::pipeline::report::{MethodFit, Report, Verdict};
 use rigcal::sim::rigs::{RigPreset, SimRig};
 use rigcal::sim::synth::{SynthConfig, synthesize};
@@ -99,6 +100,57 @@ fn a_camera_result_worse_than_the_start_is_put_back_and_failed_and_a_better_one_
     assert_eq!(report.sensors[0].verdict, Verdict::Failed);
     assert!(report.sensors[0].why.starts_with("ran to its bounds"));
     assert_eq!(pose(&written), pose(&start));
+}
+
+#[test]
+fn the_second_check_scores_the_truth_above_a_turned_camera_by_reflectivity_against_grey() {
+    // Known answer: on the simulator the truth is where the LiDAR's reflectivity and the
+    // image's grey agree best, so a camera turned by 1° scores lower, and the check says so
+    // both ways round (each time on the points the result keeps in view). The report carries
+    // it beside the edge check.
+    let tmp = tempfile::tempdir().unwrap();
+    let (drive, truth) = front_camera_drive(tmp.path(), 87, (4.0, 2.0));
+    let pose = |rig: &Rig| rig.sensor("front_camera").unwrap().vehicle_from_sensor;
+    let turned_pose = pose(&turned(&truth, "front_camera", 1.0));
+    let check = |start, end| {
+        MiCheck::new(
+            &drive,
+            &truth,
+            ("front_camera", "pandar64"),
+            (8, &[], &[]),
+            (start, end),
+        )
+        .unwrap()
+    };
+    let ran_off = check(pose(&truth), turned_pose);
+    assert!(ran_off.worse(), "{ran_off:?}");
+    assert!(ran_off.frames >= 4, "{ran_off:?}");
+    let found = check(turned_pose, pose(&truth));
+    assert!(!found.worse(), "{found:?}");
+
+    let cameras = vec!["front_camera".to_string()];
+    let fit = MethodFit {
+        reference: "pandar64",
+        cameras: &cameras,
+        fitted_sweeps: 4,
+        ..MethodFit::default()
+    };
+    let start = turned(&truth, "front_camera", 1.0);
+    let edges = MethodFit {
+        fitted_edges: true,
+        ..fit.clone()
+    };
+    let (report, _) = Report::for_cameras(&drive, &start, &truth, &edges, &[]);
+    assert_ne!(report.sensors[0].verdict, Verdict::Failed);
+    let mi = report.sensors[0]
+        .checks
+        .iter()
+        .find(|c| c.unit == "nats")
+        .expect("an edge fit's report has the mutual-information check");
+    assert!(mi.after > mi.before, "{mi:?}");
+    // Another method's result the edges judge alone.
+    let (report, _) = Report::for_cameras(&drive, &start, &truth, &fit, &[]);
+    assert!(report.sensors[0].checks.iter().all(|c| c.unit != "nats"));
 }
 
 #[test]

@@ -361,9 +361,12 @@ fn a_sparse_real_sample_leaves_its_lidar_off_the_trajectory_fit_and_says_why() {
 }
 
 #[test]
-fn a_single_real_frame_is_checked_on_the_frame_it_fitted_and_says_so() {
+fn a_single_real_frame_is_checked_on_the_frame_it_fitted_and_a_worse_result_is_failed() {
     // KITTI frame 000008: one sweep, one image. The stationary stage's edge alignment fits
-    // that image, so its check has no other to judge the result on.
+    // that image, so its edge check has no other to judge the result on, and on this frame it
+    // ends further from the reference than it started (1.47° from 1°, seed 301; every seed
+    // measured: docs/experiments/real-camera-methods.md). The second check, the LiDAR's
+    // reflectivity against the image, sees it: the camera fails and keeps its start.
     let log = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
         .join("../shared/data/kitti-000008/kitti-000008.mcap");
     let drive = Drive::open(&log).unwrap();
@@ -388,6 +391,12 @@ fn a_single_real_frame_is_checked_on_the_frame_it_fitted_and_says_so() {
         err.contains("the ones fitted: the log has no others"),
         "{err}"
     );
-    assert!(err.contains("camera_2  check it"), "{err}");
-    assert!(!err.contains("camera_2  good"), "{err}");
+    assert!(
+        err.contains("camera_2  failed    moved 0.000° / 0.00 cm"),
+        "{err}"
+    );
+    assert!(
+        err.contains("reflectivity matches the image worse than at the initial guess"),
+        "{err}"
+    );
 }

@@ -22,7 +22,9 @@ use crate::calib::Rig;
 use crate::geometry::Rigid;
 use crate::geometry::camera::CameraIntrinsics;
 use crate::log::Drive;
-use crate::optim::edge_align::{AlignError, points_in_vehicle_at, sweep_image_pairs};
+use crate::optim::edge_align::{
+    AlignError, SweepImagePair, points_in_vehicle_at, sweep_image_pairs,
+};
 
 /// Settings; the defaults are the paper's (blur, equalisation, bounds).
 #[derive(Clone, Debug)]
@@ -225,6 +227,18 @@ impl MiProblem {
         segments_nanos: &[(i64, i64)],
         config: &MiConfig,
     ) -> Result<Self, AlignError> {
+        let pairs = sweep_image_pairs(drive, camera, lidar, frames, segments_nanos)?;
+        Self::from_pairs(drive, rig, (camera, lidar), pairs, config)
+    }
+
+    /// The same from chosen sweep–image pairs (e.g. [`held_out_pairs`](crate::optim::edge_align::held_out_pairs)'s).
+    pub fn from_pairs(
+        drive: &Drive,
+        rig: &Rig,
+        (camera, lidar): (&str, &str),
+        pairs: Vec<SweepImagePair>,
+        config: &MiConfig,
+    ) -> Result<Self, AlignError> {
         let setup = |what: String| AlignError::Setup(what);
         let intrinsics = rig
             .sensor(camera)
@@ -236,7 +250,7 @@ impl MiProblem {
             .vehicle_from_sensor;
         let mut prepared = Vec::new();
         let mut all_reflectivity = Vec::new();
-        for pair in sweep_image_pairs(drive, camera, lidar, frames, segments_nanos)? {
+        for pair in pairs {
             let Some(image) = drive.image_or_skip(camera, pair.image_index) else {
                 continue;
             };

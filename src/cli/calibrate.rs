@@ -393,6 +393,7 @@ pub fn calibrate(
             fitted_sweeps,
             failures: &failures,
             held_translation: (args.method == "edge").then_some(EDGE_HOLDS_TRANSLATION),
+            fitted_edges: args.method == "edge",
         };
         let (checked, rig_to_write) =
             crate::pipeline::report::Report::for_cameras(&drive, &rig, &result, &fit, &segments);

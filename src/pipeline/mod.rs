@@ -11,6 +11,7 @@
 pub mod calibrator;
 pub mod config;
 pub mod edge_check;
+pub mod mi_check;
 pub mod plan;
 pub mod report;
 pub mod run;

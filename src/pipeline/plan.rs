@@ -503,6 +503,14 @@ impl Plan {
             .unwrap_or(&[])
     }
 
+    /// Whether `camera` is fitted by the stationary stage (checkerboards or edge alignment),
+    /// whose result the report also checks by mutual information.
+    pub fn stationary_camera(&self, camera: &str) -> bool {
+        self.stages.iter().any(|s| {
+            matches!(s, Stage::StationaryCameras { cameras, .. } if cameras.iter().any(|c| c == camera))
+        })
+    }
+
     /// The images of `camera` that the last stage fitting it (UniCal, else the hand-eye, else a
     /// stationary log's edge alignment) uses,
     /// so that the check of its result can keep to others.

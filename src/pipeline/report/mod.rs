@@ -3,10 +3,11 @@
 //! before and after, and a verdict with one line of why.
 //!
 //! Where the numbers come from:
-//! - cameras: [`EdgeCheck`] against the reference LiDAR at the result (the sandwich covariance
+//! - cameras: [`EdgeCheck`](crate::pipeline::edge_check::EdgeCheck) against the reference LiDAR at the result (the sandwich covariance
 //!   of the edge-alignment cost over independent frames; its module doc). The σ rates the
-//!   result without moving it; a camera whose edges align worse than at the initial guess keeps
-//!   the initial guess and fails;
+//!   result without moving it; a camera whose edges align worse than at the initial guess, or
+//!   whose LiDAR reflectivity matches its images worse ([`MiCheck`](crate::pipeline::mi_check::MiCheck)), keeps the initial guess
+//!   and fails;
 //! - LiDARs registered by ICP: the inverse of the point-to-plane information at the result
 //!   ([`crate::classical::icp::IcpProblem::information`], neighbouring points counted as one),
 //!   and the LiDAR–LiDAR point-to-plane residual before and after; a pair that registers worse
@@ -21,11 +22,12 @@ use crate::calib::{Rig, SensorKind};
 use crate::geometry::{Rigid, so3};
 use crate::log::Drive;
 
-use super::edge_check::EdgeCheck;
 use super::plan::Plan;
 use super::run::LidarEvidence;
 
+mod camera;
 mod lidar;
+use camera::camera_report;
 use lidar::{lidar_report, reference_report, unical_lidar_report};
 
 /// Frames of each camera the report's checks use.
@@ -168,6 +170,9 @@ pub struct MethodFit<'a> {
     pub failures: &'a [(String, String)],
     /// Said of every camera when the method holds the translation at the initial guess.
     pub held_translation: Option<&'a str>,
+    /// The method fitted edge alignment, the check's own measure: its result is also checked
+    /// by mutual information ([`crate::pipeline::mi_check::MiCheck`]).
+    pub fitted_edges: bool,
 }
 
 impl Report {
@@ -211,6 +216,7 @@ impl Report {
                     (start, end),
                     plan.straight_travel,
                     (segments, &plan.fitted_images(drive, &s.name)),
+                    plan.stationary_camera(&s.name),
                     &mut report,
                 );
             } else if !plan.config.lidars.register {
@@ -250,8 +256,9 @@ impl Report {
     /// `result` moved from `initial`, checked against `reference` by edge alignment on eight
     /// frames spread over `segments_nanos`, none of them a frame the method fitted (it fitted
     /// `fitted_sweeps` sweeps of `reference` spread evenly, each with its nearest image) unless
-    /// the log has no others. A camera whose edges align worse than at the initial guess goes
-    /// back to it, with the verdict "failed" and why. Returns the report and the rig to write.
+    /// the log has no others, and by mutual information. A camera whose edges align worse than at
+    /// the initial guess, or whose reflectivity matches its images worse, goes back to it, with
+    /// the verdict "failed" and why. Returns the report and the rig to write.
     pub fn for_cameras(
         drive: &Drive,
         initial: &Rig,
@@ -287,12 +294,13 @@ impl Report {
                     segments_nanos,
                     &crate::optim::edge_align::images_nearest(drive, &s.name, reference, &fitted),
                 ),
+                fit.fitted_edges,
                 &mut report,
             );
             if let Some((_, why)) = fit.failures.iter().find(|(name, _)| *name == s.name) {
                 report.verdict = Verdict::Failed;
                 report.why = format!("{why}; the initial guess is kept");
-                if let Some(c) = report.checks.first_mut() {
+                for c in &mut report.checks {
                     c.after = c.before;
                 }
                 end = start;
@@ -341,8 +349,10 @@ impl Report {
                 .collect();
             out.push_str(&format!("  {:width$}    {}\n", "", axes.join(", ")));
             for c in &s.checks {
+                // Mutual information is a few hundredths of a nat.
+                let digits = if c.unit == "nats" { 4 } else { 2 };
                 out.push_str(&format!(
-                    "  {:width$}    {}: {:.2} → {:.2} {}\n",
+                    "  {:width$}    {}: {:.digits$} → {:.digits$} {}\n",
                     "", c.what, c.before, c.after, c.unit
                 ));
             }
@@ -410,141 +420,6 @@ fn keep_axes(start: Rigid, end: Rigid, keep: &[usize]) -> Rigid {
 
 fn axis_names(keep: &[usize]) -> String {
     keep.iter().map(|&k| AXES[k]).collect::<Vec<_>>().join(", ")
-}
-
-/// The sensor-frame translation axes a vehicle-frame direction `d` lies along (each at least
-/// half of it).
-fn axes_along(vehicle_from_sensor: Rigid, d: DVec3) -> Vec<usize> {
-    let in_sensor = vehicle_from_sensor.rotation.inverse() * d.normalize_or_zero();
-    (0..3)
-        .filter(|&k| in_sensor[k].abs() >= 0.5)
-        .map(|k| k + 3)
-        .collect()
-}
-
-#[allow(clippy::too_many_arguments)]
-fn camera_report(
-    drive: &Drive,
-    result: &Rig,
-    camera: &str,
-    reference: &str,
-    (start, end): (Rigid, Rigid),
-    straight_travel: Option<DVec3>,
-    (segments, fitted_images): (&[(i64, i64)], &[usize]),
-    report: &mut SensorReport,
-) -> Rigid {
-    let check = match EdgeCheck::new(
-        drive,
-        result,
-        (camera, reference),
-        CHECK_FRAMES,
-        segments,
-        fitted_images,
-    ) {
-        Ok(c) => c,
-        Err(e) => {
-            report.verdict = Verdict::CheckIt;
-            report.why = format!("no target-free check: {e}");
-            return end;
-        }
-    };
-    // The edge check's σ rates the result; it does not move it: on a figure-8 with eight
-    // frames it called directions of side cameras unobserved that UniCal had right, and
-    // putting them back at the initial guess cost degrees (BENCHMARKS.md, "The pipeline").
-    let mut unobserved = fill_axes(report, check.sigmas(end).0);
-    // A straight drive: the camera's position along the travel is at best weakly observed,
-    // whatever the edges say (a shift along it looks like an image delay).
-    let along = straight_travel.map_or(Vec::new(), |d| axes_along(end, d));
-    for &k in &along {
-        if report.axes[k].observed == Observed::Observed {
-            report.axes[k].observed = Observed::Weak;
-        }
-    }
-    unobserved.retain(|k| !along.contains(k));
-    let (before, after) = (check.score(start), check.score(end));
-    report.checks.push(Check {
-        what: format!(
-            "edge alignment against {reference} ({} frames, {})",
-            check.frame_count(),
-            if check.held_out() {
-                "none of them fitted"
-            } else {
-                "the ones fitted: the log has no others"
-            }
-        ),
-        before,
-        after,
-        unit: "px",
-    });
-    if after > before * (1.0 + WORSE_FRACTION) + WORSE_EDGE_PX {
-        report.verdict = Verdict::Failed;
-        report.why = format!(
-            "its edges align worse than at the initial guess ({after:.2} px against {before:.2} px): the initial guess is kept"
-        );
-        report.checks[0].after = before;
-        return start;
-    }
-    let weak: Vec<usize> = (0..6)
-        .filter(|&k| report.axes[k].observed == Observed::Weak)
-        .collect();
-    let straight = if along.is_empty() {
-        String::new()
-    } else {
-        format!(
-            "the drive is too straight to pin its position along the travel ({}, confounded with an image delay); ",
-            axis_names(&along)
-        )
-    };
-    (report.verdict, report.why) = if !straight.is_empty() {
-        let rest: Vec<usize> = unobserved
-            .iter()
-            .chain(weak.iter())
-            .copied()
-            .filter(|k| !along.contains(k))
-            .collect();
-        (
-            Verdict::CheckIt,
-            format!(
-                "{straight}{}edges {before:.2} → {after:.2} px",
-                if rest.is_empty() {
-                    String::new()
-                } else {
-                    format!("its edges also leave {} loose; ", axis_names(&rest))
-                }
-            ),
-        )
-    } else if !unobserved.is_empty() {
-        (
-            Verdict::CheckIt,
-            format!(
-                "its edges do not pin {} down (edges {before:.2} → {after:.2} px): look at its overlay",
-                axis_names(&unobserved)
-            ),
-        )
-    } else if !weak.is_empty() {
-        (
-            Verdict::CheckIt,
-            format!(
-                "weakly observed: {} (edges {before:.2} → {after:.2} px)",
-                axis_names(&weak)
-            ),
-        )
-    } else {
-        (
-            Verdict::Good,
-            format!("every axis observed; edges {before:.2} → {after:.2} px"),
-        )
-    };
-    if !check.held_out() {
-        // Judged on its own frames a fit of the images' noise looks as good as a fit of the
-        // scene.
-        report.verdict = Verdict::CheckIt;
-        report.why = format!(
-            "checked only on the frames it fitted (the log has no others); {}",
-            report.why
-        );
-    }
-    end
 }
 
 #[cfg(test)]
