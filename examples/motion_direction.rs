@@ -1,0 +1,250 @@
+//! Where each camera's own motion says it points: a check of a calibration that uses no LiDAR.
+//!
+//! Between two images of one camera the trajectory says how the vehicle moved; a camera
+//! extrinsic turns that into the camera's motion, hence an essential matrix, and the two images'
+//! verified matches (the hand-eye's, [`rigcal::classical::camera_motion::camera_pairs`]) should
+//! lie on its epipolar lines. A wrong turn of the camera tilts every pair's epipolar geometry the
+//! same way. Even on a straight drive this pins the two turns square to the travel; the turn
+//! about the mean travel is held here (a straight drive leaves it unseen).
+//!
+//! For each camera and each calibration given (the log's own rig first) this prints the median
+//! Sampson distance of the matches (normalised image units × 1000) at that calibration and after
+//! fitting the turn (Cauchy-weighted Gauss–Newton, the translation held), the fitted turn in the
+//! camera's axes and in the vehicle's, with a 1-σ that is cluster-robust over image pairs, and
+//! where the calibration and the fit stand from the log's rig (`R · R_log⁻¹` as a rotation vector
+//! in the vehicle frame, degrees).
+//!
+//! `cargo run --release --no-default-features --example motion_direction -- LOG.mcap [CALIB...]`,
+//! each `CALIB` a native calibration file or a dataset's ground_truth.json.
+
+use glam::{DMat3, DVec3};
+use rigcal::calib::Rig;
+use rigcal::calib::dataset_json::load_reference;
+use rigcal::classical::camera_motion::camera_pairs;
+use rigcal::classical::hand_eye::MotionPair;
+use rigcal::geometry::{Rigid, so3};
+use rigcal::log::Drive;
+
+fn load(path: &str) -> Result<Rig, String> {
+    let p = std::path::Path::new(path);
+    if path.ends_with(".json") {
+        load_reference(p).map_err(|e| e.to_string())
+    } else {
+        rigcal::calib::file::CalibrationFile::load_rig(p).map_err(|e| e.to_string())
+    }
+}
+
+struct Fit {
+    end: Rigid,
+    omega_camera_deg: DVec3,
+    sigma_deg: DVec3,
+    /// Median |Sampson distance| (normalised units × 1000) at the given extrinsic and the fit.
+    median_before: f64,
+    median_after: f64,
+    used: usize,
+}
+
+/// Signed Sampson distance (normalised image units) of rays `(a, b)` in cameras `i`, `j` to the
+/// epipolar geometry of `camera_i_from_camera_j`.
+fn epipolar(camera_i_from_camera_j: Rigid, a: DVec3, b: DVec3) -> f64 {
+    let j_from_i = camera_i_from_camera_j.inverse();
+    let Some(t) = j_from_i.translation.try_normalize() else {
+        return 0.0;
+    };
+    let e = so3::hat(t) * DMat3::from_quat(j_from_i.rotation);
+    let (na, nb) = (a / a.z.max(1e-6), b / b.z.max(1e-6));
+    let ea = e * na;
+    let etb = e.transpose() * nb;
+    let den = ea.x * ea.x + ea.y * ea.y + etb.x * etb.x + etb.y * etb.y;
+    if den <= 0.0 {
+        return 0.0;
+    }
+    nb.dot(ea) / den.sqrt()
+}
+
+/// Per pair, its rays' residuals for extrinsic `x`.
+fn residuals(pairs: &[MotionPair], x: Rigid) -> Vec<Vec<f64>> {
+    let inverse = x.inverse();
+    pairs
+        .iter()
+        .map(|p| {
+            let c = inverse * p.vehicle_motion * x;
+            p.rays.iter().map(|(a, b)| epipolar(c, *a, *b)).collect()
+        })
+        .collect()
+}
+
+/// Cauchy scale (normalised units, about 3 px at a 1000 px focal length).
+const SCALE: f64 = 3.0e-3;
+
+/// The turn `ω` (camera axes) with `x · exp(ω)` best fitting every pair's matches (Sampson
+/// distance, Cauchy-weighted), the translation held; the turn about the travel is damped.
+fn fit(pairs: &[MotionPair], x: Rigid) -> Option<Fit> {
+    let median = |r: &[Vec<f64>]| {
+        let mut v: Vec<f64> = r.iter().flatten().map(|e| e.abs() * 1000.0).collect();
+        v.sort_by(f64::total_cmp);
+        v.get(v.len() / 2).copied().unwrap_or(f64::NAN)
+    };
+    let pairs: Vec<MotionPair> = pairs
+        .iter()
+        .filter(|p| !p.rays.is_empty())
+        .cloned()
+        .collect();
+    if pairs.len() < 3 {
+        return None;
+    }
+    let before = residuals(&pairs, x);
+    let median_before = median(&before);
+    let matches: usize = before.iter().map(Vec::len).sum();
+    // The mean travel (vehicle frame), each pair's motion signed along the first's.
+    let first = pairs[0].vehicle_motion.translation;
+    let travel = pairs
+        .iter()
+        .map(|p| {
+            let t = p.vehicle_motion.translation.normalize_or_zero();
+            if t.dot(first) < 0.0 { -t } else { t }
+        })
+        .sum::<DVec3>()
+        .normalize_or_zero();
+    let mut current = x;
+    let mut total = DVec3::ZERO;
+    let mut covariance = DMat3::ZERO;
+    const STEP: f64 = 1e-6;
+    for _ in 0..8 {
+        let r = residuals(&pairs, current);
+        let columns: Vec<Vec<Vec<f64>>> = (0..3)
+            .map(|k| {
+                let mut d = DVec3::ZERO;
+                d[k] = STEP;
+                let moved = residuals(&pairs, current.perturbed_right(d, DVec3::ZERO));
+                moved
+                    .iter()
+                    .zip(&r)
+                    .map(|(m, h)| m.iter().zip(h).map(|(m, h)| (m - h) / STEP).collect())
+                    .collect()
+            })
+            .collect();
+        let mut normal = DMat3::ZERO;
+        let mut rhs = DVec3::ZERO;
+        let mut meat = DMat3::ZERO;
+        for (p, rp) in r.iter().enumerate() {
+            let mut score = DVec3::ZERO;
+            for (i, e) in rp.iter().enumerate() {
+                let w = 1.0 / (1.0 + (e / SCALE).powi(2));
+                let j = DVec3::new(columns[0][p][i], columns[1][p][i], columns[2][p][i]);
+                normal += so3::outer(j, j) * w;
+                rhs -= j * (w * e);
+                score += j * (w * e);
+            }
+            meat += so3::outer(score, score);
+        }
+        // Hold the turn about the mean travel, which a straight drive leaves unseen.
+        let along = current.rotation.inverse() * travel;
+        let damping =
+            so3::outer(along, along) * (normal.x_axis.x + normal.y_axis.y + normal.z_axis.z);
+        let bread = (normal + damping).inverse();
+        covariance = bread * meat * bread;
+        let step = bread * rhs;
+        current = current.perturbed_right(step, DVec3::ZERO);
+        total += step;
+        if step.length() < 1e-8 {
+            break;
+        }
+    }
+    let sigma_deg = DVec3::new(
+        covariance.x_axis.x.sqrt(),
+        covariance.y_axis.y.sqrt(),
+        covariance.z_axis.z.sqrt(),
+    ) * 180.0
+        / std::f64::consts::PI;
+    Some(Fit {
+        end: current,
+        omega_camera_deg: total * 180.0 / std::f64::consts::PI,
+        sigma_deg,
+        median_before,
+        median_after: median(&residuals(&pairs, current)),
+        used: matches,
+    })
+}
+
+fn main() -> Result<(), String> {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let Some(log) = args.first() else {
+        return Err("usage: motion_direction LOG.mcap [CALIB...]".into());
+    };
+    let drive = Drive::open(std::path::Path::new(log)).map_err(|e| e.to_string())?;
+    let mut rigs: Vec<(String, Rig)> = vec![("log".into(), drive.rig.clone())];
+    for path in &args[1..] {
+        let loaded = load(path)?;
+        let mut rig = drive.rig.clone();
+        for s in &mut rig.sensors {
+            if let Some(r) = loaded.sensor(&s.name) {
+                s.vehicle_from_sensor = r.vehicle_from_sensor;
+            }
+        }
+        rigs.push((path.clone(), rig));
+    }
+    let frames = std::env::var("RIGCAL_FRAMES")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(48);
+    let names: Vec<String> = drive.rig.cameras().map(|c| c.name.clone()).collect();
+    for name in &names {
+        let found = camera_pairs(&drive, &drive.rig, name, frames, &[], false, &|_, _, _| {})
+            .map_err(|e| e.to_string())?;
+        println!("{name}: {} pairs", found.pairs.len());
+        let first = drive.rig.sensor(name).map(|s| s.vehicle_from_sensor);
+        for (label, rig) in &rigs {
+            let Some(x) = rig.sensor(name).map(|s| s.vehicle_from_sensor) else {
+                continue;
+            };
+            match fit(&found.pairs, x) {
+                Some(f) => {
+                    let vehicle = DMat3::from_quat(x.rotation) * f.omega_camera_deg;
+                    let turn = DMat3::from_quat(x.rotation);
+                    let cov =
+                        turn * DMat3::from_diagonal(f.sigma_deg * f.sigma_deg) * turn.transpose();
+                    let vehicle_sigma = DVec3::new(
+                        cov.x_axis.x.sqrt(),
+                        cov.y_axis.y.sqrt(),
+                        cov.z_axis.z.sqrt(),
+                    );
+                    // Where the fit and the given extrinsic stand from the log's (vehicle frame).
+                    let from_log = |r: Rigid| {
+                        first.map_or(DVec3::ZERO, |l| {
+                            so3::log(r.rotation * l.rotation.inverse()) * 180.0
+                                / std::f64::consts::PI
+                        })
+                    };
+                    let (given, end) = (from_log(x), from_log(f.end));
+                    println!(
+                        "  {label:40} median {:.3} → {:.3} ({} matches)  ω camera {:+.3} {:+.3} {:+.3}° (σ {:.3} {:.3} {:.3})  vehicle {:+.3} {:+.3} {:+.3}°  given−log {:+.2} {:+.2} {:+.2}  fit−log {:+.2} {:+.2} {:+.2} (σ≈ {:.2} {:.2} {:.2})",
+                        f.median_before,
+                        f.median_after,
+                        f.used,
+                        f.omega_camera_deg.x,
+                        f.omega_camera_deg.y,
+                        f.omega_camera_deg.z,
+                        f.sigma_deg.x,
+                        f.sigma_deg.y,
+                        f.sigma_deg.z,
+                        vehicle.x,
+                        vehicle.y,
+                        vehicle.z,
+                        given.x,
+                        given.y,
+                        given.z,
+                        end.x,
+                        end.y,
+                        end.z,
+                        vehicle_sigma.x,
+                        vehicle_sigma.y,
+                        vehicle_sigma.z,
+                    );
+                }
+                None => println!("  {label:40} too few pairs"),
+            }
+        }
+    }
+    Ok(())
+}
