@@ -20,9 +20,8 @@
 use glam::{DMat3, DVec3};
 use rigcal::calib::Rig;
 use rigcal::calib::dataset_json::load_reference;
-use rigcal::classical::camera_motion::camera_pairs;
-use rigcal::classical::hand_eye::MotionPair;
-use rigcal::geometry::{Rigid, so3};
+use rigcal::classical::camera_motion::{CameraPairs, camera_pairs, picked_images};
+use rigcal::geometry::{Rigid, RowTimes, so3};
 use rigcal::log::Drive;
 
 fn load(path: &str) -> Result<Rig, String> {
@@ -62,14 +61,88 @@ fn epipolar(camera_i_from_camera_j: Rigid, a: DVec3, b: DVec3) -> f64 {
     nb.dot(ea) / den.sqrt()
 }
 
-/// Per pair, its rays' residuals for extrinsic `x`.
-fn residuals(pairs: &[MotionPair], x: Rigid) -> Vec<Vec<f64>> {
+/// One verified match: its rays in the two images and `vehicle_i_from_vehicle_j` at the times
+/// their rows were exposed.
+struct Match {
+    a: DVec3,
+    b: DVec3,
+    vehicle_motion: Rigid,
+}
+
+/// Each pair's matches, with the vehicle's motion between the rows they lie on when `readout`
+/// is a rolling shutter's (the pair's own motion otherwise).
+fn matches(
+    drive: &Drive,
+    name: &str,
+    found: &CameraPairs,
+    frames: usize,
+    readout: RowTimes,
+) -> Vec<Vec<Match>> {
+    let (Some(stream), Some(camera)) = (
+        drive.stream(name),
+        drive.rig.sensor(name).and_then(|s| s.camera.clone()),
+    ) else {
+        return Vec::new();
+    };
+    let stamps: Vec<i64> = picked_images(drive, name, frames, &[])
+        .iter()
+        .map(|&i| stream.frames[i].stamp_nanos)
+        .collect();
+    let poses = &found.world_from_vehicle;
+    found
+        .pairs
+        .iter()
+        .filter_map(|p| {
+            let i = p.first_image;
+            let wi = poses.get(i).copied().flatten()?;
+            // The second image: the frame whose pose gives the pair's motion.
+            let j = (0..poses.len())
+                .filter_map(|k| {
+                    let wk = poses[k]?;
+                    let d =
+                        ((wi.inverse() * wk).translation - p.vehicle_motion.translation).length();
+                    Some((k, d))
+                })
+                .min_by(|x, y| x.1.total_cmp(&y.1))?
+                .0;
+            let at = |stamp: i64, ray: DVec3| -> Option<Rigid> {
+                let y = camera.project(ray)?.y;
+                drive
+                    .trajectory
+                    .world_from_vehicle(stamp + readout.offset_nanos(y, camera.height))
+                    .ok()
+            };
+            Some(
+                p.rays
+                    .iter()
+                    .filter_map(|&(a, b)| {
+                        let vehicle_motion = if readout.is_global() {
+                            p.vehicle_motion
+                        } else {
+                            at(stamps[i], a)?.inverse() * at(stamps[j], b)?
+                        };
+                        Some(Match {
+                            a,
+                            b,
+                            vehicle_motion,
+                        })
+                    })
+                    .collect(),
+            )
+        })
+        .filter(|m: &Vec<Match>| !m.is_empty())
+        .collect()
+}
+
+/// Per pair, its matches' residuals for extrinsic `x`.
+fn residuals(pairs: &[Vec<Match>], x: Rigid) -> Vec<Vec<f64>> {
     let inverse = x.inverse();
     pairs
         .iter()
         .map(|p| {
-            let c = inverse * p.vehicle_motion * x;
-            p.rays.iter().map(|(a, b)| epipolar(c, *a, *b)).collect()
+            p.iter()
+                .map(|m| epipolar(inverse * m.vehicle_motion * x, m.a, m.b))
+                .collect()
         })
         .collect()
 }
@@ -79,29 +152,24 @@ const SCALE: f64 = 3.0e-3;
 
 /// The turn `ω` (camera axes) with `x · exp(ω)` best fitting every pair's matches (Sampson
 /// distance, Cauchy-weighted), the translation held; the turn about the travel is damped.
-fn fit(pairs: &[MotionPair], x: Rigid) -> Option<Fit> {
+fn fit(pairs: &[Vec<Match>], x: Rigid) -> Option<Fit> {
     let median = |r: &[Vec<f64>]| {
         let mut v: Vec<f64> = r.iter().flatten().map(|e| e.abs() * 1000.0).collect();
         v.sort_by(f64::total_cmp);
         v.get(v.len() / 2).copied().unwrap_or(f64::NAN)
     };
-    let pairs: Vec<MotionPair> = pairs
-        .iter()
-        .filter(|p| !p.rays.is_empty())
-        .cloned()
-        .collect();
     if pairs.len() < 3 {
         return None;
     }
-    let before = residuals(&pairs, x);
+    let before = residuals(pairs, x);
     let median_before = median(&before);
     let matches: usize = before.iter().map(Vec::len).sum();
     // The mean travel (vehicle frame), each pair's motion signed along the first's.
-    let first = pairs[0].vehicle_motion.translation;
+    let first = pairs[0][0].vehicle_motion.translation;
     let travel = pairs
         .iter()
         .map(|p| {
-            let t = p.vehicle_motion.translation.normalize_or_zero();
+            let t = p[0].vehicle_motion.translation.normalize_or_zero();
             if t.dot(first) < 0.0 { -t } else { t }
         })
         .sum::<DVec3>()
@@ -111,12 +179,12 @@ fn fit(pairs: &[MotionPair], x: Rigid) -> Option<Fit> {
     let mut covariance = DMat3::ZERO;
     const STEP: f64 = 1e-6;
     for _ in 0..8 {
-        let r = residuals(&pairs, current);
+        let r = residuals(pairs, current);
         let columns: Vec<Vec<Vec<f64>>> = (0..3)
             .map(|k| {
                 let mut d = DVec3::ZERO;
                 d[k] = STEP;
-                let moved = residuals(&pairs, current.perturbed_right(d, DVec3::ZERO));
+                let moved = residuals(pairs, current.perturbed_right(d, DVec3::ZERO));
                 moved
                     .iter()
                     .zip(&r)
@@ -162,7 +230,7 @@ fn fit(pairs: &[MotionPair], x: Rigid) -> Option<Fit> {
         omega_camera_deg: total * 180.0 / std::f64::consts::PI,
         sigma_deg,
         median_before,
-        median_after: median(&residuals(&pairs, current)),
+        median_after: median(&residuals(pairs, current)),
         used: matches,
     })
 }
@@ -188,17 +256,23 @@ fn main() -> Result<(), String> {
         .ok()
         .and_then(|s| s.parse().ok())
         .unwrap_or(48);
+    // A rolling shutter's readout, "FIRST,LAST" ms from the stamp (global when unset).
+    let readout = match std::env::var("RIGCAL_READOUT_MS") {
+        Ok(text) => RowTimes::parse_millis(&text).map_err(|e| e.to_string())?,
+        Err(_) => RowTimes::GLOBAL,
+    };
     let names: Vec<String> = drive.rig.cameras().map(|c| c.name.clone()).collect();
     for name in &names {
         let found = camera_pairs(&drive, &drive.rig, name, frames, &[], false, &|_, _, _| {})
             .map_err(|e| e.to_string())?;
         println!("{name}: {} pairs", found.pairs.len());
+        let with_rows = matches(&drive, name, &found, frames, readout);
         let first = drive.rig.sensor(name).map(|s| s.vehicle_from_sensor);
         for (label, rig) in &rigs {
             let Some(x) = rig.sensor(name).map(|s| s.vehicle_from_sensor) else {
                 continue;
             };
-            match fit(&found.pairs, x) {
+            match fit(&with_rows, x) {
                 Some(f) => {
                     let vehicle = DMat3::from_quat(x.rotation) * f.omega_camera_deg;
                     let turn = DMat3::from_quat(x.rotation);
