@@ -21,6 +21,7 @@ use glam::{DMat3, DVec3};
 use rigcal::calib::Rig;
 use rigcal::calib::dataset_json::load_reference;
 use rigcal::classical::camera_motion::{CameraPairs, camera_pairs, picked_images};
+use rigcal::classical::hand_eye::epipolar_residual;
 use rigcal::geometry::{Rigid, RowTimes, so3};
 use rigcal::log::Drive;
 
@@ -41,24 +42,6 @@ struct Fit {
     median_before: f64,
     median_after: f64,
     used: usize,
-}
-
-/// Signed Sampson distance (normalised image units) of rays `(a, b)` in cameras `i`, `j` to the
-/// epipolar geometry of `camera_i_from_camera_j`.
-fn epipolar(camera_i_from_camera_j: Rigid, a: DVec3, b: DVec3) -> f64 {
-    let j_from_i = camera_i_from_camera_j.inverse();
-    let Some(t) = j_from_i.translation.try_normalize() else {
-        return 0.0;
-    };
-    let e = so3::hat(t) * DMat3::from_quat(j_from_i.rotation);
-    let (na, nb) = (a / a.z.max(1e-6), b / b.z.max(1e-6));
-    let ea = e * na;
-    let etb = e.transpose() * nb;
-    let den = ea.x * ea.x + ea.y * ea.y + etb.x * etb.x + etb.y * etb.y;
-    if den <= 0.0 {
-        return 0.0;
-    }
-    nb.dot(ea) / den.sqrt()
 }
 
 /// One verified match: its rays in the two images and `vehicle_i_from_vehicle_j` at the times
@@ -141,7 +124,7 @@ fn residuals(pairs: &[Vec<Match>], x: Rigid) -> Vec<Vec<f64>> {
         .iter()
         .map(|p| {
             p.iter()
-                .map(|m| epipolar(inverse * m.vehicle_motion * x, m.a, m.b))
+                .map(|m| epipolar_residual(inverse * m.vehicle_motion * x, m.a, m.b))
                 .collect()
         })
         .collect()

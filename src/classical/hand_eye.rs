@@ -436,7 +436,7 @@ pub fn solve(pairs: &[MotionPair], start: Rigid) -> Result<HandEyeFit, HandEyeEr
 
 /// Signed Sampson distance (normalised image units) of the match `(a, b)` (rays in cameras
 /// `i`, `j`) to the epipolar geometry of `camera_i_from_camera_j`.
-fn epipolar_residual(camera_i_from_camera_j: Rigid, a: DVec3, b: DVec3) -> f64 {
+pub fn epipolar_residual(camera_i_from_camera_j: Rigid, a: DVec3, b: DVec3) -> f64 {
     // x_j = R x_i + t for j_from_i; E = [t]× R, n_jᵀ E n_i = 0.
     let j_from_i = camera_i_from_camera_j.inverse();
     let Some(t) = j_from_i.translation.try_normalize() else {
