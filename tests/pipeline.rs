@@ -400,3 +400,55 @@ fn a_single_real_frame_is_checked_on_the_frame_it_fitted_and_a_worse_result_is_f
         "{err}"
     );
 }
+
+#[test]
+fn unical_alone_on_a_log_that_does_not_move_holds_its_reference_lidar() {
+    // `--method unical` moves the LiDARs with the scene. With one vehicle pose a LiDAR's pose
+    // on the vehicle moves its whole scene along, so nothing observes the reference's: on KITTI
+    // frame 000008 (one sweep, one image) UniCal moved the Velodyne 0.035° / 0.2 cm by chance,
+    // and the camera its check failed and "kept" was then no longer at its start against it.
+    let log = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../shared/data/kitti-000008/kitti-000008.mcap");
+    let config = PipelineConfig {
+        lidars: rigcal::pipeline::config::LidarSettings {
+            register: false,
+            ..Default::default()
+        },
+        ..PipelineConfig::default()
+    };
+    let plan = plan(&log, &config);
+    let text = plan.decisions.join("\n");
+    assert!(plan.unical_stage().is_none(), "{text}");
+    assert!(
+        plan.unical.held_sensors.contains(&"velodyne".to_string()),
+        "{:?}",
+        plan.unical.held_sensors
+    );
+    assert!(
+        text.contains("velodyne (the reference) stays: the vehicle does not move"),
+        "{text}"
+    );
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("c.yaml");
+    let (ok, _, err) = rigcal(&[
+        "calibrate",
+        log.to_str().unwrap(),
+        "--method",
+        "unical",
+        "--perturb-deg",
+        "1",
+        "--perturb-cm",
+        "10",
+        "--seed",
+        "1121",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(ok, "{err}");
+    assert!(
+        err.contains(
+            "velodyne  check it  moved 0.000° / 0.00 cm; the reference: the vehicle does not move"
+        ),
+        "{err}"
+    );
+}

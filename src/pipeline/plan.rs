@@ -312,6 +312,14 @@ impl Plan {
                     lidars: others,
                 });
             }
+        } else if stationary {
+            // One vehicle pose: a LiDAR's pose on the vehicle moves its whole scene with it, so
+            // nothing observes the reference's; the others are placed against it by the scene.
+            let others = lidars.iter().any(|l| *l != reference && asked(l));
+            decisions.push(format!(
+                "lidars: not registered first (lidars.register off){}; {reference} (the reference) stays: the vehicle does not move, so nothing places it on the vehicle",
+                if others { ": UniCal moves the others" } else { "" }
+            ));
         } else {
             decisions.push(
                 "lidars: not registered first (lidars.register off): UniCal moves them".into(),
@@ -377,7 +385,13 @@ impl Plan {
         } else {
             cameras.clone()
         };
-        let lidars_move = !config.lidars.register;
+        // Without motion UniCal holds the reference LiDAR (above), and runs at all only for
+        // another LiDAR or a camera.
+        let hold_reference = !config.lidars.register && stationary;
+        let lidars_move = !config.lidars.register
+            && lidars
+                .iter()
+                .any(|l| asked(l) && !(hold_reference && *l == reference));
         let mut iterations = config.iterations.unwrap_or(preset.iterations);
         let run_unical = !unical_cameras.is_empty() || lidars_move;
         if run_unical {
@@ -464,7 +478,11 @@ impl Plan {
         let held: Vec<String> = rig
             .sensors
             .iter()
-            .filter(|s| !asked(&s.name) || (config.lidars.register && s.kind == SensorKind::Lidar))
+            .filter(|s| {
+                !asked(&s.name)
+                    || (config.lidars.register && s.kind == SensorKind::Lidar)
+                    || (hold_reference && s.name == reference)
+            })
             .map(|s| s.name.clone())
             .collect();
         let unical = DepthCalibConfig {

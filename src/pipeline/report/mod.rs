@@ -219,6 +219,15 @@ impl Report {
                     plan.stationary_camera(&s.name),
                     &mut report,
                 );
+            } else if !plan.config.lidars.register && plan.unical.held_sensors.contains(&s.name) {
+                // The reference of a log that does not move (`--method unical`): held.
+                report.verdict = Verdict::CheckIt;
+                report.why = "the reference: the vehicle does not move, so nothing places it on the vehicle: kept at the initial guess".into();
+                report
+                    .axes
+                    .iter_mut()
+                    .for_each(|a| a.observed = Observed::NotObserved);
+                end = start;
             } else if !plan.config.lidars.register {
                 // UniCal moved the LiDARs itself (`--method unical`).
                 end = unical_lidar_report(
