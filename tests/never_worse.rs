@@ -194,7 +194,7 @@ fn the_check_keeps_off_the_frames_a_method_fitted_unless_the_log_has_no_others()
 }
 
 #[test]
-fn a_lidar_unical_left_registering_worse_goes_back_to_its_start_relative_to_the_reference() {
+fn a_sensor_unical_left_worse_goes_back_to_its_start_relative_to_the_moved_reference() {
     use rigcal::pipeline::run::LidarEvidence;
     use rigcal::pipeline::{PipelineConfig, Plan, PlanRequest};
     let tmp = tempfile::tempdir().unwrap();
@@ -249,4 +249,37 @@ fn a_lidar_unical_left_registering_worse_goes_back_to_its_start_relative_to_the_
     assert_eq!(lidar.verdict, Verdict::CheckIt, "{}", report.to_text());
     assert!(lidar.why.contains("at least as well"), "{}", lidar.why);
     assert_eq!(pose(&written, "pandar_gt"), pose(&truth, "pandar_gt"));
+
+    // A camera UniCal turned 2° off while it moved the reference 0.5°: it fails, and goes back
+    // to its initial pose relative to the reference, as the PandarGT does; the check judges it
+    // there (before: the whole initial guess's alignment).
+    let request = PlanRequest {
+        sensors: vec!["pandar64".into(), "front_camera".into()],
+        ..PlanRequest::default()
+    };
+    let plan = Plan::build(&drive, &truth, &request, &config).unwrap();
+    let result = moved(
+        &moved(&truth, "pandar64", 0.5, 0.0),
+        "front_camera",
+        2.0,
+        0.0,
+    );
+    let (report, written) =
+        Report::build(&drive, &truth, &result, &plan, &LidarEvidence::default());
+    let camera = report
+        .sensors
+        .iter()
+        .find(|s| s.name == "front_camera")
+        .unwrap();
+    assert_eq!(camera.verdict, Verdict::Failed, "{}", report.to_text());
+    assert!(
+        camera
+            .why
+            .contains("its initial pose relative to pandar64 is kept"),
+        "{}",
+        camera.why
+    );
+    let relative = |rig: &Rig| pose(rig, "pandar64").inverse() * pose(rig, "front_camera");
+    let (deg, m) = relative(&truth).difference(relative(&written));
+    assert!(deg < 1e-9 && m < 1e-9, "{deg} rad, {m} m");
 }

@@ -208,17 +208,37 @@ impl Report {
                     "not among --sensors: held where the initial guess puts it".into()
                 };
             } else if s.kind == SensorKind::Camera {
+                // Where UniCal moved the reference LiDAR with the scene (`--method unical`),
+                // a camera is judged, and kept when it fails, at its initial pose relative
+                // to that LiDAR, as another LiDAR is ([`unical_lidar_report`]).
+                let relative = match (initial.sensor(&reference), result.sensor(&reference)) {
+                    (Some(a), Some(b))
+                        if !plan.config.lidars.register
+                            && a.vehicle_from_sensor != b.vehicle_from_sensor =>
+                    {
+                        Some(b.vehicle_from_sensor * a.vehicle_from_sensor.inverse() * start)
+                    }
+                    _ => None,
+                };
                 end = camera_report(
                     drive,
                     result,
                     &s.name,
                     &reference,
-                    (start, end),
+                    (relative.unwrap_or(start), end),
                     plan.straight_travel,
                     (segments, &plan.fitted_images(drive, &s.name)),
                     plan.stationary_camera(&s.name),
                     &mut report,
                 );
+                if relative.is_some() && report.verdict == Verdict::Failed {
+                    report.why = report.why.replace(
+                        "the initial guess is kept",
+                        &format!(
+                            "its initial pose relative to {reference} is kept (UniCal moved {reference} with the scene)"
+                        ),
+                    );
+                }
             } else if !plan.config.lidars.register && plan.unical.held_sensors.contains(&s.name) {
                 // The reference of a log that does not move (`--method unical`): held.
                 report.verdict = Verdict::CheckIt;
