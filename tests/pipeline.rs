@@ -428,6 +428,19 @@ fn unical_alone_on_a_log_that_does_not_move_holds_its_reference_lidar() {
         text.contains("velodyne (the reference) stays: the vehicle does not move"),
         "{text}"
     );
+    // With only the camera asked for, no LiDAR is UniCal's to move and a standing camera is the
+    // stationary stage's: no UniCal run at all.
+    let drive = Drive::open(&log).unwrap();
+    let request = PlanRequest {
+        sensors: vec!["camera_2".into()],
+        ..PlanRequest::default()
+    };
+    let camera_only = Plan::build(&drive, &drive.rig, &request, &config).unwrap();
+    assert!(
+        camera_only.unical_stage().is_none(),
+        "{}",
+        camera_only.decisions.join("\n")
+    );
     let tmp = tempfile::tempdir().unwrap();
     let out = tmp.path().join("c.yaml");
     let (ok, _, err) = rigcal(&[

@@ -27,18 +27,48 @@ fn axes_along(vehicle_from_sensor: Rigid, d: DVec3) -> Vec<usize> {
         .collect()
 }
 
+/// Where a camera's result is judged from, and where a failed one goes back to.
+#[derive(Clone, Copy, Debug)]
+pub(super) enum Start<'a> {
+    /// The initial guess on the vehicle.
+    Initial(Rigid),
+    /// The initial guess's pose relative to a LiDAR that UniCal moved with the scene
+    /// (`--method unical`): `pose` is the camera's vehicle pose that keeps it so.
+    RelativeTo { pose: Rigid, lidar: &'a str },
+}
+
+impl Start<'_> {
+    /// The vehicle pose the result is judged against.
+    pub(super) fn pose(&self) -> Rigid {
+        match *self {
+            Start::Initial(pose) | Start::RelativeTo { pose, .. } => pose,
+        }
+    }
+
+    /// What a failed camera keeps, in a report's words.
+    fn kept(&self) -> String {
+        match self {
+            Start::Initial(_) => "the initial guess is kept".into(),
+            Start::RelativeTo { lidar, .. } => format!(
+                "its initial pose relative to {lidar} is kept (UniCal moved {lidar} with the scene)"
+            ),
+        }
+    }
+}
+
 #[allow(clippy::too_many_arguments)]
 pub(super) fn camera_report(
     drive: &Drive,
     result: &Rig,
     camera: &str,
     reference: &str,
-    (start, end): (Rigid, Rigid),
+    (from, end): (Start, Rigid),
     straight_travel: Option<DVec3>,
     (segments, fitted_images): (&[(i64, i64)], &[usize]),
     fitted_edges: bool,
     report: &mut SensorReport,
 ) -> Rigid {
+    let start = from.pose();
     let check = match EdgeCheck::new(
         drive,
         result,
@@ -118,11 +148,14 @@ pub(super) fn camera_report(
         report.verdict = Verdict::Failed;
         report.why = match mi_worse {
             Some(m) if !edges_worse => format!(
-                "its LiDAR reflectivity matches the image worse than at the initial guess (mutual information {:.4} against {:.4}; edges {before:.2} → {after:.2} px): the initial guess is kept",
-                m.after, m.before,
+                "its LiDAR reflectivity matches the image worse than at the initial guess (mutual information {:.4} against {:.4}; edges {before:.2} → {after:.2} px): {}",
+                m.after,
+                m.before,
+                from.kept(),
             ),
             _ => format!(
-                "its edges align worse than at the initial guess ({after:.2} px against {before:.2} px): the initial guess is kept"
+                "its edges align worse than at the initial guess ({after:.2} px against {before:.2} px): {}",
+                from.kept()
             ),
         };
         for c in &mut report.checks {

@@ -41,23 +41,26 @@ pub(super) fn reference_report(lidars: &LidarEvidence, report: &mut SensorReport
                 )
             };
         }
-        Some(Err(why)) => {
-            report
-                .axes
-                .iter_mut()
-                .for_each(|a| a.observed = Observed::NotObserved);
-            report.verdict = Verdict::CheckIt;
-            report.why = format!("the reference, kept at the initial guess: {why}");
-        }
-        None => {
-            report.verdict = Verdict::CheckIt;
-            report.why = "the reference: not fitted to the trajectory (the plan says why): kept at the initial guess".into();
-            report
-                .axes
-                .iter_mut()
-                .for_each(|a| a.observed = Observed::NotObserved);
-        }
+        Some(Err(why)) => held_reference_report(
+            format!("the reference, kept at the initial guess: {why}"),
+            report,
+        ),
+        None => held_reference_report(
+            "the reference: not fitted to the trajectory (the plan says why): kept at the initial guess".into(),
+            report,
+        ),
     }
+}
+
+/// The reference LiDAR kept at the initial guess, for the reason `why`: every axis
+/// unobserved, "check it".
+pub(super) fn held_reference_report(why: String, report: &mut SensorReport) {
+    report.verdict = Verdict::CheckIt;
+    report.why = why;
+    report
+        .axes
+        .iter_mut()
+        .for_each(|a| a.observed = Observed::NotObserved);
 }
 
 /// A LiDAR UniCal moved with the scene (`--method unical`, no registration first): the

@@ -27,8 +27,8 @@ use super::run::LidarEvidence;
 
 mod camera;
 mod lidar;
-use camera::camera_report;
-use lidar::{lidar_report, reference_report, unical_lidar_report};
+use camera::{Start, camera_report};
+use lidar::{held_reference_report, lidar_report, reference_report, unical_lidar_report};
 
 /// Frames of each camera the report's checks use.
 const CHECK_FRAMES: usize = 8;
@@ -211,42 +211,35 @@ impl Report {
                 // Where UniCal moved the reference LiDAR with the scene (`--method unical`),
                 // a camera is judged, and kept when it fails, at its initial pose relative
                 // to that LiDAR, as another LiDAR is ([`unical_lidar_report`]).
-                let relative = match (initial.sensor(&reference), result.sensor(&reference)) {
+                let from = match (initial.sensor(&reference), result.sensor(&reference)) {
                     (Some(a), Some(b))
                         if !plan.config.lidars.register
                             && a.vehicle_from_sensor != b.vehicle_from_sensor =>
                     {
-                        Some(b.vehicle_from_sensor * a.vehicle_from_sensor.inverse() * start)
+                        Start::RelativeTo {
+                            pose: b.vehicle_from_sensor * a.vehicle_from_sensor.inverse() * start,
+                            lidar: &reference,
+                        }
                     }
-                    _ => None,
+                    _ => Start::Initial(start),
                 };
                 end = camera_report(
                     drive,
                     result,
                     &s.name,
                     &reference,
-                    (relative.unwrap_or(start), end),
+                    (from, end),
                     plan.straight_travel,
                     (segments, &plan.fitted_images(drive, &s.name)),
                     plan.stationary_camera(&s.name),
                     &mut report,
                 );
-                if relative.is_some() && report.verdict == Verdict::Failed {
-                    report.why = report.why.replace(
-                        "the initial guess is kept",
-                        &format!(
-                            "its initial pose relative to {reference} is kept (UniCal moved {reference} with the scene)"
-                        ),
-                    );
-                }
             } else if !plan.config.lidars.register && plan.unical.held_sensors.contains(&s.name) {
                 // The reference of a log that does not move (`--method unical`): held.
-                report.verdict = Verdict::CheckIt;
-                report.why = "the reference: the vehicle does not move, so nothing places it on the vehicle: kept at the initial guess".into();
-                report
-                    .axes
-                    .iter_mut()
-                    .for_each(|a| a.observed = Observed::NotObserved);
+                held_reference_report(
+                    "the reference: the vehicle does not move, so nothing places it on the vehicle: kept at the initial guess".into(),
+                    &mut report,
+                );
                 end = start;
             } else if !plan.config.lidars.register {
                 // UniCal moved the LiDARs itself (`--method unical`).
@@ -317,7 +310,7 @@ impl Report {
                 result,
                 &s.name,
                 reference,
-                (start, r.vehicle_from_sensor),
+                (Start::Initial(start), r.vehicle_from_sensor),
                 None,
                 (
                     segments_nanos,
