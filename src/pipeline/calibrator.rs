@@ -54,7 +54,11 @@ impl PipelineCalibrator {
         progress: Progress,
     ) -> Result<Self, crate::error::RunError> {
         let prepared = super::run::prepare(&drive, &initial, &plan, progress)?;
+        // The stages before UniCal dropped their images and maps: their memory goes back
+        // before UniCal's tables are allocated (BENCHMARKS.md, "Issue 59's yardstick").
+        crate::unical::table_memory::release_freed();
         let stage = super::run::unical(&drive, &plan, &prepared, progress)?;
+        crate::unical::table_memory::release_freed();
         let steps = match &stage {
             Some(s) => plan
                 .config
