@@ -597,6 +597,15 @@ impl Drive {
         Ok(sweep)
     }
 
+    /// Empty the cache of decoded images (a long stage that has its own copies, such as
+    /// UniCal's training images, need not keep full-size ones alive; they decode again when
+    /// asked for).
+    pub fn release_images(&self) {
+        if let Ok(mut cache) = self.image_cache.lock() {
+            cache.clear();
+        }
+    }
+
     /// Decode image `index` of a camera (cached).
     pub fn load_image(&self, sensor: &str, index: usize) -> Result<Arc<RgbImage>, LogError> {
         let s = self.stream_index(sensor)?;

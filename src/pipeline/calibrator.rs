@@ -58,6 +58,8 @@ impl PipelineCalibrator {
         // before UniCal's tables are allocated (BENCHMARKS.md, "Issue 59's yardstick").
         crate::unical::table_memory::release_freed();
         let stage = super::run::unical(&drive, &plan, &prepared, progress)?;
+        // UniCal keeps its own training images: the full-size ones go too.
+        drive.release_images();
         crate::unical::table_memory::release_freed();
         let steps = match &stage {
             Some(s) => plan
@@ -201,10 +203,14 @@ impl PipelineCalibrator {
     }
 
     fn finish(&mut self) {
+        let best = self.raw_best();
+        // The report needs UniCal's result, not its tables: they go before it decodes images.
+        self.stage = None;
+        crate::unical::table_memory::release_freed();
         let (report, rig) = Report::build(
             &self.drive,
             &self.initial,
-            &self.raw_best(),
+            &best,
             &self.plan,
             &self.prepared.lidars,
         );
