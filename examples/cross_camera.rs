@@ -23,12 +23,14 @@
 //! each `CALIB` a native calibration file or a dataset's ground_truth.json. `RIGCAL_PAIRS`
 //! ("a:b,c:d") picks the pairs; by default every pair whose fields of view overlap by 5° or more.
 
+mod given_rigs;
+use given_rigs::given_rigs;
+
 use std::sync::Arc;
 
 use glam::{DMat3, DVec2, DVec3};
 use image::RgbImage;
 use rigcal::calib::Rig;
-use rigcal::calib::dataset_json::load_reference;
 use rigcal::classical::hand_eye::epipolar_residual;
 use rigcal::features::matching::match_mutual;
 use rigcal::features::orb::{Keypoint, detect};
@@ -46,15 +48,6 @@ const GATE: f64 = 0.03;
 const MIN_MATCHES: usize = 8;
 /// Cauchy scale (normalised units, about 3 px at a 1000 px focal length).
 const SCALE: f64 = 3.0e-3;
-
-fn load(path: &str) -> Result<Rig, String> {
-    let p = std::path::Path::new(path);
-    if path.ends_with(".json") {
-        load_reference(p).map_err(|e| e.to_string())
-    } else {
-        rigcal::calib::file::CalibrationFile::load_rig(p).map_err(|e| e.to_string())
-    }
-}
 
 /// Keypoints of `img` found at [`COMMON_FOCAL_PX`], positions in the image's own pixels.
 fn keypoints(img: &RgbImage, k: &CameraIntrinsics) -> Vec<Keypoint> {
@@ -240,17 +233,7 @@ fn main() -> Result<(), String> {
         return Err("usage: cross_camera LOG.mcap [CALIB...]".into());
     };
     let drive = Drive::open(std::path::Path::new(log)).map_err(|e| e.to_string())?;
-    let mut rigs: Vec<(String, Rig)> = vec![("log".into(), drive.rig.clone())];
-    for path in &args[1..] {
-        let loaded = load(path)?;
-        let mut rig = drive.rig.clone();
-        for s in &mut rig.sensors {
-            if let Some(r) = loaded.sensor(&s.name) {
-                s.vehicle_from_sensor = r.vehicle_from_sensor;
-            }
-        }
-        rigs.push((path.clone(), rig));
-    }
+    let rigs = given_rigs(&drive, &args[1..])?;
     let pairs = match std::env::var("RIGCAL_PAIRS") {
         Ok(text) => text
             .split(',')

@@ -17,22 +17,14 @@
 //! `cargo run --release --no-default-features --example motion_direction -- LOG.mcap [CALIB...]`,
 //! each `CALIB` a native calibration file or a dataset's ground_truth.json.
 
+mod given_rigs;
+use given_rigs::given_rigs;
+
 use glam::{DMat3, DVec3};
-use rigcal::calib::Rig;
-use rigcal::calib::dataset_json::load_reference;
 use rigcal::classical::camera_motion::{CameraPairs, camera_pairs, picked_images};
 use rigcal::classical::hand_eye::epipolar_residual;
 use rigcal::geometry::{Rigid, RowTimes, so3};
 use rigcal::log::Drive;
-
-fn load(path: &str) -> Result<Rig, String> {
-    let p = std::path::Path::new(path);
-    if path.ends_with(".json") {
-        load_reference(p).map_err(|e| e.to_string())
-    } else {
-        rigcal::calib::file::CalibrationFile::load_rig(p).map_err(|e| e.to_string())
-    }
-}
 
 struct Fit {
     end: Rigid,
@@ -224,17 +216,7 @@ fn main() -> Result<(), String> {
         return Err("usage: motion_direction LOG.mcap [CALIB...]".into());
     };
     let drive = Drive::open(std::path::Path::new(log)).map_err(|e| e.to_string())?;
-    let mut rigs: Vec<(String, Rig)> = vec![("log".into(), drive.rig.clone())];
-    for path in &args[1..] {
-        let loaded = load(path)?;
-        let mut rig = drive.rig.clone();
-        for s in &mut rig.sensors {
-            if let Some(r) = loaded.sensor(&s.name) {
-                s.vehicle_from_sensor = r.vehicle_from_sensor;
-            }
-        }
-        rigs.push((path.clone(), rig));
-    }
+    let rigs = given_rigs(&drive, &args[1..])?;
     let frames = std::env::var("RIGCAL_FRAMES")
         .ok()
         .and_then(|s| s.parse().ok())
