@@ -1,4 +1,5 @@
-//! Small helpers shared by every module: atomic file writes, a fast hasher for integer keys.
+//! Small helpers shared by every module: atomic file writes, a fast hasher for integer keys,
+//! handing freed memory back to the system.
 
 use std::io::Write;
 use std::path::Path;
@@ -227,6 +228,21 @@ fn civil_from_days(z: i64) -> (i64, u32, u32) {
     let m = if mp < 10 { mp + 3 } else { mp - 9 } as u32;
     let y = yoe + era * 400 + i64::from(m <= 2);
     (y, m, d)
+}
+
+/// Give the memory the program has freed back to the operating system. glibc's allocator
+/// keeps freed chunks in its per-thread arenas, so a stage that builds and drops large
+/// temporary data (the pipeline's hand-eye start: decoded images, a LiDAR map and its k-d
+/// tree) would otherwise leave them counted in the process's memory while UniCal allocates
+/// its tables beside them. A no-op on other allocators and systems.
+pub fn release_freed() {
+    #[cfg(all(target_os = "linux", target_env = "gnu"))]
+    #[allow(unsafe_code)]
+    // SAFETY: malloc_trim only returns free memory at the top of the heap and whole free
+    // pages inside it to the system; it touches no live allocation.
+    unsafe {
+        libc::malloc_trim(0);
+    }
 }
 
 #[cfg(test)]

@@ -465,3 +465,62 @@ fn unical_alone_on_a_log_that_does_not_move_holds_its_reference_lidar() {
         "{err}"
     );
 }
+
+/// A finished run through the library, as the studio and `bench` drive it: once the report is
+/// made the UniCal stage is gone, and `current` and `best` are both the reported rig (failed
+/// sensors and unobserved axes back at the start), however often they are asked or stepped.
+/// The log's full-size images, released for UniCal's tables, decode again to the same pixels.
+#[test]
+fn a_finished_run_reports_its_rig_and_the_released_images_decode_the_same() {
+    use rigcal::optim::runner::Calibrator;
+    let (_tmp, log, _) = drive(TrajectoryKind::Straight, 2.0, 36);
+    let drive = std::sync::Arc::new(Drive::open(&log).unwrap());
+    let before = drive.load_image("front_camera", 1).unwrap();
+    drive.release_images();
+    let after = drive.load_image("front_camera", 1).unwrap();
+    assert!(!std::sync::Arc::ptr_eq(&before, &after));
+    assert_eq!(before.as_raw(), after.as_raw());
+
+    let config = PipelineConfig {
+        quality: Quality::Fast,
+        iterations: Some(6),
+        ..PipelineConfig::default()
+    };
+    let initial = drive.rig.clone();
+    let plan = Plan::build(&drive, &initial, &PlanRequest::default(), &config).unwrap();
+    let mut run = rigcal::pipeline::calibrator::PipelineCalibrator::prepare(
+        drive.clone(),
+        initial.clone(),
+        plan,
+        std::time::Instant::now(),
+        &|_, _, _| {},
+    )
+    .unwrap();
+    assert!(run.report().is_none());
+    let mut steps = 0;
+    while !run.step().done {
+        steps += 1;
+        assert!(steps <= 6, "the run did not end with its schedule");
+    }
+    let report = run.report().expect("a finished run has its report").clone();
+    assert_eq!(report.sensors.len(), 3);
+    let (current, best) = (run.current(), run.best());
+    assert_eq!(current.extrinsics(), best.extrinsics());
+    for s in report
+        .sensors
+        .iter()
+        .filter(|s| s.verdict == rigcal::pipeline::report::Verdict::Failed)
+    {
+        assert_eq!(
+            best.sensor(&s.name).unwrap().vehicle_from_sensor,
+            initial.sensor(&s.name).unwrap().vehicle_from_sensor,
+            "{}: failed but moved",
+            s.name
+        );
+    }
+    // Stepping a finished run changes nothing.
+    let again = run.step();
+    assert!(again.done && again.losses.is_empty());
+    assert_eq!(run.best().extrinsics(), best.extrinsics());
+    assert_eq!(run.current().extrinsics(), best.extrinsics());
+}

@@ -56,11 +56,11 @@ impl PipelineCalibrator {
         let prepared = super::run::prepare(&drive, &initial, &plan, progress)?;
         // The stages before UniCal dropped their images and maps: their memory goes back
         // before UniCal's tables are allocated (BENCHMARKS.md, "Issue 59's yardstick").
-        crate::unical::table_memory::release_freed();
+        crate::util::release_freed();
         let stage = super::run::unical(&drive, &plan, &prepared, progress)?;
         // UniCal keeps its own training images: the full-size ones go too.
         drive.release_images();
-        crate::unical::table_memory::release_freed();
+        crate::util::release_freed();
         let steps = match &stage {
             Some(s) => plan
                 .config
@@ -206,7 +206,7 @@ impl PipelineCalibrator {
         let best = self.raw_best();
         // The report needs UniCal's result, not its tables: they go before it decodes images.
         self.stage = None;
-        crate::unical::table_memory::release_freed();
+        crate::util::release_freed();
         let (report, rig) = Report::build(
             &self.drive,
             &self.initial,

@@ -43,21 +43,6 @@ fn advise_huge_pages(table: &[f32]) {
 #[cfg(not(target_os = "linux"))]
 fn advise_huge_pages(_table: &[f32]) {}
 
-/// Give the memory the program has freed back to the operating system. glibc's allocator
-/// keeps freed chunks in its per-thread arenas, so a stage that builds and drops large
-/// temporary data (the pipeline's hand-eye start: decoded images, a LiDAR map and its k-d
-/// tree) would otherwise leave them counted in the process's memory while UniCal allocates
-/// its tables beside them. A no-op on other allocators and systems.
-pub fn release_freed() {
-    #[cfg(all(target_os = "linux", target_env = "gnu"))]
-    #[allow(unsafe_code)]
-    // SAFETY: malloc_trim only returns free memory at the top of the heap and whole free
-    // pages inside it to the system; it touches no live allocation.
-    unsafe {
-        libc::malloc_trim(0);
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;

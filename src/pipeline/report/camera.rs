@@ -46,7 +46,7 @@ impl Start<'_> {
     }
 
     /// What a failed camera keeps, in a report's words.
-    fn kept(&self) -> String {
+    pub(super) fn kept(&self) -> String {
         match self {
             Start::Initial(_) => "the initial guess is kept".into(),
             Start::RelativeTo { lidar, .. } => format!(

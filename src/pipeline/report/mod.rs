@@ -321,7 +321,7 @@ impl Report {
             );
             if let Some((_, why)) = fit.failures.iter().find(|(name, _)| *name == s.name) {
                 report.verdict = Verdict::Failed;
-                report.why = format!("{why}; the initial guess is kept");
+                report.why = format!("{why}; {}", Start::Initial(start).kept());
                 for c in &mut report.checks {
                     c.after = c.before;
                 }
