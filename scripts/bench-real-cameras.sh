@@ -9,6 +9,8 @@
 #   scripts/bench-real-cameras.sh [METHODS] [SEEDS] [DATASETS]
 #   scripts/bench-real-cameras.sh "edge mi" "301 302 303 304 305" "kitti360 kitti000008 pandaset"
 #   RIGCAL_BIN=/tmp/rigcal-before TMPDIR=/tmp/before scripts/bench-real-cameras.sh auto 306 kitti360
+#   RIGCAL_CONFIG=trial.yaml scripts/bench-real-cameras.sh auto 306 pandaset   (a configuration
+#   file given to every calibrate run with --config, to compare a setting before and after)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 export CARGO_TARGET_DIR="${CARGO_TARGET_DIR:-$HOME/.cache/rigcal-target}"
@@ -54,7 +56,7 @@ for d in $datasets; do
       out="$work/$d-$m-$s"
       t0=$(date +%s.%N)
       "$bin" calibrate "$log" --method "$m" --perturb-deg 1 --perturb-cm 10 --seed "$s" \
-        --out "$out.yaml" > "$out.txt" 2>&1 || true
+        ${RIGCAL_CONFIG:+--config "$RIGCAL_CONFIG"} --out "$out.yaml" > "$out.txt" 2>&1 || true
       t1=$(date +%s.%N)
       "$bin" eval "$log" --ground-truth "$gt" --calibration "$out.yaml" --json "$out.json" \
         > /dev/null 2>&1
