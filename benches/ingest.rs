@@ -59,7 +59,7 @@ fn full(path: &Path) -> Work {
     let drive = Drive::open_with(
         path,
         &DriveOptions {
-            image_cache_len: 1,
+            image_cache_bytes: 1,
             ..DriveOptions::default()
         },
     )

@@ -48,6 +48,10 @@ fn stamp_conflicts(source: &str, conflicts: &[StampConflict]) -> Problem {
     ))
 }
 
+/// Decoded images a [`Drive`] keeps by default: about ten full-HD images (the eight frames a
+/// camera's checks read twice fit), forty-five of KITTI's.
+pub const DEFAULT_IMAGE_CACHE_BYTES: usize = 64 << 20;
+
 #[derive(Clone, Debug)]
 pub struct DriveOptions {
     /// Fixed frame of the trajectory (e.g. world, odom, map); default: parent of the densest
@@ -57,8 +61,10 @@ pub struct DriveOptions {
     pub vehicle_frame: Option<String>,
     /// How far (s) a query may extrapolate past either end of the trajectory.
     pub max_extrapolation_secs: f64,
-    /// Decoded images kept in memory.
-    pub image_cache_len: usize,
+    /// Bytes of decoded images kept in memory (the last image decoded is kept whatever its
+    /// size): a bound in bytes, not images, so that a log of full-HD cameras does not hold
+    /// six times what one of KITTI's does.
+    pub image_cache_bytes: usize,
     /// Added to every camera image's stamp: a known delay between the cameras' clock (or
     /// trigger) and the trajectory's (negative: the images were taken before their stamps).
     pub camera_time_offset_nanos: i64,
@@ -73,7 +79,7 @@ impl Default for DriveOptions {
             fixed_frame: None,
             vehicle_frame: None,
             max_extrapolation_secs: 0.1,
-            image_cache_len: 24,
+            image_cache_bytes: DEFAULT_IMAGE_CACHE_BYTES,
             camera_time_offset_nanos: 0,
             camera_readout: RowTimes::GLOBAL,
         }
@@ -165,7 +171,7 @@ pub struct Drive {
     pub streams: Vec<SensorStream>,
     pub problems: Problems,
     image_cache: Arc<Mutex<VecDeque<((usize, usize), Arc<RgbImage>)>>>,
-    image_cache_len: usize,
+    image_cache_bytes: usize,
     /// The frames runs skipped because they did not decode ([`super::frames`]).
     pub(super) skipped_frames: Arc<super::frames::SkippedFrames>,
     /// When each image row of the cameras was exposed relative to the image's stamp (a
@@ -494,7 +500,7 @@ impl Drive {
             problems,
             image_cache: Arc::new(Mutex::new(VecDeque::new())),
             skipped_frames: Default::default(),
-            image_cache_len: options.image_cache_len.max(1),
+            image_cache_bytes: options.image_cache_bytes,
             camera_readout: options.camera_readout,
         })
     }
@@ -520,7 +526,7 @@ impl Drive {
             streams: self.streams.clone(),
             problems: self.problems.clone(),
             image_cache: Arc::clone(&self.image_cache),
-            image_cache_len: self.image_cache_len,
+            image_cache_bytes: self.image_cache_bytes,
             skipped_frames: Arc::clone(&self.skipped_frames),
             camera_readout: readout,
         }
@@ -633,8 +639,11 @@ impl Drive {
         let image = Arc::new(image);
         if let Ok(mut cache) = self.image_cache.lock() {
             cache.push_back(((s, index), image.clone()));
-            while cache.len() > self.image_cache_len {
-                cache.pop_front();
+            let mut bytes: usize = cache.iter().map(|(_, img)| img.as_raw().len()).sum();
+            while bytes > self.image_cache_bytes && cache.len() > 1 {
+                if let Some((_, old)) = cache.pop_front() {
+                    bytes -= old.as_raw().len();
+                }
             }
         }
         Ok(image)
