@@ -477,7 +477,7 @@ fn a_finished_run_reports_its_rig_and_the_released_images_decode_the_same() {
     let (_tmp, log, _) = drive(TrajectoryKind::Straight, 2.0, 36);
     let drive = std::sync::Arc::new(Drive::open(&log).unwrap());
     let before = drive.load_image("front_camera", 1).unwrap();
-    drive.release_images();
+    drive.release_caches();
     let after = drive.load_image("front_camera", 1).unwrap();
     assert!(!std::sync::Arc::ptr_eq(&before, &after));
     assert_eq!(before.as_raw(), after.as_raw());

@@ -481,6 +481,13 @@ impl McapContainer {
         }
     }
 
+    /// Empty the cache of decompressed chunks.
+    pub fn release_cache(&self) {
+        if let Ok(mut cache) = self.cache.lock() {
+            cache.clear();
+        }
+    }
+
     /// Decompressed records of chunk `index`, through the LRU cache.
     pub fn chunk_data(&self, index: u32) -> Result<Arc<Vec<u8>>, RecordError> {
         if let Ok(mut cache) = self.cache.lock()

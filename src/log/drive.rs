@@ -603,13 +603,15 @@ impl Drive {
         Ok(sweep)
     }
 
-    /// Empty the cache of decoded images (a long stage that has its own copies, such as
-    /// UniCal's training images, need not keep full-size ones alive; they decode again when
-    /// asked for).
-    pub fn release_images(&self) {
+    /// Empty the caches of decoded images and of the file's decompressed chunks: a long
+    /// stage that has its own copies of what it reads, such as UniCal's training images and
+    /// sweeps, need not keep them alive (up to 64 MB of images and 256 MB of chunks). What is
+    /// asked for later is read and decoded again.
+    pub fn release_caches(&self) {
         if let Ok(mut cache) = self.image_cache.lock() {
             cache.clear();
         }
+        self.container.release_cache();
     }
 
     /// Decode image `index` of a camera (cached).

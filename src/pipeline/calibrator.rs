@@ -58,8 +58,9 @@ impl PipelineCalibrator {
         // before UniCal's tables are allocated (BENCHMARKS.md, "Issue 59's yardstick").
         crate::util::release_freed();
         let stage = super::run::unical(&drive, &plan, &prepared, progress)?;
-        // UniCal keeps its own training images: the full-size ones go too.
-        drive.release_images();
+        // UniCal keeps its own copies of what it read: the log's caches of decoded images
+        // and decompressed chunks go too.
+        drive.release_caches();
         crate::util::release_freed();
         let steps = match &stage {
             Some(s) => plan
