@@ -418,6 +418,68 @@ fn a_written_drive_reads_back_exactly() {
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
+/// Decoded images are kept within their bound in bytes (the least recently used go first), and
+/// released ones decode again to the same pixels.
+#[test]
+fn decoded_images_are_kept_within_their_bytes_and_decode_the_same_after_a_release() {
+    use std::sync::Arc;
+    let dir = temp_dir("image-cache");
+    let path = dir.join("drive.mcap");
+    write_drive(&path);
+    let drive = Drive::open(&path).unwrap();
+    let before = drive.load_image("cam_front", 1).unwrap();
+    assert!(Arc::ptr_eq(
+        &before,
+        &drive.load_image("cam_front", 1).unwrap()
+    ));
+    drive.release_caches();
+    let after = drive.load_image("cam_front", 1).unwrap();
+    assert!(!Arc::ptr_eq(&before, &after), "released, so decoded anew");
+    assert_eq!(before.as_raw(), after.as_raw());
+
+    // Room for one 32×24 image and a half: each image decoded pushes out the one before.
+    let one_image = after.as_raw().len();
+    let small = Drive::open_with(
+        &path,
+        &rigcal::log::DriveOptions {
+            image_cache_bytes: one_image + one_image / 2,
+            ..rigcal::log::DriveOptions::default()
+        },
+    )
+    .unwrap();
+    let first = small.load_image("cam_front", 0).unwrap();
+    let second = small.load_image("cam_front", 1).unwrap();
+    let first_again = small.load_image("cam_front", 0).unwrap();
+    assert!(!Arc::ptr_eq(&first, &first_again), "evicted by the second");
+    assert_eq!(first.as_raw(), first_again.as_raw());
+    assert!(!Arc::ptr_eq(
+        &second,
+        &small.load_image("cam_front", 1).unwrap()
+    ));
+    // A bound of two images holds the two used last.
+    let two = Drive::open_with(
+        &path,
+        &rigcal::log::DriveOptions {
+            image_cache_bytes: 2 * one_image,
+            ..rigcal::log::DriveOptions::default()
+        },
+    )
+    .unwrap();
+    let a = two.load_image("cam_front", 0).unwrap();
+    let b = two.load_image("cam_front", 1).unwrap();
+    assert!(Arc::ptr_eq(&a, &two.load_image("cam_front", 0).unwrap()));
+    two.load_image("cam_front", 2).unwrap();
+    assert!(
+        Arc::ptr_eq(&a, &two.load_image("cam_front", 0).unwrap()),
+        "used last but one"
+    );
+    assert!(
+        !Arc::ptr_eq(&b, &two.load_image("cam_front", 1).unwrap()),
+        "least recently used"
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
 #[test]
 fn the_file_is_shaped_like_a_rosbag2_recording() {
     let dir = temp_dir("shape");

@@ -23,6 +23,8 @@ use rayon::prelude::*;
 use super::error::{LogError, Problem, Problems};
 
 const MAGIC: &[u8; 8] = b"\x89MCAP0\r\n";
+/// Bytes of decompressed chunks kept for reading payloads again (least recently used first out).
+const CHUNK_CACHE_BYTES: usize = 256 << 20;
 /// Refuse single records larger than this (a corrupt length would otherwise allocate wildly).
 const MAX_RECORD_BYTES: u64 = 4 << 30;
 /// Output reserved up front when decompressing: the declared size, up to this bound (a corrupt
@@ -104,7 +106,7 @@ pub struct McapContainer {
     pub library: Option<String>,
     pub profile: Option<String>,
     pub problems: Problems,
-    cache: Mutex<ChunkCache>,
+    cache: Mutex<ByteLru<u32, Vec<u8>>>,
 }
 
 impl std::fmt::Debug for McapContainer {
@@ -176,7 +178,7 @@ impl McapContainer {
             library: None,
             profile: None,
             problems: Problems::new(),
-            cache: Mutex::new(ChunkCache::new(256 << 20)),
+            cache: Mutex::new(ByteLru::new(CHUNK_CACHE_BYTES)),
         };
         c.read_header();
         if !c.try_summary() {
@@ -491,13 +493,13 @@ impl McapContainer {
     /// Decompressed records of chunk `index`, through the LRU cache.
     pub fn chunk_data(&self, index: u32) -> Result<Arc<Vec<u8>>, RecordError> {
         if let Ok(mut cache) = self.cache.lock()
-            && let Some(hit) = cache.get(index)
+            && let Some(hit) = cache.get(&index)
         {
             return Ok(hit);
         }
         let data = Arc::new(self.load_chunk(index)?);
         if let Ok(mut cache) = self.cache.lock() {
-            cache.put(index, data.clone());
+            cache.put(index, data.clone(), data.len());
         }
         Ok(data)
     }
@@ -783,8 +785,7 @@ fn crc32(data: &[u8]) -> u32 {
     crc32fast::hash(data)
 }
 
-mod cache;
-use cache::ChunkCache;
+use super::byte_lru::ByteLru;
 
 #[cfg(test)]
 mod tests;

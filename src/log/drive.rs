@@ -6,12 +6,13 @@
 //! image. Header stamps are the sensor time; a topic whose stamps are all zero falls back to log
 //! time, and [`SensorStream::stamp_source`] says which was used.
 
-use std::collections::{BTreeMap, VecDeque};
+use std::collections::BTreeMap;
 use std::path::Path;
 use std::sync::{Arc, Mutex};
 
 use image::RgbImage;
 
+use super::byte_lru::ByteLru;
 use super::container::{McapContainer, MessageRef};
 use super::decode::Codec;
 use super::error::{LogError, Problem, Problems};
@@ -170,8 +171,8 @@ pub struct Drive {
     pub camera_infos: BTreeMap<String, CameraIntrinsics>,
     pub streams: Vec<SensorStream>,
     pub problems: Problems,
-    image_cache: Arc<Mutex<VecDeque<((usize, usize), Arc<RgbImage>)>>>,
-    image_cache_bytes: usize,
+    /// Decoded images by (stream, frame index), bounded by [`DriveOptions::image_cache_bytes`].
+    image_cache: Arc<Mutex<ByteLru<(usize, usize), RgbImage>>>,
     /// The frames runs skipped because they did not decode ([`super::frames`]).
     pub(super) skipped_frames: Arc<super::frames::SkippedFrames>,
     /// When each image row of the cameras was exposed relative to the image's stamp (a
@@ -498,9 +499,8 @@ impl Drive {
             camera_infos,
             streams,
             problems,
-            image_cache: Arc::new(Mutex::new(VecDeque::new())),
+            image_cache: Arc::new(Mutex::new(ByteLru::new(options.image_cache_bytes))),
             skipped_frames: Default::default(),
-            image_cache_bytes: options.image_cache_bytes,
             camera_readout: options.camera_readout,
         })
     }
@@ -526,7 +526,6 @@ impl Drive {
             streams: self.streams.clone(),
             problems: self.problems.clone(),
             image_cache: Arc::clone(&self.image_cache),
-            image_cache_bytes: self.image_cache_bytes,
             skipped_frames: Arc::clone(&self.skipped_frames),
             camera_readout: readout,
         }
@@ -603,10 +602,10 @@ impl Drive {
         Ok(sweep)
     }
 
-    /// Empty the caches of decoded images and of the file's decompressed chunks: a long
-    /// stage that has its own copies of what it reads, such as UniCal's training images and
-    /// sweeps, need not keep them alive (up to 64 MB of images and 256 MB of chunks). What is
-    /// asked for later is read and decoded again.
+    /// Empty the caches of decoded images ([`DriveOptions::image_cache_bytes`]) and of the
+    /// file's decompressed chunks: a long stage that has its own copies of what it reads, such
+    /// as UniCal's training images and sweeps, need not keep them alive. What is asked for
+    /// later is read and decoded again.
     pub fn release_caches(&self) {
         if let Ok(mut cache) = self.image_cache.lock() {
             cache.clear();
@@ -617,10 +616,10 @@ impl Drive {
     /// Decode image `index` of a camera (cached).
     pub fn load_image(&self, sensor: &str, index: usize) -> Result<Arc<RgbImage>, LogError> {
         let s = self.stream_index(sensor)?;
-        if let Ok(cache) = self.image_cache.lock()
-            && let Some((_, img)) = cache.iter().find(|(k, _)| *k == (s, index))
+        if let Ok(mut cache) = self.image_cache.lock()
+            && let Some(img) = cache.get(&(s, index))
         {
-            return Ok(img.clone());
+            return Ok(img);
         }
         let stream = &self.streams[s];
         let frame = self.frame(stream, index)?;
@@ -640,13 +639,7 @@ impl Drive {
         .map_err(|e| self.payload_error(stream, &frame.msg, e.0))?;
         let image = Arc::new(image);
         if let Ok(mut cache) = self.image_cache.lock() {
-            cache.push_back(((s, index), image.clone()));
-            let mut bytes: usize = cache.iter().map(|(_, img)| img.as_raw().len()).sum();
-            while bytes > self.image_cache_bytes && cache.len() > 1 {
-                if let Some((_, old)) = cache.pop_front() {
-                    bytes -= old.as_raw().len();
-                }
-            }
+            cache.put((s, index), image.clone(), image.as_raw().len());
         }
         Ok(image)
     }

@@ -7,6 +7,7 @@
 //! the trajectory and the initial rig → sweeps and images are decoded on demand
 //! ([`Drive::load_sweep`], [`Drive::load_image`]) through bounded caches.
 
+mod byte_lru;
 pub mod cdr;
 pub mod container;
 pub mod decode;

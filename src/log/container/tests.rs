@@ -31,12 +31,3 @@ use super::*;
 fn crc32_known_value() {
     assert_eq!(crc32(b"123456789"), 0xCBF4_3926);
 }
-
-#[test]
-fn cache_evicts_oldest() {
-    let mut c = ChunkCache::new(10);
-    c.put(0, Arc::new(vec![0; 6]));
-    c.put(1, Arc::new(vec![0; 6]));
-    assert!(c.get(0).is_none());
-    assert!(c.get(1).is_some());
-}
