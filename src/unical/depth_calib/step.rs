@@ -223,7 +223,13 @@ impl DepthCalibration {
                     background,
                     appearance: &stage.appearance,
                     opacity,
-                    pose_levels: self.config.colour_pose_levels,
+                    // A pose the colour does not move this step needs no spatial gradient:
+                    // skip its table reads.
+                    pose_levels: if colour_moves_poses && !held[k] {
+                        self.config.colour_pose_levels
+                    } else {
+                        Some(0.0)
+                    },
                 };
                 let (pose, exposure) = (&stage.poses[k], &stage.exposure[k]);
                 let total_rays = rays.len() as f64;
