@@ -17,6 +17,8 @@
 
 use crate::sim::wide::dispatch_wide;
 
+pub use super::grad_sink::{ACC_BLOCK, GradAccumulator, GradSink, Scaled, SparseGrad};
+
 /// Features per entry.
 pub const F: usize = 2;
 
@@ -64,163 +66,6 @@ pub struct HashGrid {
     /// Per level, the factor its features enter the encoding with (1: fully open; see
     /// [`HashGrid::set_active_levels`]).
     level_weights: Vec<f32>,
-}
-
-/// Gradients of a batch with respect to table entries: (entry, dL/d features), unsorted, with
-/// repeats. [`SparseGrad::merge`] sums repeats.
-#[derive(Clone, Debug, Default)]
-pub struct SparseGrad {
-    pub entries: Vec<(u32, [f32; F])>,
-}
-
-impl SparseGrad {
-    /// Sum repeated entries (sorted by entry).
-    pub fn merge(&mut self) {
-        self.entries.sort_unstable_by_key(|e| e.0);
-        let mut out: Vec<(u32, [f32; F])> = Vec::with_capacity(self.entries.len());
-        for &(i, g) in &self.entries {
-            match out.last_mut() {
-                Some(last) if last.0 == i => {
-                    for f in 0..F {
-                        last.1[f] += g[f];
-                    }
-                }
-                _ => out.push((i, g)),
-            }
-        }
-        self.entries = out;
-    }
-
-    pub fn append(&mut self, other: &mut SparseGrad) {
-        self.entries.append(&mut other.entries);
-    }
-}
-
-/// Where a backward pass puts hash-table gradients: a list of (entry, gradient) pairs
-/// ([`SparseGrad`]) or, on the hot path, straight into a dense accumulator ([`Scaled`]).
-pub trait GradSink {
-    fn add(&mut self, entry: u32, g: [f32; F]);
-}
-
-impl GradSink for SparseGrad {
-    #[inline]
-    fn add(&mut self, entry: u32, g: [f32; F]) {
-        self.entries.push((entry, g));
-    }
-}
-
-/// `None` discards (e.g. no background field to train).
-impl<G: GradSink> GradSink for Option<G> {
-    #[inline]
-    fn add(&mut self, entry: u32, g: [f32; F]) {
-        if let Some(sink) = self {
-            sink.add(entry, g);
-        }
-    }
-}
-
-/// Adds `scale ×` each gradient into a [`GradAccumulator`] as it is produced (one accumulator
-/// per parallel chunk of rays, so no list of millions of pairs is built and re-read).
-pub struct Scaled<'a> {
-    pub acc: &'a mut GradAccumulator,
-    pub scale: f32,
-}
-
-impl GradSink for Scaled<'_> {
-    #[inline]
-    fn add(&mut self, entry: u32, g: [f32; F]) {
-        self.acc.add_one(entry, g.map(|v| v * self.scale));
-    }
-}
-
-/// Sums sparse gradients by scattering into a dense buffer (O(n), where sorting the millions of
-/// (entry, gradient) pairs of a step was the step's largest cost), marking which blocks of
-/// [`ACC_BLOCK`] entries were touched so only they are read back and cleared. Allocated once
-/// per optimisation; [`super::adam::SparseAdam::step_accumulated`] reads and clears several in
-/// one parallel pass in index order.
-#[derive(Clone, Debug)]
-pub struct GradAccumulator {
-    grad: Vec<f32>,
-    dirty: Vec<bool>,
-}
-
-/// Entries per dirty flag of a [`GradAccumulator`].
-pub const ACC_BLOCK: usize = 64;
-
-impl GradAccumulator {
-    pub fn new(entries: usize) -> Self {
-        Self {
-            grad: super::table_memory::zeroed(entries * F),
-            dirty: vec![false; entries.div_ceil(ACC_BLOCK)],
-        }
-    }
-
-    /// Add `scale · g`.
-    pub fn add(&mut self, g: &SparseGrad, scale: f32) {
-        for &(entry, v) in &g.entries {
-            self.add_one(entry, v.map(|x| x * scale));
-        }
-    }
-
-    /// Add one entry's gradient.
-    #[inline]
-    pub fn add_one(&mut self, entry: u32, v: [f32; F]) {
-        let e = entry as usize;
-        let Some(slot) = self.grad.get_mut(e * F..e * F + F) else {
-            return;
-        };
-        for f in 0..F {
-            slot[f] += v[f];
-        }
-        self.dirty[e / ACC_BLOCK] = true;
-    }
-
-    /// Blocks of [`ACC_BLOCK`] entries: their gradients (`ACC_BLOCK · F` values) and whether
-    /// any was touched, for a consumer that clears both.
-    pub(crate) fn blocks_mut(&mut self) -> impl Iterator<Item = (&mut [f32], &mut bool)> {
-        self.grad
-            .chunks_mut(ACC_BLOCK * F)
-            .zip(self.dirty.iter_mut())
-    }
-
-    /// Sum several accumulators (in order, so the result is deterministic) and empty them: the
-    /// plain path [`super::adam::SparseAdam::step_accumulated`] fuses with the optimiser.
-    pub fn drain_all(accs: &mut [GradAccumulator]) -> SparseGrad {
-        let Some((first, rest)) = accs.split_first_mut() else {
-            return SparseGrad::default();
-        };
-        for acc in rest {
-            let g = acc.drain();
-            first.add(&g, 1.0);
-        }
-        first.drain()
-    }
-
-    /// The summed gradient, in entry order: every entry of a touched block whose gradient is
-    /// not zero (an entry whose contributions cancel exactly moves no optimiser either). The
-    /// accumulator is empty afterwards.
-    pub fn drain(&mut self) -> SparseGrad {
-        let mut out = SparseGrad::default();
-        for (block, (grads, dirty)) in self
-            .grad
-            .chunks_mut(ACC_BLOCK * F)
-            .zip(self.dirty.iter_mut())
-            .enumerate()
-        {
-            if !std::mem::take(dirty) {
-                continue;
-            }
-            for (k, g) in grads.chunks_exact_mut(F).enumerate() {
-                if g.iter().any(|v| *v != 0.0) {
-                    let mut v = [0f32; F];
-                    v.copy_from_slice(g);
-                    g.fill(0.0);
-                    out.entries.push(((block * ACC_BLOCK + k) as u32, v));
-                }
-            }
-        }
-        out
-    }
 }
 
 /// Levels whose corners are found together before the table is read.
@@ -470,6 +315,7 @@ dispatch_wide! {
 
 #[inline(always)]
 fn encode_inner<const WIDE: bool>(grid: &HashGrid, x: [f32; 3], out: &mut [f32]) {
+    let near = super::grad_sink::accumulator_near(&grid.params);
     for (chunk, levels) in grid.levels.chunks(LEVEL_CHUNK).enumerate() {
         let first = chunk * LEVEL_CHUNK;
         let mut corners = [Corners::default(); LEVEL_CHUNK];
@@ -484,6 +330,9 @@ fn encode_inner<const WIDE: bool>(grid: &HashGrid, x: [f32; 3], out: &mut [f32])
             if w == 0.0 {
                 out[l * F..(l + 1) * F].fill(0.0);
                 continue;
+            }
+            if let Some(near) = near {
+                super::grad_sink::prefetch_slots(near, &c.entry);
             }
             let mut acc = [0f32; F];
             for k in 0..8 {
@@ -593,25 +442,6 @@ mod tests {
             *p = ((i as f32 * 0.618).fract() - 0.5) * 2.0;
         }
         g
-    }
-
-    #[test]
-    fn accumulator_sums_like_merge() {
-        let mut g = SparseGrad::default();
-        for k in 0..200u32 {
-            g.entries.push((k * 7 % 31, [k as f32, 1.0]));
-        }
-        let mut acc = GradAccumulator::new(40);
-        acc.add(&g, 0.5);
-        let mut a = acc.drain();
-        a.entries.sort_unstable_by_key(|e| e.0);
-        g.merge();
-        assert_eq!(a.entries.len(), g.entries.len());
-        for (x, y) in a.entries.iter().zip(&g.entries) {
-            assert_eq!(x.0, y.0);
-            assert!((x.1[0] - 0.5 * y.1[0]).abs() < 1e-3 && (x.1[1] - 0.5 * y.1[1]).abs() < 1e-6);
-        }
-        assert!(acc.drain().entries.is_empty());
     }
 
     #[test]

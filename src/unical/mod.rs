@@ -45,6 +45,7 @@ pub mod depth_calib;
 pub mod depth_config;
 pub mod field;
 pub mod gemm;
+pub mod grad_sink;
 pub mod hash_grid;
 pub mod hash_load;
 pub mod intensity;

@@ -102,10 +102,7 @@ impl DepthCalibration {
                                 (camera(*a), camera(*b)),
                                 rays,
                                 &settings,
-                                &mut Scaled {
-                                    acc: &mut *acc,
-                                    scale: w as f32,
-                                },
+                                &mut Scaled::new(&field.grid, &mut *acc, w as f32),
                             ),
                             AlignmentLoss::ProjectedRayDistance => projected_ray_step(
                                 (camera(*a), camera(*b)),

@@ -50,7 +50,7 @@ impl DepthCalibration {
             .zip(self.grid_accs.par_iter_mut())
             .map(|(c, acc)| {
                 let share = c.len() as f64 / total;
-                let mut sink = Scaled { acc, scale: 1.0 };
+                let mut sink = Scaled::new(&field.grid, acc, 1.0);
                 let mut mlp = field.geo.zero_grad();
                 let loss = sdf_fit_step(field, c, share as f32, &mut sink, &mut mlp);
                 (loss * share, mlp)

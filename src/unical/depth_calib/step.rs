@@ -112,10 +112,7 @@ impl DepthCalibration {
                     // lidar_step averages over its chunk: weight chunks by size, sensors
                     // equally.
                     let share = c.len() as f64 / total_rays / lidars;
-                    let mut sink = Scaled {
-                        acc,
-                        scale: share as f32,
-                    };
+                    let mut sink = Scaled::new(&model.field.grid, acc, share as f32);
                     let part = lidar_step(model, pose, map, &weights, c, &mut sink);
                     (c.len(), part)
                 })
@@ -242,9 +239,10 @@ impl DepthCalibration {
                     .into_par_iter()
                     .map(|(c, acc, background_acc)| {
                         let w = (c.len() as f64 / total_rays / cameras as f64 * rgb_weight) as f32;
-                        let mut sink = Scaled { acc, scale: w };
-                        let mut background_sink =
-                            background_acc.map(|acc| Scaled { acc, scale: w });
+                        let mut sink = Scaled::new(&model.field.grid, acc, w);
+                        let mut background_sink = background_acc
+                            .zip(model.background)
+                            .map(|(acc, b)| Scaled::new(&b.grid, acc, w));
                         let part =
                             colour_step(model, pose, exposure, c, &mut sink, &mut background_sink);
                         (c.len(), part)
