@@ -72,7 +72,7 @@ impl<G: GradSink> GradSink for Option<G> {
 /// per parallel chunk of rays, so no list of millions of pairs is built and re-read).
 ///
 /// While it lives, the grid's encodes on this thread also prefetch the accumulator's slots of
-/// the entries they read ([`prefetch_slots`]): the backward of the same ray, moments later,
+/// the entries they read: the backward of the same ray, moments later,
 /// then adds into lines already in cache instead of waiting for each from memory.
 pub struct Scaled<'a> {
     acc: &'a mut GradAccumulator,
