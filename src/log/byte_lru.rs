@@ -3,7 +3,8 @@
 //!
 //! Entries are shared (`Arc`), so an evicted entry stays alive for whoever still holds it. The
 //! newest entry is kept even when it alone is larger than the budget (a caller asked for it and
-//! may ask again). Lookups scan the entries: the caches hold tens of them, not thousands.
+//! may ask again). Lookups scan the entries: the image cache holds about ten, the chunk cache
+//! up to a few hundred (its 256 MB in chunks of a megabyte or more, as MCAP writers make them).
 
 use std::collections::VecDeque;
 use std::sync::Arc;

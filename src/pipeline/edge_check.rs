@@ -30,8 +30,11 @@ const STEP_RAD: f64 = 0.3 * std::f64::consts::PI / 180.0;
 const STEP_M: f64 = 0.03;
 /// Rotations are compared with translations as the displacement they cause at this lever (m).
 const LEVER_M: f64 = 10.0;
-/// The edge score's own error, added in quadrature to every observed axis's σ (module doc).
+/// The edge score's own rotation error (°), added in quadrature to every observed rotation
+/// axis's σ (module doc).
 pub const FLOOR_DEG: f64 = 0.02;
+/// The edge score's own translation error (m), added in quadrature to every observed
+/// translation axis's σ (module doc).
 pub const FLOOR_M: f64 = 0.005;
 
 /// One camera against one LiDAR, over a few frames.

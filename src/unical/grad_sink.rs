@@ -90,7 +90,8 @@ impl<'a> Scaled<'a> {
         NEAR.with(|near| {
             let mut pairs = near.get();
             // A free pair, else the second (two tables at most are trained together: the
-            // scene's and the background's).
+            // scene's and the background's). The last sink of a table wins: dropping either of
+            // two overlapping sinks ends the table's prefetching (lost hints, same results).
             let k = pairs
                 .iter()
                 .position(|p| p.0 == 0 || p.0 == table)
@@ -149,8 +150,9 @@ pub(super) fn prefetch_slots((address, len): (usize, usize), entries: &[u32; 8])
         let i = e as usize * F;
         if i < len {
             // SAFETY: `_mm_prefetch` reads and writes nothing and never faults, whatever the
-            // address; this one is in a live accumulator (its `Scaled` is alive on this thread,
-            // and `i < len`).
+            // address, and the pointer is formed with `wrapping_add`. The address is normally
+            // in a live accumulator, but it may be stale (a leaked `Scaled`, a table reallocated
+            // at the same address): then a useless hint, never a fault or a wrong result.
             unsafe {
                 let p = (address as *const f32).wrapping_add(i) as *const i8;
                 std::arch::x86_64::_mm_prefetch::<{ std::arch::x86_64::_MM_HINT_T0 }>(p);
@@ -278,7 +280,14 @@ mod tests {
     /// later encode prefetches nothing stale; two tables' sinks live side by side.
     #[test]
     fn a_sink_registers_its_accumulator_while_it_lives() {
-        let grid = HashGrid::new(crate::unical::hash_grid::HashGridConfig::default(), 1);
+        let grid = HashGrid::new(
+            crate::unical::hash_grid::HashGridConfig {
+                levels: 4,
+                log2_table_size: 10,
+                ..Default::default()
+            },
+            1,
+        );
         let other = HashGrid::new(
             crate::unical::hash_grid::HashGridConfig {
                 levels: 2,
@@ -296,6 +305,7 @@ mod tests {
             let _background = Scaled::new(&other, &mut b, 1.0);
             assert_eq!(accumulator_near(&grid.params), Some(a_at));
             assert_eq!(accumulator_near(&other.params), Some(b_at));
+            // Entries past the accumulator's end are skipped (this only shows it does not fault).
             prefetch_slots(a_at, &[0, 1, 2, 3, 60, 63, 64, 1 << 30]);
             sink.add(3, [2.0, 4.0]);
         }

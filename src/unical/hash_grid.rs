@@ -13,7 +13,9 @@
 //! touched entries (a step touches a tiny fraction of the table; method.md §18). Spatial gradient:
 //! the derivative of the trilinear weights times `scale_l`, used for pose gradients and Eikonal.
 //! Both passes are compiled for AVX-512 and AVX2 as well and run as the CPU allows
-//! ([`crate::sim::wide`]).
+//! ([`crate::sim::wide`]). While a [`Scaled`] sink lives on the thread, the encode also
+//! prefetches the gradient accumulator's slots of the corners it reads
+//! ([`super::grad_sink`]), so the backward of the same ray finds them in cache.
 
 use crate::sim::wide::dispatch_wide;
 
