@@ -6,7 +6,6 @@
 //!
 //! `cargo run --release --no-default-features --example sigma_check -- LOG REFERENCE RESULT [FRAMES]`
 
-use glam::DVec3;
 use rigcal::calib::Rig;
 use rigcal::calib::file::CalibrationFile;
 use rigcal::log::Drive;
@@ -42,43 +41,7 @@ fn main() {
         ];
         let check = EdgeCheck::new(&drive, &end, (cam, &lidar), frames, &[], &[]).unwrap();
         let sig = check.sigmas(at).0;
-        // Newton step of the summed score by central differences.
-        let step = [
-            0.3f64.to_radians(),
-            0.3f64.to_radians(),
-            0.3f64.to_radians(),
-            0.03,
-            0.03,
-            0.03,
-        ];
-        let f = |d: [f64; 6]| {
-            check.score(
-                at.perturbed_right(DVec3::new(d[0], d[1], d[2]), DVec3::new(d[3], d[4], d[5])),
-            )
-        };
-        let unit = |i: usize, s: f64| -> [f64; 6] {
-            std::array::from_fn(|k| if k == i { s * step[i] } else { 0.0 })
-        };
-        let f0 = f([0.0; 6]);
-        let mut h = [[0.0; 6]; 6];
-        let mut g = [0.0; 6];
-        for i in 0..6 {
-            let (p, m) = (f(unit(i, 1.0)), f(unit(i, -1.0)));
-            g[i] = (p - m) / (2.0 * step[i]);
-            h[i][i] = (p + m - 2.0 * f0) / (step[i] * step[i]);
-            for j in i + 1..6 {
-                let at2 = |a: f64, b: f64| {
-                    let mut d = unit(i, a);
-                    d[j] = b * step[j];
-                    f(d)
-                };
-                let v = (at2(1.0, 1.0) - at2(1.0, -1.0) - at2(-1.0, 1.0) + at2(-1.0, -1.0))
-                    / (4.0 * step[i] * step[j]);
-                h[i][j] = v;
-                h[j][i] = v;
-            }
-        }
-        let hm = solve(h, g);
+        let newton = check.local_model(at).newton_step();
         let fmt = |v: [f64; 6]| {
             format!(
                 "{:+.3} {:+.3} {:+.3}° {:+.2} {:+.2} {:+.2} cm",
@@ -93,33 +56,9 @@ fn main() {
         println!("{cam}");
         println!("  error  {}", fmt(err));
         println!("  sigma  {}", fmt(sig));
-        match hm {
-            Some(n) => println!("  newton {}", fmt(n.map(|x| -x))),
-            None => println!("  newton (H not invertible)"),
+        match newton {
+            Some(n) => println!("  newton {}", fmt(n)),
+            None => println!("  newton (H not positive definite)"),
         }
     }
-}
-
-/// Solve H x = g by Gaussian elimination with partial pivoting.
-fn solve(mut h: [[f64; 6]; 6], mut g: [f64; 6]) -> Option<[f64; 6]> {
-    for c in 0..6 {
-        let p = (c..6).max_by(|&a, &b| h[a][c].abs().total_cmp(&h[b][c].abs()))?;
-        if h[p][c].abs() < 1e-12 {
-            return None;
-        }
-        h.swap(c, p);
-        g.swap(c, p);
-        for r in c + 1..6 {
-            let k = h[r][c] / h[c][c];
-            for j in c..6 {
-                h[r][j] -= k * h[c][j];
-            }
-            g[r] -= k * g[c];
-        }
-    }
-    let mut x = [0.0; 6];
-    for r in (0..6).rev() {
-        x[r] = (g[r] - (r + 1..6).map(|j| h[r][j] * x[j]).sum::<f64>()) / h[r][r];
-    }
-    Some(x)
 }

@@ -129,8 +129,9 @@ impl EdgeCheck {
         self.frame_sums(vehicle_from_camera).iter().sum::<f64>() / points.max(1) as f64
     }
 
-    /// The 1-σ uncertainty of each axis of the camera's pose at `at` (module doc).
-    pub fn sigmas(&self, at: Rigid) -> AxisSigmas {
+    /// The edge cost's local quadratic model at `at` (module doc): central differences of the
+    /// summed edge distances over every frame, in the camera's own frame.
+    pub fn local_model(&self, at: Rigid) -> LocalModel {
         let step = [STEP_RAD, STEP_RAD, STEP_RAD, STEP_M, STEP_M, STEP_M];
         let pose = |dx: [f64; 6]| {
             at.perturbed_right(
@@ -150,9 +151,9 @@ impl EdgeCheck {
         let minus: Vec<Vec<f64>> = (0..6)
             .map(|i| self.frame_sums(pose(unit(i, -1.0))))
             .collect();
-        let mut h = [[0.0; 6]; 6];
+        let mut hessian = [[0.0; 6]; 6];
         for i in 0..6 {
-            h[i][i] = (total(&plus[i]) + total(&minus[i]) - 2.0 * s0) / (step[i] * step[i]);
+            hessian[i][i] = (total(&plus[i]) + total(&minus[i]) - 2.0 * s0) / (step[i] * step[i]);
             for j in i + 1..6 {
                 let at2 = |a: f64, b: f64| {
                     let mut d = unit(i, a);
@@ -161,19 +162,30 @@ impl EdgeCheck {
                 };
                 let v = (at2(1.0, 1.0) - at2(1.0, -1.0) - at2(-1.0, 1.0) + at2(-1.0, -1.0))
                     / (4.0 * step[i] * step[j]);
-                h[i][j] = v;
-                h[j][i] = v;
+                hessian[i][j] = v;
+                hessian[j][i] = v;
             }
         }
-        // Each frame's gradient, centred, and their scatter.
-        let k = centre.len();
-        let grads: Vec<[f64; 6]> = (0..k)
+        let frame_gradients: Vec<[f64; 6]> = (0..centre.len())
             .map(|f| std::array::from_fn(|i| (plus[i][f] - minus[i][f]) / (2.0 * step[i])))
             .collect();
-        let mean: [f64; 6] =
-            std::array::from_fn(|i| grads.iter().map(|g| g[i]).sum::<f64>() / k as f64);
+        let gradient = std::array::from_fn(|i| frame_gradients.iter().map(|g| g[i]).sum::<f64>());
+        LocalModel {
+            hessian,
+            gradient,
+            frame_gradients,
+        }
+    }
+
+    /// The 1-σ uncertainty of each axis of the camera's pose at `at` (module doc).
+    pub fn sigmas(&self, at: Rigid) -> AxisSigmas {
+        let model = self.local_model(at);
+        let grads = &model.frame_gradients;
+        // Each frame's gradient, centred, and their scatter.
+        let k = grads.len();
+        let mean: [f64; 6] = std::array::from_fn(|i| model.gradient[i] / k.max(1) as f64);
         let mut b = [[0.0; 6]; 6];
-        for g in &grads {
+        for g in grads {
             for r in 0..6 {
                 for c in 0..6 {
                     b[r][c] += (g[r] - mean[r]) * (g[c] - mean[c]);
@@ -186,7 +198,26 @@ impl EdgeCheck {
             1.0
         };
         b.iter_mut().flatten().for_each(|v| *v *= scale_b.max(1.0));
-        AxisSigmas(with_floor(sandwich_sigmas(h, b, k)))
+        AxisSigmas(with_floor(sandwich_sigmas(model.hessian, b, k)))
+    }
+}
+
+/// The edge cost's local model at a pose (rotations first; px per rad and per m).
+#[derive(Clone, Debug)]
+pub struct LocalModel {
+    /// The Hessian of the summed edge distances.
+    pub hessian: [[f64; 6]; 6],
+    /// Their gradient (the sum of `frame_gradients`).
+    pub gradient: [f64; 6],
+    /// Each frame's own gradient.
+    pub frame_gradients: Vec<[f64; 6]>,
+}
+
+impl LocalModel {
+    /// The Newton step to the model's minimum, `−H⁻¹ g`, where `H` is positive definite.
+    pub fn newton_step(&self) -> Option<[f64; 6]> {
+        let h: [f64; 36] = std::array::from_fn(|k| self.hessian[k / 6][k % 6]);
+        crate::geometry::spd::solve6(h, self.gradient).map(|x| x.map(|v| -v))
     }
 }
 
@@ -265,5 +296,37 @@ mod tests {
         assert!((s[3] - FLOOR_M).abs() < 1e-12);
         assert!((s[4] - 0.013).abs() < 1e-12, "{s:?}");
         assert!(s[2].is_infinite() && s[5].is_infinite());
+    }
+
+    /// The Newton step of a quadratic `½ xᵀHx + gᵀx` lands on its minimum; an indefinite
+    /// model has none.
+    #[test]
+    fn the_newton_step_reaches_a_quadratic_minimum() {
+        let minimum = [0.01, -0.02, 0.003, 0.05, -0.01, 0.02];
+        let mut hessian = [[0.0; 6]; 6];
+        for (i, row) in hessian.iter_mut().enumerate() {
+            row[i] = 2.0 + i as f64;
+            if i + 1 < 6 {
+                row[i + 1] = 0.5;
+            }
+            if i > 0 {
+                row[i - 1] = 0.5;
+            }
+        }
+        // At x = 0 the gradient of ½ (x − m)ᵀ H (x − m) is −H m.
+        let gradient =
+            std::array::from_fn(|r| -(0..6).map(|c| hessian[r][c] * minimum[c]).sum::<f64>());
+        let model = LocalModel {
+            hessian,
+            gradient,
+            frame_gradients: vec![gradient],
+        };
+        let step = model.newton_step().unwrap();
+        for (s, m) in step.iter().zip(minimum) {
+            assert!((s - m).abs() < 1e-12, "{step:?}");
+        }
+        hessian[2][2] = -1.0;
+        let indefinite = LocalModel { hessian, ..model };
+        assert!(indefinite.newton_step().is_none());
     }
 }
