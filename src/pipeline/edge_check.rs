@@ -169,10 +169,8 @@ impl EdgeCheck {
         let frame_gradients: Vec<[f64; 6]> = (0..centre.len())
             .map(|f| std::array::from_fn(|i| (plus[i][f] - minus[i][f]) / (2.0 * step[i])))
             .collect();
-        let gradient = std::array::from_fn(|i| frame_gradients.iter().map(|g| g[i]).sum::<f64>());
         LocalModel {
             hessian,
-            gradient,
             frame_gradients,
         }
     }
@@ -183,7 +181,8 @@ impl EdgeCheck {
         let grads = &model.frame_gradients;
         // Each frame's gradient, centred, and their scatter.
         let k = grads.len();
-        let mean: [f64; 6] = std::array::from_fn(|i| model.gradient[i] / k.max(1) as f64);
+        let gradient = model.gradient();
+        let mean: [f64; 6] = std::array::from_fn(|i| gradient[i] / k.max(1) as f64);
         let mut b = [[0.0; 6]; 6];
         for g in grads {
             for r in 0..6 {
@@ -207,17 +206,20 @@ impl EdgeCheck {
 pub struct LocalModel {
     /// The Hessian of the summed edge distances.
     pub hessian: [[f64; 6]; 6],
-    /// Their gradient (the sum of `frame_gradients`).
-    pub gradient: [f64; 6],
     /// Each frame's own gradient.
     pub frame_gradients: Vec<[f64; 6]>,
 }
 
 impl LocalModel {
+    /// The gradient of the summed edge distances: the sum of the frames' gradients.
+    pub fn gradient(&self) -> [f64; 6] {
+        std::array::from_fn(|i| self.frame_gradients.iter().map(|g| g[i]).sum())
+    }
+
     /// The Newton step to the model's minimum, `−H⁻¹ g`, where `H` is positive definite.
     pub fn newton_step(&self) -> Option<[f64; 6]> {
         let h: [f64; 36] = std::array::from_fn(|k| self.hessian[k / 6][k % 6]);
-        crate::geometry::spd::solve6(h, self.gradient).map(|x| x.map(|v| -v))
+        crate::geometry::spd::solve6(h, self.gradient()).map(|x| x.map(|v| -v))
     }
 }
 
@@ -318,7 +320,6 @@ mod tests {
             std::array::from_fn(|r| -(0..6).map(|c| hessian[r][c] * minimum[c]).sum::<f64>());
         let model = LocalModel {
             hessian,
-            gradient,
             frame_gradients: vec![gradient],
         };
         let step = model.newton_step().unwrap();
