@@ -7,7 +7,8 @@
 //! `cargo run --release --no-default-features --example hand_eye -- LOG.mcap GT [DEG CM SEEDS]`,
 //! `GT` a native calibration file or a dataset's ground_truth.json.
 
-use rigcal::calib::dataset_json::load_reference;
+mod reference;
+
 use rigcal::classical::camera_motion::{DEFAULT_FRAMES, camera_pairs, fit_rig_cameras, lidar_map};
 use rigcal::classical::lidar_translation::fit_pose;
 use rigcal::log::Drive;
@@ -26,13 +27,7 @@ fn main() -> Result<(), String> {
     };
     let (deg, cm, seeds) = (number(2, 10.0), number(3, 100.0), number(4, 1.0) as u64);
     let drive = Drive::open(std::path::Path::new(log)).map_err(|e| e.to_string())?;
-    let reference = load_reference(std::path::Path::new(gt)).map_err(|e| e.to_string())?;
-    let mut truth = drive.rig.clone();
-    for s in &mut truth.sensors {
-        if let Some(r) = reference.sensor(&s.name) {
-            s.vehicle_from_sensor = r.vehicle_from_sensor;
-        }
-    }
+    let truth = reference::at_reference(&drive.rig, gt)?;
     let frames = std::env::var("RIGCAL_FRAMES")
         .ok()
         .and_then(|s| s.parse().ok())

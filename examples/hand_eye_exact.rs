@@ -1,0 +1,137 @@
+//! Does the hand-eye's rotation bias come from the estimator or from the keypoints? Each
+//! camera's pairs are read from the truth; every match is triangulated with the true extrinsic
+//! and reprojected exactly into both images (the estimator's input without keypoint error),
+//! then again with symmetric noise of `NOISE_PX` pixels; the fit from the truth is printed for
+//! the measured, the exact and the noisy rays, as the rotation error about the camera's axes.
+//!
+//! Two probes of the measured matches, by environment: `SHIFT_PX=DX,DY` moves every measured
+//! keypoint by a constant offset (pixels at the camera's focal length) before the fit, and
+//! `UPPER=1` keeps only the matches above the optical axis (no ground).
+//!
+//! `cargo run --release --no-default-features --example hand_eye_exact -- LOG.mcap GT [NOISE_PX]`
+//! (docs/experiments/pipeline.md, "The hand-eye tilts every camera down").
+
+mod reference;
+
+use glam::DVec3;
+use rigcal::classical::camera_motion::{DEFAULT_FRAMES, camera_pairs};
+use rigcal::classical::hand_eye::{MotionPair, solve};
+use rigcal::classical::lidar_translation::triangulate;
+use rigcal::geometry::Rigid;
+use rigcal::log::Drive;
+
+fn main() -> Result<(), String> {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let (log, gt) = match (args.first(), args.get(1)) {
+        (Some(l), Some(g)) => (l, g),
+        _ => return Err("usage: hand_eye_exact LOG.mcap GT.yaml [NOISE_PX]".into()),
+    };
+    let noise_px: f64 = args.get(2).and_then(|s| s.parse().ok()).unwrap_or(1.0);
+    let drive = Drive::open(std::path::Path::new(log)).map_err(|e| e.to_string())?;
+    let truth = reference::at_reference(&drive.rig, gt)?;
+    let names: Vec<String> = truth.cameras().map(|c| c.name.clone()).collect();
+    for name in &names {
+        let Some(sensor) = truth.sensor(name) else {
+            continue;
+        };
+        let x = sensor.vehicle_from_sensor;
+        let fx = sensor.camera.as_ref().map_or(1000.0, |c| c.fx);
+        let found = camera_pairs(
+            &drive,
+            &truth,
+            name,
+            DEFAULT_FRAMES,
+            &[],
+            false,
+            &|_, _, _| {},
+        )
+        .map_err(|e| e.to_string())?;
+        let mut seed = 0x9E37_79B9_7F4A_7C15u64;
+        let mut gauss = move || {
+            let mut u = || {
+                seed ^= seed << 13;
+                seed ^= seed >> 7;
+                seed ^= seed << 17;
+                (seed >> 11) as f64 / (1u64 << 53) as f64
+            };
+            let (a, b) = (u().max(1e-12), u());
+            (-2.0 * a.ln()).sqrt() * (std::f64::consts::TAU * b).cos()
+        };
+        let remade = |sigma_px: f64, gauss: &mut dyn FnMut() -> f64| -> Vec<MotionPair> {
+            found
+                .pairs
+                .iter()
+                .map(|p| {
+                    let points = triangulate(std::slice::from_ref(p), &found.world_from_vehicle, x);
+                    let j_from_i = (x.inverse() * p.vehicle_motion * x).inverse();
+                    let mut jitter = |r: DVec3| -> DVec3 {
+                        let (u, v) = (r.x / r.z, r.y / r.z);
+                        let s = sigma_px / fx;
+                        DVec3::new(u + s * gauss(), v + s * gauss(), 1.0).normalize_or_zero()
+                    };
+                    let rays = points
+                        .iter()
+                        .map(|t| {
+                            let in_i = x.rotation.inverse() * t.from_camera;
+                            let in_j = j_from_i.transform_point(in_i);
+                            (
+                                jitter(in_i.normalize_or_zero()),
+                                jitter(in_j.normalize_or_zero()),
+                            )
+                        })
+                        .collect();
+                    MotionPair { rays, ..p.clone() }
+                })
+                .collect()
+        };
+        let shift: Vec<f64> = std::env::var("SHIFT_PX")
+            .unwrap_or_default()
+            .split(',')
+            .filter_map(|v| v.parse().ok())
+            .collect();
+        let shifted: Vec<MotionPair> = found
+            .pairs
+            .iter()
+            .map(|p| {
+                let (dx, dy) = (
+                    shift.first().copied().unwrap_or(0.0),
+                    shift.get(1).copied().unwrap_or(0.0),
+                );
+                let mv = |r: DVec3| {
+                    DVec3::new(r.x / r.z + dx / fx, r.y / r.z + dy / fx, 1.0).normalize_or_zero()
+                };
+                MotionPair {
+                    rays: p
+                        .rays
+                        .iter()
+                        .filter(|(a, _)| std::env::var("UPPER").is_err() || a.y < 0.0)
+                        .map(|(a, b)| (mv(*a), mv(*b)))
+                        .collect(),
+                    ..p.clone()
+                }
+            })
+            .collect();
+        let exact = remade(0.0, &mut gauss);
+        let noisy = remade(noise_px, &mut gauss);
+        let axes = |pairs: &[MotionPair]| -> String {
+            match solve(pairs, x) {
+                Ok(f) => {
+                    let e: Rigid = f.vehicle_from_camera;
+                    let a = rigcal::geometry::so3::log(x.rotation.inverse() * e.rotation)
+                        .to_array()
+                        .map(f64::to_degrees);
+                    format!("{:+.3} {:+.3} {:+.3}°", a[0], a[1], a[2])
+                }
+                Err(e) => e.to_string(),
+            }
+        };
+        println!(
+            "{name:20} fx {fx:.0} measured {}  shifted {shift:?} px {}  exact {}  noisy ({noise_px} px) {}",
+            axes(&found.pairs),
+            axes(&shifted),
+            axes(&exact),
+            axes(&noisy)
+        );
+    }
+    Ok(())
+}
