@@ -17,8 +17,8 @@ use glam::DVec3;
 use rigcal::classical::camera_motion::{DEFAULT_FRAMES, camera_pairs};
 use rigcal::classical::hand_eye::{MotionPair, solve};
 use rigcal::classical::lidar_translation::triangulate;
-use rigcal::geometry::Rigid;
 use rigcal::log::Drive;
+use rigcal::sim::noise::hash3;
 
 fn main() -> Result<(), String> {
     let args: Vec<String> = std::env::args().skip(1).collect();
@@ -29,6 +29,17 @@ fn main() -> Result<(), String> {
     let noise_px: f64 = args.get(2).and_then(|s| s.parse().ok()).unwrap_or(1.0);
     let drive = Drive::open(std::path::Path::new(log)).map_err(|e| e.to_string())?;
     let truth = reference::at_reference(&drive.rig, gt)?;
+    // The probes of the measured matches (module docs).
+    let shift: Vec<f64> = std::env::var("SHIFT_PX")
+        .unwrap_or_default()
+        .split(',')
+        .filter_map(|v| v.parse().ok())
+        .collect();
+    let (dx, dy) = (
+        shift.first().copied().unwrap_or(0.0),
+        shift.get(1).copied().unwrap_or(0.0),
+    );
+    let upper_only = std::env::var("UPPER").is_ok();
     let names: Vec<String> = truth.cameras().map(|c| c.name.clone()).collect();
     for name in &names {
         let Some(sensor) = truth.sensor(name) else {
@@ -46,15 +57,12 @@ fn main() -> Result<(), String> {
             &|_, _, _| {},
         )
         .map_err(|e| e.to_string())?;
-        let mut seed = 0x9E37_79B9_7F4A_7C15u64;
+        // Standard normal draws from the simulator's seeded hash (Box–Muller), one per call.
+        let mut draws = 0i32;
         let mut gauss = move || {
-            let mut u = || {
-                seed ^= seed << 13;
-                seed ^= seed >> 7;
-                seed ^= seed << 17;
-                (seed >> 11) as f64 / (1u64 << 53) as f64
-            };
-            let (a, b) = (u().max(1e-12), u());
+            draws += 1;
+            let a = f64::from(hash3(draws, 0, 0, 7)).max(1e-12);
+            let b = f64::from(hash3(draws, 1, 0, 7));
             (-2.0 * a.ln()).sqrt() * (std::f64::consts::TAU * b).cos()
         };
         let remade = |sigma_px: f64, gauss: &mut dyn FnMut() -> f64| -> Vec<MotionPair> {
@@ -84,19 +92,10 @@ fn main() -> Result<(), String> {
                 })
                 .collect()
         };
-        let shift: Vec<f64> = std::env::var("SHIFT_PX")
-            .unwrap_or_default()
-            .split(',')
-            .filter_map(|v| v.parse().ok())
-            .collect();
         let shifted: Vec<MotionPair> = found
             .pairs
             .iter()
             .map(|p| {
-                let (dx, dy) = (
-                    shift.first().copied().unwrap_or(0.0),
-                    shift.get(1).copied().unwrap_or(0.0),
-                );
                 let mv = |r: DVec3| {
                     DVec3::new(r.x / r.z + dx / fx, r.y / r.z + dy / fx, 1.0).normalize_or_zero()
                 };
@@ -104,7 +103,7 @@ fn main() -> Result<(), String> {
                     rays: p
                         .rays
                         .iter()
-                        .filter(|(a, _)| std::env::var("UPPER").is_err() || a.y < 0.0)
+                        .filter(|(a, _)| !upper_only || a.y < 0.0)
                         .map(|(a, b)| (mv(*a), mv(*b)))
                         .collect(),
                     ..p.clone()
@@ -116,8 +115,8 @@ fn main() -> Result<(), String> {
         let axes = |pairs: &[MotionPair]| -> String {
             match solve(pairs, x) {
                 Ok(f) => {
-                    let e: Rigid = f.vehicle_from_camera;
-                    let a = rigcal::geometry::so3::log(x.rotation.inverse() * e.rotation)
+                    let turned = x.rotation.inverse() * f.vehicle_from_camera.rotation;
+                    let a = rigcal::geometry::so3::log(turned)
                         .to_array()
                         .map(f64::to_degrees);
                     format!("{:+.3} {:+.3} {:+.3}°", a[0], a[1], a[2])
@@ -126,7 +125,7 @@ fn main() -> Result<(), String> {
             }
         };
         println!(
-            "{name:20} fx {fx:.0} measured {}  shifted {shift:?} px {}  exact {}  noisy ({noise_px} px) {}",
+            "{name:20} fx {fx:.0} measured {}  shifted ({dx}, {dy}) px {}  exact {}  noisy ({noise_px} px) {}",
             axes(&found.pairs),
             axes(&shifted),
             axes(&exact),
