@@ -6,7 +6,8 @@
 //!
 //! Two probes of the measured matches, by environment: `SHIFT_PX=DX,DY` moves every measured
 //! keypoint by a constant offset (pixels at the camera's focal length) before the fit, and
-//! `UPPER=1` keeps only the matches above the optical axis (no ground).
+//! `UPPER=1` keeps only the matches above the optical axis (no ground). `RESIDUALS=1` also
+//! prints each camera's mean distance of its matches from their epipolar lines under the truth.
 //!
 //! `cargo run --release --no-default-features --example hand_eye_exact -- LOG.mcap GT [NOISE_PX]`
 //! (docs/experiments/pipeline.md, "The hand-eye tilts every camera down").
@@ -110,6 +111,9 @@ fn main() -> Result<(), String> {
                 }
             })
             .collect();
+        if std::env::var("RESIDUALS").is_ok() {
+            epipolar_residuals(name, fx, x, &found.pairs);
+        }
         let exact = remade(0.0, &mut gauss);
         let noisy = remade(noise_px, &mut gauss);
         let axes = |pairs: &[MotionPair]| -> String {
@@ -133,4 +137,63 @@ fn main() -> Result<(), String> {
         );
     }
     Ok(())
+}
+
+/// Each measured match's distance from its epipolar line under the truth, as an image offset
+/// of its second keypoint (pixels at `fx`): the mean offset over all matches and over the
+/// matches in each half of the first image (above / below, left / right of the optical axis),
+/// and the mean size. Only this component moves a motion estimate (an error along the line
+/// is a depth).
+fn epipolar_residuals(name: &str, fx: f64, x: rigcal::geometry::Rigid, pairs: &[MotionPair]) {
+    // [all, upper, lower, left, right, flow down, flow up]: (sum dx, sum dy, sum |e|, count)
+    let mut bins = [[0.0f64; 4]; 7];
+    for p in pairs {
+        let i_from_j = x.inverse() * p.vehicle_motion * x;
+        let c = i_from_j.translation;
+        for &(a, b) in &p.rays {
+            let n = a.cross(c).normalize_or_zero();
+            let b_i = i_from_j.rotation * b;
+            let e = n.dot(b_i);
+            let n_j = i_from_j.rotation.inverse() * n;
+            // The offset's direction in image j: n_j's projection at b.
+            let off = glam::DVec2::new(n_j.x - b.x / b.z * n_j.z, n_j.y - b.y / b.z * n_j.z)
+                .normalize_or_zero()
+                * (e * fx);
+            let flow_down = b.y / b.z > a.y / a.z;
+            let mut add = |k: usize| {
+                bins[k][0] += off.x;
+                bins[k][1] += off.y;
+                bins[k][2] += e.abs() * fx;
+                bins[k][3] += 1.0;
+            };
+            add(0);
+            add(if a.y < 0.0 { 1 } else { 2 });
+            add(if a.x < 0.0 { 3 } else { 4 });
+            add(if flow_down { 5 } else { 6 });
+        }
+    }
+    let label = [
+        "all",
+        "upper",
+        "lower",
+        "left",
+        "right",
+        "flow-down",
+        "flow-up",
+    ];
+    let parts: Vec<String> = bins
+        .iter()
+        .zip(label)
+        .map(|(b, l)| {
+            let n = b[3].max(1.0);
+            format!(
+                "{l} {:.0}: ({:+.3}, {:+.3}) |{:.2}|",
+                b[3],
+                b[0] / n,
+                b[1] / n,
+                b[2] / n
+            )
+        })
+        .collect();
+    println!("{name:20} residual px {}", parts.join("  "));
 }
