@@ -4,7 +4,7 @@
 //! then again with symmetric noise of `NOISE_PX` pixels; the fit from the truth is printed for
 //! the measured, the exact and the noisy rays, as the rotation error about the camera's axes.
 //!
-//! Two probes of the measured matches, by environment: `SHIFT_PX=DX,DY` moves every measured
+//! Probes of the measured matches, by environment: `SHIFT_PX=DX,DY` moves every measured
 //! keypoint by a constant offset (pixels at the camera's focal length) before the fit, and
 //! `UPPER=1` keeps only the matches above the optical axis (no ground). `RESIDUALS=1` also
 //! prints each camera's mean distance of its matches from their epipolar lines under the truth.
@@ -41,6 +41,7 @@ fn main() -> Result<(), String> {
         shift.get(1).copied().unwrap_or(0.0),
     );
     let upper_only = std::env::var("UPPER").is_ok();
+    let residuals = std::env::var("RESIDUALS").is_ok();
     let names: Vec<String> = truth.cameras().map(|c| c.name.clone()).collect();
     for name in &names {
         let Some(sensor) = truth.sensor(name) else {
@@ -111,7 +112,7 @@ fn main() -> Result<(), String> {
                 }
             })
             .collect();
-        if std::env::var("RESIDUALS").is_ok() {
+        if residuals {
             epipolar_residuals(name, fx, x, &found.pairs);
         }
         let exact = remade(0.0, &mut gauss);
